@@ -1,0 +1,245 @@
+"""The paper's vocabulary as plain, frozen data: actions, controller parameters,
+entity features (Table 1), symbolic states and the meta-outcome Omega (Table 2).
+
+Every layer speaks these types: the simulator produces them, the store persists
+them, the world models learn from them and the agent reasons with them. Nothing
+here imports PyBullet, SQLAlchemy, torch or the CLI.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Iterable, Mapping
+
+#: The four actions of Table 1, in the order of their encoding (1..4).
+ACTIONS: tuple[str, ...] = ("push", "push_together", "remove_from_container", "place_in_container")
+
+#: Number of entity arguments each action controller takes.
+ACTION_ARITY: Mapping[str, int] = {
+    "push": 1,
+    "push_together": 2,
+    "remove_from_container": 2,
+    "place_in_container": 2,
+}
+
+#: Approach sides of a controller. Table 1 encodes the first two; the other two
+#: let a push move an entity along every horizontal axis (see docs/controllers.md).
+ORIENTATIONS: tuple[str, ...] = ("left", "top", "right", "front")
+
+#: Entity shapes and colors of Table 1, in the order of their encoding.
+SHAPES: tuple[str, ...] = ("sphere", "box", "cylinder")
+COLORS: tuple[str, ...] = ("red", "blue", "green")
+
+#: Where a trial came from.
+TRIAL_SOURCES: tuple[str, ...] = ("pretrain", "plan", "exploration", "replay")
+
+#: The six bits of Omega (Table 2), in order.
+OUTCOME_NAMES: tuple[str, ...] = (
+    "positive_visibility",
+    "negative_visibility",
+    "positive_reachability",
+    "negative_reachability",
+    "positive_touching",
+    "negative_touching",
+)
+
+#: Fluent predicates whose changes Omega summarises, mapped to their Table-2 stem.
+OUTCOME_FLUENTS: Mapping[str, str] = {
+    "visible": "visibility",
+    "reachable": "reachability",
+    "touching": "touching",
+}
+
+Fluent = tuple[str, ...]
+"""A ground atom, e.g. ``("visible", "red_box")`` or ``("touching", "a", "b")``.
+
+Symmetric predicates (``touching``) keep their arguments sorted so that a fact has
+exactly one spelling."""
+
+State = frozenset[Fluent]
+"""A symbolic state: the set of fluents that hold (negations are implicit)."""
+
+SYMMETRIC_PREDICATES: frozenset[str] = frozenset({"touching"})
+
+
+def fluent(predicate: str, *arguments: str) -> Fluent:
+    """Build a fluent in its canonical spelling (symmetric predicates sorted)."""
+    if predicate in SYMMETRIC_PREDICATES:
+        arguments = tuple(sorted(arguments))
+    return (predicate, *arguments)
+
+
+def format_fluent(atom: Fluent) -> str:
+    """Render a fluent the PDDL way: ``(touching a b)``."""
+    return "(" + " ".join(atom) + ")"
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """Sub-symbolic settings r_i of an action controller.
+
+    Attributes:
+        rate: end-effector speed during the action's main motion, in m/s.
+        movement_magnitude: length of that motion, in metres.
+        orientation: the side the end effector approaches the argument from.
+    """
+
+    rate: float
+    movement_magnitude: float
+    orientation: str
+
+    def __post_init__(self) -> None:
+        if self.orientation not in ORIENTATIONS:
+            raise ValueError(f"unknown orientation {self.orientation!r}; expected one of {ORIENTATIONS}")
+        if not self.rate > 0:
+            raise ValueError(f"rate must be positive, got {self.rate}")
+        if not self.movement_magnitude >= 0:
+            raise ValueError(f"movement_magnitude must be >= 0, got {self.movement_magnitude}")
+
+
+@dataclass(frozen=True)
+class EntityFeatures:
+    """The feature mapping x_i of one entity (Table 1).
+
+    The vector is the entity's position relative to the robot base, split into its
+    magnitude and unit direction.
+    """
+
+    shape: str
+    volume: float
+    color: str
+    vector_magnitude: float
+    unit_x: float
+    unit_y: float
+    unit_z: float
+
+    def as_dict(self) -> dict[str, float | str]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """What to execute: an action a_i, its arguments and controller settings r_i."""
+
+    action: str
+    arguments: tuple[str, ...]
+    params: ControllerParams
+
+    def __post_init__(self) -> None:
+        if self.action not in ACTIONS:
+            raise ValueError(f"unknown action {self.action!r}; expected one of {ACTIONS}")
+        if len(self.arguments) != ACTION_ARITY[self.action]:
+            raise ValueError(
+                f"{self.action} takes {ACTION_ARITY[self.action]} argument(s), got {self.arguments}"
+            )
+
+    @property
+    def label(self) -> str:
+        p = self.params
+        return (
+            f"{self.action}({', '.join(self.arguments)}) "
+            f"rate={p.rate:g} magnitude={p.movement_magnitude:g} orientation={p.orientation}"
+        )
+
+
+@dataclass(frozen=True)
+class WorldModelInput:
+    """One input of the world model W: (a_i, r_i, nabla_i, X_i).
+
+    ``features`` holds one :class:`EntityFeatures` per argument, in argument order.
+    Both stored trials and not-yet-executed candidates are described this way.
+    """
+
+    spec: TrialSpec
+    features: tuple[EntityFeatures, ...]
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Omega: six meta-level symbolic changes (Table 2).
+
+    A bit is True when at least one fluent instance of that kind changed that way.
+    """
+
+    positive_visibility: bool = False
+    negative_visibility: bool = False
+    positive_reachability: bool = False
+    negative_reachability: bool = False
+    positive_touching: bool = False
+    negative_touching: bool = False
+
+    @classmethod
+    def between(cls, before: Iterable[Fluent], after: Iterable[Fluent]) -> "Outcome":
+        """Compute Omega from the fluent sets before and after a trial."""
+        before_set, after_set = frozenset(before), frozenset(after)
+        bits: dict[str, bool] = {}
+        for predicate, stem in OUTCOME_FLUENTS.items():
+            gained = any(f[0] == predicate for f in after_set - before_set)
+            lost = any(f[0] == predicate for f in before_set - after_set)
+            bits[f"positive_{stem}"] = gained
+            bits[f"negative_{stem}"] = lost
+        return cls(**bits)
+
+    @classmethod
+    def from_bits(cls, bits: Iterable[int | bool]) -> "Outcome":
+        values = [bool(b) for b in bits]
+        if len(values) != len(OUTCOME_NAMES):
+            raise ValueError(f"an outcome has {len(OUTCOME_NAMES)} bits, got {len(values)}")
+        return cls(**dict(zip(OUTCOME_NAMES, values)))
+
+    def bits(self) -> tuple[int, ...]:
+        return tuple(int(getattr(self, name)) for name in OUTCOME_NAMES)
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(zip(OUTCOME_NAMES, self.bits()))
+
+
+@dataclass(frozen=True)
+class TrialRecord:
+    """A trial as the experience store keeps it: the lifelong training set's unit."""
+
+    id: int
+    branch: str
+    source: str
+    spec: TrialSpec
+    features: tuple[EntityFeatures, ...]
+    outcome: Outcome
+    solved: bool
+    sim_steps: int
+    wall_seconds: float
+    seed: int
+    run_id: int | None = None
+    episode_id: int | None = None
+    snapshot_id: int | None = None
+    scenario: str | None = None
+    created_at: str | None = None
+    extra: Mapping[str, object] = field(default_factory=dict)
+
+    @property
+    def model_input(self) -> WorldModelInput:
+        return WorldModelInput(spec=self.spec, features=self.features)
+
+    def as_json(self) -> dict[str, object]:
+        """The JSON shape used by ``--json`` outputs and ``db export``."""
+        p = self.spec.params
+        return {
+            "id": self.id,
+            "branch": self.branch,
+            "run_id": self.run_id,
+            "episode_id": self.episode_id,
+            "scenario": self.scenario,
+            "source": self.source,
+            "action": self.spec.action,
+            "rate": p.rate,
+            "movement_magnitude": p.movement_magnitude,
+            "orientation": p.orientation,
+            "arguments": list(self.spec.arguments),
+            "features": [f.as_dict() for f in self.features],
+            "outcome": self.outcome.as_dict(),
+            "solved": self.solved,
+            "sim_steps": self.sim_steps,
+            "wall_seconds": self.wall_seconds,
+            "seed": self.seed,
+            "snapshot_id": self.snapshot_id,
+            "created_at": self.created_at,
+        }
