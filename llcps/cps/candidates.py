@@ -1,0 +1,102 @@
+"""The exploration candidate space: every (action, rate, movement magnitude,
+orientation, arguments) combination of the documented discretization.
+
+The default order is the one an agent without a world model would follow:
+*focused* exploration first (the failed action a_f with every other setting, on
+its own arguments), then *defocused* exploration (a_f on other entities, then the
+other actions on every valid argument tuple). A world model and a measure reorder
+this list; ``random`` shuffles it.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from typing import Iterator, Mapping, Sequence
+
+from llcps.cps.grid import EXPLORATION_ORIENTATIONS, MOVEMENT_MAGNITUDES, RATES
+from llcps.domain import ACTIONS, ControllerParams, TrialSpec
+
+#: Entity kinds an argument slot accepts, per action.
+ARGUMENT_KINDS: Mapping[str, tuple[frozenset[str], ...]] = {
+    "push": (frozenset({"object", "container"}),),
+    "push_together": (frozenset({"object", "container"}), frozenset({"object", "container"})),
+    "remove_from_container": (frozenset({"object"}), frozenset({"container"})),
+    "place_in_container": (frozenset({"object"}), frozenset({"container"})),
+}
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A discretization of controller settings."""
+
+    rates: tuple[float, ...] = RATES
+    movement_magnitudes: tuple[float, ...] = MOVEMENT_MAGNITUDES
+    orientations: tuple[str, ...] = EXPLORATION_ORIENTATIONS
+
+    def params(self) -> Iterator[ControllerParams]:
+        for orientation, magnitude, rate in itertools.product(
+            self.orientations, self.movement_magnitudes, self.rates
+        ):
+            yield ControllerParams(rate=rate, movement_magnitude=magnitude, orientation=orientation)
+
+    @property
+    def size(self) -> int:
+        return len(self.rates) * len(self.movement_magnitudes) * len(self.orientations)
+
+
+def argument_tuples(action: str, entities: Mapping[str, str]) -> list[tuple[str, ...]]:
+    """Every valid argument tuple of ``action`` over ``entities`` (name -> kind), sorted."""
+    slots = ARGUMENT_KINDS[action]
+    pools = [sorted(name for name, kind in entities.items() if kind in allowed) for allowed in slots]
+    return [args for args in itertools.product(*pools) if len(set(args)) == len(args)]
+
+
+def enumerate_candidates(
+    *,
+    failed: TrialSpec | None,
+    entities: Mapping[str, str],
+    grid: Grid = Grid(),
+) -> list[TrialSpec]:
+    """All candidates in the default order, without the failed trial itself.
+
+    Args:
+        failed: the controller call that failed (a_f with its arguments and settings);
+            ``None`` enumerates the whole space in action order.
+        entities: manipulable entities of the scene, name -> "object" | "container".
+        grid: the discretization of controller settings.
+
+    Returns:
+        Distinct candidates: focused ones first, then defocused ones.
+    """
+    order: list[tuple[str, tuple[str, ...]]] = []
+    if failed is not None:
+        order.append((failed.action, failed.arguments))
+        order.extend(
+            (failed.action, args)
+            for args in argument_tuples(failed.action, entities)
+            if args != failed.arguments
+        )
+    for action in ACTIONS:
+        if failed is not None and action == failed.action:
+            continue
+        order.extend((action, args) for args in argument_tuples(action, entities))
+
+    candidates: list[TrialSpec] = []
+    for action, args in order:
+        for params in grid.params():
+            spec = TrialSpec(action=action, arguments=args, params=params)
+            if failed is not None and spec == failed:
+                continue
+            candidates.append(spec)
+    return candidates
+
+
+def focused_count(candidates: Sequence[TrialSpec], failed: TrialSpec) -> int:
+    """How many leading candidates vary only the failed action's settings."""
+    n = 0
+    for spec in candidates:
+        if spec.action != failed.action or spec.arguments != failed.arguments:
+            break
+        n += 1
+    return n
