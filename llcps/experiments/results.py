@@ -1,0 +1,311 @@
+"""The long-format results table: one row per (sequence, scenario).
+
+Everything downstream (statistics, plots, report) reads this table and nothing else,
+so a report can be rebuilt from a CSV, a JSON file or the experience store without
+re-running a single trial. The table is a tuple of frozen rows; numpy arrays are
+made on demand (no pandas: the table is small and its columns are fixed).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Mapping
+
+import numpy as np
+
+from llcps.errors import LlcpsError
+from llcps.experiments.grid import SCENARIO_SEQUENCE, Cell, Sequence, parse_branch
+
+#: Columns that can be analysed as "exploration" (the paper's Figure 2 uses time).
+METRICS: tuple[str, ...] = ("exploration_trials", "sim_seconds", "wall_seconds")
+#: The scenario condition experiment episodes run in.
+NOVELTY = "novelty"
+
+
+@dataclass(frozen=True)
+class ResultRow:
+    """One scenario of one sequence: how much exploration it took and whether it solved."""
+
+    preset: str
+    model: str
+    measure: str
+    pretrain_size: int
+    condition: str
+    seed: int
+    scenario: str
+    solved: bool
+    exploration_trials: int
+    sim_seconds: float
+    wall_seconds: float
+    episode_id: int | None
+    branch: str
+
+    @property
+    def cell(self) -> Cell:
+        return Cell(self.model, self.measure, self.pretrain_size, self.condition)
+
+    @property
+    def sequence(self) -> Sequence:
+        return Sequence(self.preset, self.cell, self.seed)
+
+    @property
+    def key(self) -> tuple[Sequence, str]:
+        """What identifies a row: at most one row per (sequence, scenario)."""
+        return (self.sequence, self.scenario)
+
+    def metric(self, name: str) -> float:
+        """The value of one of :data:`METRICS`."""
+        if name not in METRICS:
+            raise LlcpsError(f"unknown metric {name!r}", hint=f"choose one of: {', '.join(METRICS)}")
+        return float(getattr(self, name))
+
+
+COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(ResultRow))
+
+_PARSERS: dict[str, Callable[[str], Any]] = {
+    "pretrain_size": int,
+    "seed": int,
+    "exploration_trials": int,
+    "sim_seconds": float,
+    "wall_seconds": float,
+}
+
+
+def _parse_bool(text: str) -> bool:
+    low = text.strip().lower()
+    if low in ("true", "1", "yes"):
+        return True
+    if low in ("false", "0", "no"):
+        return False
+    raise ValueError(f"not a boolean: {text!r}")
+
+
+def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
+    """Build a row from strings (CSV) or JSON values, with one clear error per bad field."""
+    missing = [c for c in COLUMNS if c not in data]
+    if missing:
+        raise LlcpsError(f"{where}: missing column(s) {', '.join(missing)}", hint=f"expected columns: {', '.join(COLUMNS)}")
+    values: dict[str, Any] = {}
+    for name in COLUMNS:
+        raw = data[name]
+        try:
+            if name == "solved":
+                values[name] = raw if isinstance(raw, bool) else _parse_bool(str(raw))
+            elif name == "episode_id":
+                values[name] = None if raw in (None, "") else int(raw)
+            elif name in _PARSERS:
+                values[name] = _PARSERS[name](raw)
+            else:
+                values[name] = str(raw)
+        except (TypeError, ValueError):
+            raise LlcpsError(f"{where}: bad value {raw!r} in column {name!r}") from None
+    return ResultRow(**values)
+
+
+class ResultsTable:
+    """An immutable, ordered collection of :class:`ResultRow` with one row per key.
+
+    Rows are kept sorted by (sequence, scenario order), so two tables with the same
+    rows compare, serialise and analyse identically whatever order they were built in.
+    """
+
+    def __init__(self, rows: Iterable[ResultRow] = ()) -> None:
+        order = {s: i for i, s in enumerate(SCENARIO_SEQUENCE)}
+        by_key: dict[tuple[Sequence, str], ResultRow] = {}
+        for row in rows:
+            if row.key in by_key:
+                raise LlcpsError(f"two results for {row.sequence.branch_name} {row.scenario}")
+            by_key[row.key] = row
+        self._rows: tuple[ResultRow, ...] = tuple(
+            sorted(by_key.values(), key=lambda r: (r.sequence, order.get(r.scenario, len(order)), r.scenario))
+        )
+
+    # -- collection protocol -------------------------------------------------
+    def __iter__(self) -> Iterator[ResultRow]:
+        return iter(self._rows)
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, ResultsTable) and self._rows == other._rows
+
+    def __repr__(self) -> str:
+        return f"ResultsTable({len(self._rows)} rows)"
+
+    @property
+    def rows(self) -> tuple[ResultRow, ...]:
+        return self._rows
+
+    def filter(self, **equal: Any) -> ResultsTable:
+        """The rows whose fields equal every given value, e.g. ``filter(scenario="scenario2")``."""
+        unknown = set(equal) - set(COLUMNS)
+        if unknown:
+            raise LlcpsError(f"unknown column(s) {', '.join(sorted(unknown))}", hint=f"columns: {', '.join(COLUMNS)}")
+        return ResultsTable(r for r in self._rows if all(getattr(r, k) == v for k, v in equal.items()))
+
+    def column(self, name: str) -> np.ndarray:
+        """One column as a numpy array (object dtype for text columns)."""
+        if name not in COLUMNS:
+            raise LlcpsError(f"unknown column {name!r}", hint=f"columns: {', '.join(COLUMNS)}")
+        values = [getattr(r, name) for r in self._rows]
+        if name in METRICS or name in ("pretrain_size", "seed"):
+            return np.asarray(values, dtype=float if name in METRICS else int)
+        if name == "solved":
+            return np.asarray(values, dtype=bool)
+        return np.asarray(values, dtype=object)
+
+    def unique(self, name: str) -> tuple[Any, ...]:
+        """Distinct values of a column in first-seen (i.e. sorted-table) order."""
+        return tuple(dict.fromkeys(getattr(r, name) for r in self._rows))
+
+    # -- completeness, for resumable runs ------------------------------------
+    def complete_sequences(self) -> frozenset[Sequence]:
+        """Sequences with a row for every scenario of :data:`SCENARIO_SEQUENCE`."""
+        seen: dict[Sequence, set[str]] = {}
+        for row in self._rows:
+            seen.setdefault(row.sequence, set()).add(row.scenario)
+        return frozenset(s for s, done in seen.items() if done >= set(SCENARIO_SEQUENCE))
+
+    def missing(self, sequences: Iterable[Sequence]) -> tuple[Sequence, ...]:
+        """The given sequences that are not complete yet, in the given order."""
+        done = self.complete_sequences()
+        return tuple(s for s in sequences if s not in done)
+
+    # -- serialisation ---------------------------------------------------------
+    def to_records(self) -> list[dict[str, Any]]:
+        return [asdict(r) for r in self._rows]
+
+    def write_csv(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("w", newline="", encoding="utf-8") as fh:
+            writer = csv.DictWriter(fh, fieldnames=COLUMNS, lineterminator="\n")
+            writer.writeheader()
+            for record in self.to_records():
+                record["episode_id"] = "" if record["episode_id"] is None else record["episode_id"]
+                record["sim_seconds"] = repr(record["sim_seconds"])
+                record["wall_seconds"] = repr(record["wall_seconds"])
+                writer.writerow(record)
+        return path
+
+    @classmethod
+    def read_csv(cls, path: str | Path) -> ResultsTable:
+        path = Path(path)
+        try:
+            with path.open(newline="", encoding="utf-8") as fh:
+                reader = csv.DictReader(fh)
+                return cls(_row_from_mapping(rec, f"{path}:{i + 2}") for i, rec in enumerate(reader))
+        except OSError as exc:
+            raise LlcpsError(f"cannot read results file {path}: {exc.strerror}", hint="pass a results.csv written by a run") from None
+
+    def write_json(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"columns": list(COLUMNS), "rows": self.to_records()}, indent=1) + "\n", encoding="utf-8")
+        return path
+
+    @classmethod
+    def read_json(cls, path: str | Path) -> ResultsTable:
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise LlcpsError(f"cannot read results file {path}: {exc.strerror}") from None
+        except json.JSONDecodeError as exc:
+            raise LlcpsError(f"{path} is not valid JSON: {exc}") from None
+        rows = data.get("rows") if isinstance(data, dict) else data
+        if not isinstance(rows, list):
+            raise LlcpsError(f"{path}: expected a list of rows or an object with 'rows'")
+        return cls(_row_from_mapping(rec, f"{path}: row {i}") for i, rec in enumerate(rows))
+
+    @classmethod
+    def read(cls, path: str | Path) -> ResultsTable:
+        """Read a table from a ``.csv`` or ``.json`` file, or from a directory's ``results.csv``."""
+        path = Path(path)
+        if path.is_dir():
+            path = path / "results.csv"
+        if path.suffix == ".json":
+            return cls.read_json(path)
+        return cls.read_csv(path)
+
+
+@dataclass(frozen=True)
+class EpisodeImport:
+    """A table built from stored episodes, and what was left out and why."""
+
+    table: ResultsTable
+    skipped: dict[str, int]
+
+
+def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
+    """Build the results table from the experience store's episodes.
+
+    Each episode is a mapping or an object with a ``summary`` mapping holding
+    ``SolveResult.as_json()`` (scenario, condition, model, measure, seed, branch,
+    solved, status, exploration_trials, sim_seconds, wall_seconds, episode_id). The
+    cell and seed come from the branch name; the summary must agree with it.
+
+    Episodes on other branches, in the original condition, or still ``running``
+    (a run cut off mid-episode) are skipped and counted. When one (sequence,
+    scenario) was solved more than once (a re-run), the latest episode wins.
+    """
+    skipped: dict[str, int] = {}
+    chosen: dict[tuple[Sequence, str], tuple[tuple[int, int], ResultRow]] = {}
+
+    def skip(reason: str) -> None:
+        skipped[reason] = skipped.get(reason, 0) + 1
+
+    for order, episode in enumerate(episodes):
+        summary = episode if isinstance(episode, Mapping) else getattr(episode, "summary", None)
+        if not isinstance(summary, Mapping):
+            skip("no summary")
+            continue
+        parsed = parse_branch(str(summary.get("branch", "")))
+        if parsed is None:
+            skip("not an experiment branch")
+            continue
+        if summary.get("condition", NOVELTY) != NOVELTY:
+            skip("not the novelty condition")
+            continue
+        if summary.get("status") == "running":
+            skip("unfinished episode")
+            continue
+        seq, scenario = parsed.sequence, str(summary.get("scenario"))
+        if scenario not in SCENARIO_SEQUENCE or (parsed.scenario is not None and parsed.scenario != scenario):
+            skip("scenario does not match its branch")
+            continue
+        if summary.get("model") != seq.cell.model or summary.get("measure") != seq.cell.measure:
+            skip("model or measure does not match its branch")
+            continue
+        try:
+            row = ResultRow(
+                preset=seq.preset,
+                model=seq.cell.model,
+                measure=seq.cell.measure,
+                pretrain_size=seq.cell.pretrain_size,
+                condition=seq.cell.condition,
+                seed=seq.seed,
+                scenario=scenario,
+                solved=bool(summary["solved"]),
+                exploration_trials=int(summary["exploration_trials"]),
+                sim_seconds=float(summary["sim_seconds"]),
+                wall_seconds=float(summary["wall_seconds"]),
+                episode_id=None if summary.get("episode_id") is None else int(summary["episode_id"]),
+                branch=str(summary["branch"]),
+            )
+        except (KeyError, TypeError, ValueError):
+            skip("malformed summary")
+            continue
+        rank = (-1 if row.episode_id is None else row.episode_id, order)
+        previous = chosen.get(row.key)
+        if previous is not None:
+            skip("superseded by a later episode")
+            if previous[0] > rank:
+                continue
+        chosen[row.key] = (rank, row)
+    return EpisodeImport(ResultsTable(row for _, row in chosen.values()), skipped)
+
