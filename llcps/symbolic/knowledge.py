@@ -1,0 +1,418 @@
+"""The knowledge base K (a PDDL domain plus learned operators) and tasks T = (K, s0, sg).
+
+K starts as the package's ``pddl/domain.pddl``: the robot's naive knowledge of its four
+actions. Exploration expands it into K' with learned operators
+(:meth:`KnowledgeBase.with_operator`) and with preconditions it learned a failed action
+needs (:meth:`KnowledgeBase.with_refinement`). A knowledge base is a value: every change
+returns a new one, so the K of a branch and its K' can be held side by side.
+
+All PDDL is read and written with the `pddl` library (AI-Planning).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from typing import Iterable, Mapping
+
+from lark.exceptions import LarkError
+from pddl.core import Domain, Problem
+from pddl.exceptions import PDDLValidationError
+from pddl.logic.base import And, Formula, Not
+from pddl.logic.functions import EqualTo as NumericEqualTo
+from pddl.logic.functions import Metric, NumericFunction, NumericValue
+from pddl.logic.predicates import Predicate
+from pddl.logic.terms import Constant, Variable
+from pddl.parser.domain import DomainParser
+from pddl.requirements import Requirements
+
+from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, State, fluent
+from llcps.errors import LlcpsError, UnknownNameError
+from llcps.symbolic.operators import LearnedOperator, parse_operator_name
+from llcps.symbolic.schema import (
+    PDDL_NAME,
+    TOTAL_COST,
+    Controller,
+    Operator,
+    operator_parts_from_pddl,
+    operator_to_pddl,
+    sort_fluents,
+)
+
+#: The requirements every knowledge base declares.
+REQUIREMENTS: tuple[str, ...] = ("strips", "typing", "negative-preconditions", "equality", "action-costs")
+
+
+def _parse_error(what: str, exc: Exception) -> LlcpsError:
+    first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return LlcpsError(f"cannot read the PDDL {what}: {first_line}", hint="check the PDDL syntax and requirements")
+
+
+def parse_domain(text: str) -> Domain:
+    """Parse a PDDL domain with the `pddl` library, turning its errors into one project error."""
+    try:
+        return DomainParser()(text)
+    except (LarkError, PDDLValidationError, ValueError, AssertionError) as exc:
+        raise _parse_error("domain", exc) from exc
+
+
+def _domain_action_operator(parts: dict[str, object]) -> Operator:
+    """A naive action of K: its controller takes the first parameters, and aims at the next one if any."""
+    name = str(parts["name"])
+    variables = [v for v, _ in parts["parameters"]]  # type: ignore[attr-defined]
+    arity = ACTION_ARITY[name]
+    if len(variables) < arity:
+        raise LlcpsError(f"action {name} needs at least {arity} parameter(s) for its controller, got {len(variables)}")
+    toward = variables[arity] if len(variables) > arity else None
+    return Operator(**parts, controller=Controller(action=name, arguments=tuple(variables[:arity]), toward=toward))  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class KnowledgeBase:
+    """K: types, constants, predicates, the domain's actions and the learned operators.
+
+    Attributes:
+        name: the PDDL domain name.
+        type_parents: ``(type, parent)`` pairs; ``parent`` None means ``object``.
+        constant_types: ``(constant, type)`` pairs (``table``).
+        predicate_signatures: ``(predicate, ((variable, type), ...))`` pairs.
+        actions: the domain's actions, as refined so far.
+        learned: operators learned from exploration, in the order they were learned.
+    """
+
+    name: str
+    type_parents: tuple[tuple[str, str | None], ...]
+    constant_types: tuple[tuple[str, str], ...]
+    predicate_signatures: tuple[tuple[str, tuple[tuple[str, str], ...]], ...]
+    actions: tuple[Operator, ...]
+    learned: tuple[LearnedOperator, ...] = ()
+    _types: dict[str, str | None] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_types", dict(self.type_parents))
+        names = [op.name.lower() for op in self.operators()]
+        duplicates = sorted({n for n in names if names.count(n) > 1})
+        if duplicates:
+            raise LlcpsError(f"duplicate operator name(s) in the knowledge base: {', '.join(duplicates)}")
+        known = self.known_types()
+        for op in self.operators():
+            for var, kind in op.parameters:
+                if kind not in known:
+                    raise LlcpsError(f"operator {op.name}: parameter {var} has unknown type {kind!r}", hint=f"known types: {', '.join(sorted(known))}")
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def default(cls) -> KnowledgeBase:
+        """The robot's initial, naive K (the package's ``pddl/domain.pddl``)."""
+        return _default_kb()
+
+    @classmethod
+    def from_pddl(cls, text: str) -> KnowledgeBase:
+        """Read K from a PDDL domain; actions named like learned operators become learned operators.
+
+        Raises:
+            LlcpsError: the text does not parse, or an action is neither one of the four
+                controller actions nor a learned operator.
+        """
+        domain = parse_domain(text)
+        actions: list[Operator] = []
+        learned: list[LearnedOperator] = []
+        for action in sorted(domain.actions, key=lambda a: str(a.name)):
+            parts = operator_parts_from_pddl(action)
+            if str(parts["name"]) in ACTIONS:
+                actions.append(_domain_action_operator(parts))
+            else:
+                learned.append(LearnedOperator.from_operator(Operator(**parts, controller=_placeholder_controller(parts))))  # type: ignore[arg-type]
+        learned.sort(key=lambda op: op.name)
+        return cls(
+            name=str(domain.name),
+            type_parents=_type_parents(domain),
+            constant_types=tuple(sorted((str(c.name), str(c.type_tag) if c.type_tag else "object") for c in domain.constants)),
+            predicate_signatures=tuple(
+                sorted(
+                    (str(p.name), tuple((f"?{t.name}", str(sorted(t.type_tags)[0]) if t.type_tags else "object") for t in p.terms))
+                    for p in domain.predicates
+                )
+            ),
+            actions=tuple(actions),
+            learned=tuple(learned),
+        )
+
+    def with_operator(self, op: LearnedOperator) -> KnowledgeBase:
+        """K' = K plus a learned operator.
+
+        Adding an operator that teaches nothing new (same settings, parameters,
+        preconditions and effects as one already known) returns K unchanged; a
+        different operator with a taken name is renamed ``<name>_2``, ``_3``, ...
+        """
+        for known in self.learned:
+            if op.same_knowledge(known):
+                return self
+        taken = {o.name.lower() for o in self.operators()}
+        if op.name.lower() in taken:
+            parsed = parse_operator_name(op.name)
+            base = op.name if parsed is None or parsed[2] == 1 else op.name.rsplit("_", 1)[0]
+            n = 2
+            while f"{base}_{n}".lower() in taken:
+                n += 1
+            op = op.renamed(f"{base}_{n}")
+        return replace(self, learned=(*self.learned, op))
+
+    def with_refinement(self, action: str, extra_preconditions: Iterable[Fluent]) -> KnowledgeBase:
+        """K' in which ``action`` (a domain action or a learned operator) needs more preconditions.
+
+        Args:
+            action: the operator's name.
+            extra_preconditions: lifted fluents over the operator's parameters.
+        """
+        extra = frozenset(fluent(a[0], *a[1:]) for a in extra_preconditions)
+        op = self.operator(action)
+        op.with_preconditions(extra)  # validates the variables
+        if any(a.name == op.name for a in self.actions):
+            actions = tuple(a.with_preconditions(extra) if a.name == op.name else a for a in self.actions)
+            return replace(self, actions=actions)
+        learned = tuple(
+            replace(o, preconditions=o.preconditions | extra) if o.name == op.name else o for o in self.learned
+        )
+        return replace(self, learned=learned)
+
+    def refinement_of(self, action: str) -> dict[str, object] | None:
+        """What K' learned about a domain action beyond the naive K, as JSON for the store.
+
+        Returns:
+            ``{"action": name, "preconditions": [[predicate, term, ...], ...]}`` or None
+            when the action needs nothing beyond its preconditions in the default K.
+        """
+        op = self.operator(action)
+        naive = {a.name: a for a in KnowledgeBase.default().actions}.get(op.name)
+        if naive is None:
+            return None
+        extra = op.preconditions - naive.preconditions
+        if not extra:
+            return None
+        return {"action": op.name, "preconditions": [list(a) for a in sort_fluents(extra)]}
+
+    def apply_learned(self, definition: Mapping[str, object]) -> KnowledgeBase:
+        """Replay one stored expansion: ``{"operator": LearnedOperator.to_json(), "refinement": refinement_of(...) or None}``.
+
+        Raises:
+            LlcpsError: the record is malformed.
+        """
+        kb = self.with_operator(LearnedOperator.from_json(definition["operator"]))  # type: ignore[arg-type]
+        refinement = definition.get("refinement")
+        if refinement:
+            try:
+                action = str(refinement["action"])  # type: ignore[index]
+                extra = [tuple(map(str, a)) for a in refinement["preconditions"]]  # type: ignore[index]
+            except (KeyError, TypeError) as exc:
+                raise LlcpsError(f"malformed refinement record: {exc}", hint="the record must come from KnowledgeBase.refinement_of()") from exc
+            kb = kb.with_refinement(action, extra)
+        return kb
+
+    # ------------------------------------------------------------------ reading
+
+    @property
+    def constants(self) -> dict[str, str]:
+        """Constant -> type."""
+        return dict(self.constant_types)
+
+    @property
+    def predicates(self) -> dict[str, int]:
+        """Predicate -> arity."""
+        return {name: len(params) for name, params in self.predicate_signatures}
+
+    def operators(self) -> list[Operator]:
+        """Every operator the planner may use: the domain's actions, then the learned ones."""
+        return [*self.actions, *(op.as_operator() for op in self.learned)]
+
+    def operator(self, name: str) -> Operator:
+        """The operator called ``name``.
+
+        Raises:
+            UnknownNameError: no such operator.
+        """
+        for op in self.operators():
+            if op.name.lower() == name.lower():
+                return op
+        raise UnknownNameError("operator", name, [op.name for op in self.operators()])
+
+    def learned_operator(self, name: str) -> LearnedOperator:
+        """The learned operator called ``name`` (for its controller settings)."""
+        for op in self.learned:
+            if op.name.lower() == name.lower():
+                return op
+        raise UnknownNameError("learned operator", name, [op.name for op in self.learned])
+
+    def is_subtype(self, kind: str, ancestor: str) -> bool:
+        """Whether an object of type ``kind`` may fill a parameter of type ``ancestor``."""
+        seen: set[str] = set()
+        current: str | None = kind
+        while current is not None and current not in seen:
+            if current == ancestor:
+                return True
+            seen.add(current)
+            current = self._types.get(current)
+        return ancestor == "object"
+
+    def known_types(self) -> set[str]:
+        """Every declared type, its ancestors and ``object``."""
+        return {*self._types, *(p for p in self._types.values() if p is not None), "object"}
+
+    # ------------------------------------------------------------------ PDDL
+
+    def to_domain(self) -> Domain:
+        """K as a `pddl` library domain (type-checked by the library)."""
+        constants = self.constants
+        predicates = [
+            Predicate(name, *(Variable(v[1:], [t]) for v, t in params)) for name, params in self.predicate_signatures
+        ]
+        try:
+            return Domain(
+                self.name,
+                requirements={Requirements(r) for r in REQUIREMENTS},
+                types=dict(self.type_parents),
+                constants=[Constant(c, t) for c, t in self.constant_types],
+                predicates=predicates,
+                functions={NumericFunction(TOTAL_COST): "number"},
+                actions=[operator_to_pddl(op, constants) for op in self.operators()],
+            )
+        except (PDDLValidationError, ValueError, AssertionError) as exc:
+            raise LlcpsError(f"the knowledge base is not a valid PDDL domain: {exc}") from exc
+
+    def to_pddl(self) -> str:
+        """K as PDDL domain text, learned operators included."""
+        return str(self.to_domain()) + "\n"
+
+
+def _type_parents(domain: Domain) -> tuple[tuple[str, str | None], ...]:
+    """Every type with its parent, implicit ``- object`` roots included, sorted."""
+    parents: dict[str, str | None] = {str(t): (str(p) if p is not None else None) for t, p in domain.types.items()}
+    for p in list(parents.values()):
+        if p is not None and p != "object":
+            parents.setdefault(p, None)
+    parents.pop("object", None)
+    return tuple(sorted(parents.items()))
+
+
+def _placeholder_controller(parts: dict[str, object]) -> Controller:
+    """A syntactically valid controller so that a learned operator's fields can be checked
+    before :meth:`LearnedOperator.from_operator` derives the real one from its name."""
+    parsed = parse_operator_name(str(parts["name"]))
+    variables = [v for v, _ in parts["parameters"]]  # type: ignore[attr-defined]
+    if parsed is None or len(variables) < ACTION_ARITY[parsed[0]]:
+        raise LlcpsError(
+            f"action {parts['name']} is neither one of {ACTIONS} nor a learned operator",
+            hint="learned operators are named like push_front_r0p2_m0p3 and take the controller's arguments first",
+        )
+    return Controller(action=parsed[0], arguments=tuple(variables[: ACTION_ARITY[parsed[0]]]))
+
+
+@functools.cache
+def _default_kb() -> KnowledgeBase:
+    text = resources.files("llcps.symbolic").joinpath("pddl/domain.pddl").read_text(encoding="utf-8")
+    return KnowledgeBase.from_pddl(text)
+
+
+def default_domain_pddl() -> str:
+    """The text of the package's naive domain, comments included."""
+    return resources.files("llcps.symbolic").joinpath("pddl/domain.pddl").read_text(encoding="utf-8")
+
+
+def _symmetric_closure(state: Iterable[Fluent]) -> list[Fluent]:
+    out: set[Fluent] = set()
+    for atom in state:
+        out.add(atom)
+        if atom[0] in SYMMETRIC_PREDICATES:
+            out.add((atom[0], *reversed(atom[1:])))
+    return sort_fluents(out)
+
+
+@dataclass(frozen=True)
+class Task:
+    """T = (K, s0, sg) without K: the objects, the perceived initial state and the goal.
+
+    Attributes:
+        objects: object -> type (``item``, ``container``, ``surface``, ``entity``).
+        init: s0, the fluents that hold.
+        goal_pos: fluents the goal requires.
+        goal_neg: fluents the goal forbids.
+        name: the PDDL problem name.
+    """
+
+    objects: Mapping[str, str]
+    init: State
+    goal_pos: frozenset[Fluent] = frozenset()
+    goal_neg: frozenset[Fluent] = frozenset()
+    name: str = "task"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "objects", dict(self.objects))
+        for attr in ("init", "goal_pos", "goal_neg"):
+            object.__setattr__(self, attr, frozenset(fluent(a[0], *a[1:]) for a in getattr(self, attr)))
+
+    def satisfied_by(self, state: State) -> bool:
+        """Whether ``state`` is a goal state."""
+        return self.goal_pos <= state and self.goal_neg.isdisjoint(state)
+
+    def all_objects(self, kb: KnowledgeBase) -> dict[str, str]:
+        """The task's objects together with K's constants (object -> type)."""
+        return {**self.objects, **kb.constants}
+
+    def check(self, kb: KnowledgeBase) -> None:
+        """Check the task against K: known names, types and predicate arities.
+
+        Raises:
+            LlcpsError: naming the first problem found.
+        """
+        constants = kb.constants
+        types = kb.known_types()
+        lower: dict[str, str] = {}
+        for obj, kind in self.objects.items():
+            if not PDDL_NAME.fullmatch(obj):
+                raise LlcpsError(f"object name {obj!r} is not a PDDL name", hint="use letters, digits, '-' and '_', starting with a letter")
+            if kind not in types:
+                raise LlcpsError(f"object {obj} has unknown type {kind!r}", hint=f"known types: {', '.join(sorted(types))}")
+            if obj in constants and constants[obj] != kind:
+                raise LlcpsError(f"object {obj} is typed {kind} but is the domain constant of type {constants[obj]}")
+            if obj.lower() in lower:
+                raise LlcpsError(f"objects {lower[obj.lower()]} and {obj} differ only by case", hint="PDDL names are case-insensitive")
+            lower[obj.lower()] = obj
+        everything = self.all_objects(kb)
+        arities = kb.predicates
+        for what, atoms in (("initial state", self.init), ("goal", self.goal_pos | self.goal_neg)):
+            for atom in atoms:
+                if atom[0] not in arities:
+                    raise UnknownNameError("predicate", atom[0], sorted(arities))
+                if len(atom) - 1 != arities[atom[0]]:
+                    raise LlcpsError(f"{what}: {atom[0]} takes {arities[atom[0]]} argument(s), got {atom[1:]}")
+                unknown = [t for t in atom[1:] if t not in everything]
+                if unknown:
+                    raise LlcpsError(f"{what}: ({' '.join(atom)}) mentions unknown object(s) {', '.join(unknown)}", hint="list every entity in Task.objects")
+
+    def to_problem(self, kb: KnowledgeBase) -> Problem:
+        """T as a `pddl` library problem against K's domain (type-checked by the library)."""
+        self.check(kb)
+        everything = self.all_objects(kb)
+        constants = kb.constants
+
+        def atom(a: Fluent) -> Predicate:
+            return Predicate(a[0], *(Constant(t, everything[t]) for t in a[1:]))
+
+        goal: list[Formula] = [atom(a) for a in sort_fluents(self.goal_pos)]
+        goal += [Not(atom(a)) for a in sort_fluents(self.goal_neg)]
+        init: list[Formula] = [atom(a) for a in _symmetric_closure(self.init)]
+        init.append(NumericEqualTo(NumericFunction(TOTAL_COST), NumericValue(0)))
+        return Problem(
+            self.name,
+            domain=kb.to_domain(),
+            objects=[Constant(o, t) for o, t in sorted(self.objects.items()) if o not in constants],
+            init=init,
+            goal=And(*goal),
+            metric=Metric(NumericFunction(TOTAL_COST), Metric.MINIMIZE),
+        )
+
+    def problem_pddl(self, kb: KnowledgeBase) -> str:
+        """T as PDDL problem text for K's domain."""
+        return str(self.to_problem(kb)) + "\n"

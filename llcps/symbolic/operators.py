@@ -1,0 +1,369 @@
+"""Knowledge-base expansion K -> K': operators learned from exploration trials.
+
+A trial that resolves a novelty (an action controller with fixed settings, run on some
+entities) becomes a :class:`LearnedOperator`: its preconditions are what held among the
+entities involved before the trial, its effects what the trial was actually observed to
+change. The planner can then use it like any action of K (it is cheaper, so a plan
+prefers what the robot has learned), and the executor maps it back to the controller
+settings that produced it.
+
+:func:`refine_failed_action` teaches K why the failed action a_f failed: effects of the
+learned operator that a_f needed but lacked become preconditions of a_f.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Collection, Mapping, Sequence
+
+from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, TrialSpec, fluent
+from llcps.errors import LlcpsError
+from llcps.symbolic.schema import (
+    Controller,
+    GroundAction,
+    Operator,
+    is_variable,
+    operator_to_pddl,
+    sort_fluents,
+    substitute,
+)
+
+if TYPE_CHECKING:
+    from llcps.symbolic.knowledge import KnowledgeBase
+
+#: What a plan pays for a learned operator (domain actions cost 1 or 2).
+LEARNED_COST = 0.5
+
+#: Variable stems for parameter types; other types use their first letter.
+_TYPE_STEMS = {"item": "o", "container": "c", "surface": "s", "entity": "e"}
+
+_NAME = re.compile(
+    rf"(?P<action>{'|'.join(sorted(ACTIONS, key=len, reverse=True))})"
+    rf"_(?P<orientation>{'|'.join(ORIENTATIONS)})"
+    r"_r(?P<rate>[0-9a-z+-]+)_m(?P<magnitude>[0-9a-z+-]+)(?:_(?P<copy>[0-9]+))?"
+)
+
+
+def _encode_number(value: float) -> str:
+    text = repr(float(value))
+    if text.endswith(".0"):
+        text = text[:-2]
+    return text.replace(".", "p")
+
+
+def _decode_number(text: str) -> float:
+    return float(text.replace("p", "."))
+
+
+def operator_name(action: str, params: ControllerParams, copy: int | None = None) -> str:
+    """The PDDL name of a learned operator, which encodes its controller settings.
+
+    ``push`` at 0.2 m/s over 0.3 m from the front is ``push_front_r0p2_m0p3`` (``p`` is
+    the decimal point, which PDDL names cannot contain); a second, different operator
+    with the same settings gets ``_2``.
+    """
+    name = f"{action}_{params.orientation}_r{_encode_number(params.rate)}_m{_encode_number(params.movement_magnitude)}"
+    return name if copy is None or copy <= 1 else f"{name}_{copy}"
+
+
+def parse_operator_name(name: str) -> tuple[str, ControllerParams, int] | None:
+    """Recover (action, controller settings, copy number) from a learned operator's name.
+
+    Returns:
+        None when ``name`` is not the name of a learned operator.
+    """
+    match = _NAME.fullmatch(name.lower())
+    if match is None:
+        return None
+    try:
+        params = ControllerParams(
+            rate=_decode_number(match["rate"]),
+            movement_magnitude=_decode_number(match["magnitude"]),
+            orientation=match["orientation"],
+        )
+    except ValueError:
+        return None
+    return match["action"], params, int(match["copy"] or 1)
+
+
+@dataclass(frozen=True)
+class LearnedOperator:
+    """An operator of K' learned from one exploration trial.
+
+    Attributes:
+        name: a PDDL name encoding the controller settings (see :func:`operator_name`).
+        action: the controller that executes it.
+        arguments: the parameter variables that are the controller's physical arguments.
+        params: the controller settings the trial used.
+        parameters: ``(variable, type)`` pairs; the controller's arguments come first.
+        preconditions: lifted fluents that held among the parameters before the trial.
+        add: lifted fluents the trial was observed to make true.
+        delete: lifted fluents the trial was observed to make false.
+        cost: what a plan pays for it.
+        source_arguments: the objects the parameters were lifted from, in parameter order
+            (None when read back from PDDL, which does not record them).
+    """
+
+    name: str
+    action: str
+    arguments: tuple[str, ...]
+    params: ControllerParams
+    parameters: tuple[tuple[str, str], ...]
+    preconditions: frozenset[Fluent]
+    add: frozenset[Fluent]
+    delete: frozenset[Fluent]
+    cost: float = LEARNED_COST
+    source_arguments: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        self.as_operator()  # validates names, variables and the controller binding
+        if self.source_arguments is not None and len(self.source_arguments) != len(self.parameters):
+            raise ValueError(f"{self.name}: source_arguments {self.source_arguments} do not match parameters {self.parameters}")
+
+    @property
+    def variables(self) -> tuple[str, ...]:
+        return tuple(v for v, _ in self.parameters)
+
+    def as_operator(self) -> Operator:
+        """The operator the planner searches with."""
+        return Operator(
+            name=self.name,
+            parameters=self.parameters,
+            preconditions=self.preconditions,
+            negative_preconditions=frozenset(),
+            add=self.add,
+            delete=self.delete,
+            cost=self.cost,
+            controller=Controller(action=self.action, arguments=self.arguments, params=self.params),
+        )
+
+    @classmethod
+    def from_operator(cls, op: Operator) -> LearnedOperator:
+        """Recognise a learned operator read back from PDDL by its name.
+
+        The controller's physical arguments are the first parameters, as many as the
+        controller takes.
+
+        Raises:
+            LlcpsError: the name does not encode controller settings, or the operator
+                has negative preconditions (learned operators have none).
+        """
+        parsed = parse_operator_name(op.name)
+        if parsed is None:
+            raise LlcpsError(
+                f"action {op.name} is neither one of {ACTIONS} nor a learned operator",
+                hint="learned operators are named like push_front_r0p2_m0p3",
+            )
+        if op.negative_preconditions:
+            raise LlcpsError(f"learned operator {op.name} has negative preconditions", hint="learned operators have positive preconditions only")
+        action, params, _ = parsed
+        arity = ACTION_ARITY[action]
+        if len(op.parameters) < arity:
+            raise LlcpsError(f"learned operator {op.name} has fewer parameters than the {action} controller takes ({arity})")
+        return cls(
+            name=op.name,
+            action=action,
+            arguments=op.variables[:arity],
+            params=params,
+            parameters=op.parameters,
+            preconditions=op.preconditions,
+            add=op.add,
+            delete=op.delete,
+            cost=op.cost,
+        )
+
+    def renamed(self, name: str) -> LearnedOperator:
+        return replace(self, name=name)
+
+    def same_knowledge(self, other: LearnedOperator) -> bool:
+        """Equal up to its name and where it was learned: adding it again teaches nothing."""
+        return replace(self, name=other.name, source_arguments=other.source_arguments) == other
+
+    def to_pddl(self, constant_types: Mapping[str, str] | None = None) -> str:
+        """The operator as a PDDL ``:action`` (rendered by the `pddl` library)."""
+        return str(operator_to_pddl(self.as_operator(), constant_types))
+
+    def controller_spec(self, binding: Mapping[str, str] | Sequence[str]) -> TrialSpec:
+        """The trial that executes this operator on concrete objects.
+
+        Args:
+            binding: variable -> object, or the objects in parameter order (a plan step's args).
+        """
+        if not isinstance(binding, Mapping):
+            if len(binding) != len(self.parameters):
+                raise ValueError(f"{self.name} takes {len(self.parameters)} argument(s), got {tuple(binding)}")
+            binding = dict(zip(self.variables, binding))
+        return TrialSpec(action=self.action, arguments=tuple(binding[v] for v in self.arguments), params=self.params)
+
+    def to_json(self) -> dict[str, object]:
+        """A JSON-safe dict for the experience store."""
+        return {
+            "name": self.name,
+            "action": self.action,
+            "arguments": list(self.arguments),
+            "params": {
+                "rate": self.params.rate,
+                "movement_magnitude": self.params.movement_magnitude,
+                "orientation": self.params.orientation,
+            },
+            "parameters": [list(p) for p in self.parameters],
+            "preconditions": [list(a) for a in sort_fluents(self.preconditions)],
+            "add": [list(a) for a in sort_fluents(self.add)],
+            "delete": [list(a) for a in sort_fluents(self.delete)],
+            "cost": self.cost,
+            "source_arguments": list(self.source_arguments) if self.source_arguments is not None else None,
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, object]) -> LearnedOperator:
+        """Rebuild an operator stored with :meth:`to_json`.
+
+        Raises:
+            LlcpsError: the record is malformed.
+        """
+        try:
+            params = data["params"]
+            source = data.get("source_arguments")
+            return cls(
+                name=str(data["name"]),
+                action=str(data["action"]),
+                arguments=tuple(data["arguments"]),  # type: ignore[arg-type]
+                params=ControllerParams(
+                    rate=float(params["rate"]),  # type: ignore[index]
+                    movement_magnitude=float(params["movement_magnitude"]),  # type: ignore[index]
+                    orientation=str(params["orientation"]),  # type: ignore[index]
+                ),
+                parameters=tuple((str(v), str(t)) for v, t in data["parameters"]),  # type: ignore[union-attr]
+                preconditions=frozenset(fluent(*a) for a in data["preconditions"]),  # type: ignore[union-attr]
+                add=frozenset(fluent(*a) for a in data["add"]),  # type: ignore[union-attr]
+                delete=frozenset(fluent(*a) for a in data["delete"]),  # type: ignore[union-attr]
+                cost=float(data.get("cost", LEARNED_COST)),  # type: ignore[arg-type]
+                source_arguments=tuple(source) if source is not None else None,  # type: ignore[arg-type]
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise LlcpsError(f"malformed learned operator record: {exc}", hint="the record must come from LearnedOperator.to_json()") from exc
+
+
+def _relevant_entities(arguments: Collection[str], before: State, after: State, constants: Collection[str]) -> set[str]:
+    """The trial's arguments and every entity one relation away from them (e.g. ``(in cube tray)``)."""
+    base = set(arguments)
+    linked = set(base)
+    for atom in before | after:
+        if len(atom) > 2 and base.intersection(atom[1:]):
+            linked.update(atom[1:])
+    return linked - set(constants)
+
+
+def learn_operator(
+    *,
+    spec: TrialSpec,
+    before: State,
+    after: State,
+    objects: Mapping[str, str],
+    focus: Collection[str] = (),
+    constants: Collection[str] | None = None,
+) -> LearnedOperator:
+    """Turn one executed trial into an operator of K'.
+
+    Parameters are the trial's arguments plus every entity of an observed change that
+    matters: one that is an argument, in ``focus``, or related to one of them by a fluent
+    before or after the trial (pushing the tray matters to the cube in it). Constants
+    of the domain (``table``) stay constants. Preconditions are the fluents of ``before``
+    that mention only parameters; effects are the observed differences, restricted alike.
+
+    Args:
+        spec: the trial (controller, arguments, settings).
+        before: the perceived state before the trial.
+        after: the perceived state after it.
+        objects: object -> type for every entity that can become a parameter.
+        focus: extra entities that matter, e.g. the failed action's arguments.
+        constants: names that stay constants; defaults to the default domain's constants.
+    """
+    if constants is None:
+        from llcps.symbolic.knowledge import KnowledgeBase
+
+        constants = KnowledgeBase.default().constants.keys()
+    constants = set(constants)
+    before, after = frozenset(before), frozenset(after)
+    changed = (after - before) | (before - after)
+    relevant = _relevant_entities((*spec.arguments, *focus), before, after, constants)
+    extra = sorted({e for atom in changed for e in atom[1:] if e in relevant} - set(spec.arguments))
+    entities = list(dict.fromkeys((*spec.arguments, *extra)))
+
+    binding: dict[str, str] = {}
+    parameters: list[tuple[str, str]] = []
+    used: set[str] = set()
+    for entity in entities:
+        if entity in constants:
+            raise ValueError(f"the trial argument {entity!r} is a domain constant, not an object")
+        if entity not in objects:
+            raise ValueError(f"entity {entity!r} has no type in objects")
+        kind = objects[entity]
+        stem = _TYPE_STEMS.get(kind, kind[:1].lower() or "x")
+        var, n = f"?{stem}", 1
+        while var in used:
+            n += 1
+            var = f"?{stem}{n}"
+        used.add(var)
+        binding[entity] = var
+        parameters.append((var, kind))
+
+    def lift(atoms: frozenset[Fluent]) -> frozenset[Fluent]:
+        keep = {a for a in atoms if all(t in binding or t in constants for t in a[1:])}
+        return frozenset(substitute(a, binding) for a in keep)
+
+    return LearnedOperator(
+        name=operator_name(spec.action, spec.params),
+        action=spec.action,
+        arguments=tuple(binding[a] for a in spec.arguments),
+        params=spec.params,
+        parameters=tuple(parameters),
+        preconditions=lift(before),
+        add=lift(after - before),
+        delete=lift(before - after),
+        source_arguments=tuple(entities),
+    )
+
+
+def refine_failed_action(kb: KnowledgeBase, failed: GroundAction, learned: LearnedOperator, failure_state: State) -> KnowledgeBase:
+    """K': add the learned operator and teach the failed action a_f what it lacked.
+
+    Each positive effect of the learned operator (as observed, on the objects it was
+    learned from) that mentions only a_f's arguments, was false in the failure state and
+    is not something a_f achieves itself becomes an extra precondition of a_f's operator.
+    Where the learned effect already holds the planner still plans a_f alone; where it
+    does not, it chains the learned operator before a_f.
+
+    Args:
+        kb: the knowledge base a_f was planned with.
+        failed: the step that failed (from the monitor).
+        learned: the operator learned while resolving the failure.
+        failure_state: the perceived state in which a_f failed.
+
+    Returns:
+        K' holding ``learned`` and the refined a_f (unchanged a_f when nothing applies).
+
+    Raises:
+        ValueError: ``learned`` does not record the objects it was learned from.
+    """
+    if learned.source_arguments is None:
+        raise ValueError(f"{learned.name} does not record the objects it was learned from; cannot relate it to {failed}")
+    kb = kb.with_operator(learned)
+    op = kb.operator(failed.name)
+    constants = set(kb.constants)
+    source = dict(zip(learned.variables, learned.source_arguments))
+    failed_vars: dict[str, str] = {}
+    for var, obj in zip(op.variables, failed.args):
+        failed_vars.setdefault(obj, var)
+    extra: set[Fluent] = set()
+    for atom in sort_fluents(substitute(a, source) for a in learned.add):
+        if atom in failure_state:
+            continue
+        if not all(t in failed_vars or (t in constants and not is_variable(t)) for t in atom[1:]):
+            continue
+        lifted = substitute(atom, failed_vars)
+        if lifted in op.add or lifted in op.preconditions or lifted in op.negative_preconditions:
+            continue
+        extra.add(lifted)
+    return kb.with_refinement(failed.name, extra) if extra else kb

@@ -1,0 +1,117 @@
+"""The planner: cheapest plans for a task T = (K, s0, sg).
+
+The knowledge bases here are tiny (a handful of operators over a handful of
+entities), so the planner grounds every operator over the task's objects and runs a
+uniform-cost search on the ground problem. Maintained pure-Python planners do not fit:
+pyperplan handles STRIPS only (no negative preconditions, no action costs), and
+unified-planning would need a compilation step and a heavy dependency for this size.
+
+Ties between plans of equal cost are broken deterministically: fewer steps first, then
+the order in which operators and their arguments sort.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+
+from llcps.errors import LlcpsError
+from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.schema import GroundAction
+
+Plan = tuple[GroundAction, ...]
+"""A plan pi = [a_1, ..., a_n]: ground actions in execution order."""
+
+#: Default bound on the number of states the search expands.
+MAX_EXPANSIONS = 200_000
+
+
+class PlanningLimitError(LlcpsError):
+    """The search ran out of its expansion budget before it could decide the task."""
+
+    exit_code = 1
+
+
+def ground(kb: KnowledgeBase, task: Task) -> list[GroundAction]:
+    """Every ground action of K over the task's objects, in a deterministic order.
+
+    A parameter of type t takes every object whose type is t or a subtype of t.
+    """
+    objects = task.all_objects(kb)
+    names = sorted(objects)
+    actions: list[GroundAction] = []
+    for op in sorted(kb.operators(), key=lambda o: o.name):
+        domains = [[o for o in names if kb.is_subtype(objects[o], kind)] for _, kind in op.parameters]
+        for args in itertools.product(*domains):
+            step = op.ground(args)
+            if step is not None:
+                actions.append(step)
+    return actions
+
+
+def plan(kb: KnowledgeBase, task: Task, *, max_expansions: int = MAX_EXPANSIONS) -> Plan | None:
+    """The cheapest plan from the task's initial state to its goal.
+
+    Args:
+        kb: the knowledge base K.
+        task: objects, initial state and goal.
+        max_expansions: how many states the search may expand before giving up.
+
+    Returns:
+        A cheapest plan (empty when s0 already satisfies the goal), or None when no plan
+        exists with K.
+
+    Raises:
+        LlcpsError: the task does not fit K (unknown objects, predicates, types).
+        PlanningLimitError: the budget ran out first.
+    """
+    task.check(kb)
+    actions = ground(kb, task)
+    start = task.init
+    # (cost, steps, insertion order, state); the insertion order makes ties deterministic.
+    counter = itertools.count()
+    frontier: list[tuple[float, int, int, frozenset]] = [(0.0, 0, next(counter), start)]
+    best: dict[frozenset, tuple[float, int]] = {start: (0.0, 0)}
+    parent: dict[frozenset, tuple[frozenset, GroundAction] | None] = {start: None}
+    closed: set[frozenset] = set()
+    expansions = 0
+    while frontier:
+        cost, steps, _, state = heapq.heappop(frontier)
+        if state in closed:
+            continue
+        if task.satisfied_by(state):
+            return _extract(parent, state)
+        closed.add(state)
+        expansions += 1
+        if expansions > max_expansions:
+            raise PlanningLimitError(
+                f"planning gave up after {max_expansions} expansions",
+                hint="raise max_expansions or give the task fewer objects",
+            )
+        for action in actions:
+            if not action.applicable(state):
+                continue
+            successor = action.apply(state)
+            if successor in closed:
+                continue
+            key = (cost + action.cost, steps + 1)
+            if key < best.get(successor, (float("inf"), 0)):
+                best[successor] = key
+                parent[successor] = (state, action)
+                heapq.heappush(frontier, (*key, next(counter), successor))
+    return None
+
+
+def _extract(parent: dict[frozenset, tuple[frozenset, GroundAction] | None], state: frozenset) -> Plan:
+    steps: list[GroundAction] = []
+    link = parent[state]
+    while link is not None:
+        previous, action = link
+        steps.append(action)
+        link = parent[previous]
+    return tuple(reversed(steps))
+
+
+def plan_cost(steps: Plan) -> float:
+    """The metric value of a plan: the sum of its steps' costs."""
+    return sum(step.cost for step in steps)
