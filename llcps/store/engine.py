@@ -1,0 +1,154 @@
+"""Turning ``--db`` into an engine, safely.
+
+A path or URL is checked before anything is written: a missing directory, a
+directory, an unreadable file, a file that is not SQLite, or a SQLite file that is
+not an llcps store all raise :class:`~llcps.errors.StoreError` and leave the file
+byte-identical. Only then does the engine (which switches SQLite to WAL) connect.
+
+SQLite connections get WAL journaling, a 30 s busy timeout, foreign keys and
+``synchronous=NORMAL``: a committed transaction is in the WAL file before the
+commit returns, so it survives a killed process (an OS crash or power cut can
+lose the last commits, never consistency). Write transactions start with
+``BEGIN IMMEDIATE`` so concurrent writers queue on the busy timeout instead of
+failing with "database is locked" when a read would have to upgrade to a write.
+Everything SQLite-specific lives in this module; other backends (PostgreSQL)
+get plain SQLAlchemy.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import URL, Engine, create_engine, event, make_url
+from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+from sqlalchemy.pool import NullPool, StaticPool
+
+from llcps.errors import StoreError
+from llcps.store.schema import SQLITE_APPLICATION_ID
+
+#: How long a SQLite writer waits for another writer's lock, in milliseconds.
+BUSY_TIMEOUT_MS = 30_000
+
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+#: Execution option that marks a connection's transaction as a write.
+WRITE_OPTION = "llcps_write"
+
+
+def resolve_url(url_or_path: str) -> URL:
+    """Read ``--db``: an SQLAlchemy URL if it has a scheme, else a file path."""
+    text = url_or_path.strip()
+    if not text:
+        raise StoreError("the database location is empty", hint="pass --db PATH or --db URL")
+    if "://" in text:
+        try:
+            return make_url(text)
+        except ArgumentError as exc:
+            raise StoreError(f"cannot parse database URL {text!r}", hint="e.g. sqlite:///llcps.db or postgresql+psycopg://user@host/db") from exc
+    path = Path(text).expanduser().absolute()
+    return URL.create("sqlite", database=str(path))
+
+
+def sqlite_path(url: URL) -> Path | None:
+    """The file behind a SQLite URL, or None for other backends and in-memory DBs."""
+    if url.get_backend_name() != "sqlite":
+        return None
+    database = url.database or ""
+    if database in ("", ":memory:") or database.startswith("file:"):
+        return None
+    return Path(database)
+
+
+def check_sqlite_file(path: Path, *, create: bool) -> bool:
+    """Make sure ``path`` can be an llcps store without touching it.
+
+    Returns:
+        True when the file exists (and is an llcps store), False when it is absent
+        and ``create`` allows making it.
+    """
+    if path.is_dir():
+        raise StoreError(f"{path} is a directory, not a database file", hint=f"pass a file path, e.g. --db {path / 'llcps.db'}")
+    if not path.parent.is_dir():
+        raise StoreError(f"directory {path.parent} does not exist", hint="create it first or choose another --db path")
+    if not path.exists():
+        if create:
+            if not os.access(path.parent, os.W_OK):
+                raise StoreError(f"cannot create {path}: directory {path.parent} is not writable", hint="choose another --db path")
+            return False
+        raise StoreError(f"no llcps database at {path}", hint=f"create one with `llcps --db {path} db init`")
+    try:
+        with path.open("rb") as fh:
+            header = fh.read(100)
+    except OSError as exc:
+        raise StoreError(f"cannot read {path}: {exc.strerror or exc}", hint="check the file's permissions") from exc
+    if len(header) < 100 or not header.startswith(SQLITE_MAGIC):
+        raise StoreError(f"{path} is not a SQLite database", hint="choose another --db path; the file was left untouched")
+    if int.from_bytes(header[68:72], "big") != SQLITE_APPLICATION_ID:
+        raise StoreError(
+            f"{path} is a SQLite database but not an llcps store",
+            hint="choose another --db path (or a new file for `llcps db init`); the file was left untouched",
+        )
+    return True
+
+
+def _on_sqlite_connect(foreign_keys: bool, file_backed: bool):  # noqa: ANN202 - event hook factory
+    def on_connect(dbapi_connection: Any, _record: Any) -> None:
+        # Let SQLAlchemy's "begin" event issue BEGIN so we choose its kind.
+        dbapi_connection.isolation_level = None
+        cursor = dbapi_connection.cursor()
+        try:
+            cursor.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+            if file_backed:
+                cursor.execute("PRAGMA journal_mode = WAL")
+            cursor.execute("PRAGMA synchronous = NORMAL")
+            cursor.execute(f"PRAGMA foreign_keys = {'ON' if foreign_keys else 'OFF'}")
+        finally:
+            cursor.close()
+
+    return on_connect
+
+
+def _on_sqlite_begin(conn: Any) -> None:
+    immediate = conn.get_execution_options().get(WRITE_OPTION, False)
+    conn.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
+
+
+def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True) -> Engine:
+    """Create the engine for an already checked URL.
+
+    Args:
+        foreign_keys: SQLite only; migrations turn them off while batch operations
+            rebuild tables, as SQLite requires.
+        pooled: keep connections open between calls (False for one-off use).
+    """
+    kwargs: dict[str, Any] = {}
+    is_sqlite = url.get_backend_name() == "sqlite"
+    file_backed = is_sqlite and sqlite_path(url) is not None
+    if is_sqlite and not file_backed:
+        # One shared connection, or every checkout would see a fresh empty DB.
+        kwargs["poolclass"] = StaticPool
+        kwargs["connect_args"] = {"check_same_thread": False}
+    elif not pooled:
+        kwargs["poolclass"] = NullPool
+    try:
+        engine = create_engine(url, **kwargs)
+    except (NoSuchModuleError, ModuleNotFoundError, ImportError) as exc:
+        raise StoreError(
+            f"no database driver for {url.drivername!r}: {exc}",
+            hint="for PostgreSQL install the extra: pip install 'llcps[postgres]' and use postgresql+psycopg://...",
+        ) from exc
+    if is_sqlite:
+        event.listen(engine, "connect", _on_sqlite_connect(foreign_keys, file_backed))
+        event.listen(engine, "begin", _on_sqlite_begin)
+    return engine
+
+
+def set_sqlite_application_id(engine: Engine) -> None:
+    """Mark a new SQLite file as an llcps store (a no-op on other backends)."""
+    if engine.url.get_backend_name() != "sqlite":
+        return
+    with engine.connect() as conn:
+        conn.exec_driver_sql(f"PRAGMA application_id = {SQLITE_APPLICATION_ID}")
+        conn.commit()

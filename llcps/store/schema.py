@@ -1,0 +1,205 @@
+"""SQLAlchemy 2.0 typed tables of the experience store.
+
+These classes describe the head schema; the Alembic revisions in ``migrations/``
+create it step by step, and ``tests/test_migrations.py`` checks that both agree.
+ORM rows never leave :mod:`llcps.store`: the store returns frozen dataclasses.
+
+Trial and branch ids use SQLite's AUTOINCREMENT (PostgreSQL sequences behave the
+same way): an id is never reused, so "trial id <= fork point" keeps meaning the
+same thing after trials are deleted.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    BigInteger,
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    MetaData,
+    SmallInteger,
+    String,
+    Text,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+#: Alembic's bookkeeping table; its name marks a database as an llcps store.
+VERSION_TABLE = "llcps_alembic_version"
+
+#: SQLite ``PRAGMA application_id`` of llcps stores ("LLCP" in ASCII). It lives in
+#: the file header, so a file can be recognised without opening it as a database.
+SQLITE_APPLICATION_ID = 0x4C4C4350
+
+#: Longest branch name accepted.
+MAX_BRANCH_NAME = 100
+
+NAMING_CONVENTION = {
+    "ix": "ix_%(table_name)s_%(column_0_N_name)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING_CONVENTION)
+    type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+class Branch(Base):
+    """A line of experience: a parent and the trial id it forked at."""
+
+    __tablename__ = "branches"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(MAX_BRANCH_NAME), unique=True)
+    parent_id: Mapped[int | None] = mapped_column(ForeignKey("branches.id"))
+    fork_point: Mapped[int] = mapped_column(BigInteger, default=0)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class Setting(Base):
+    """Small key/value facts about the store, e.g. the current branch."""
+
+    __tablename__ = "settings"
+
+    key: Mapped[str] = mapped_column(String(64), primary_key=True)
+    value: Mapped[str] = mapped_column(Text)
+
+
+class Run(Base):
+    """One CLI invocation or experiment sequence (provenance of its trials)."""
+
+    __tablename__ = "runs"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    command: Mapped[str] = mapped_column(Text)
+    seed: Mapped[int | None] = mapped_column(BigInteger)
+    config: Mapped[dict[str, Any]]
+    # A name, not a foreign key: the run log outlives deleted branches.
+    branch: Mapped[str] = mapped_column(String(MAX_BRANCH_NAME))
+    llcps_version: Mapped[str] = mapped_column(String(32))
+    status: Mapped[str] = mapped_column(String(32))
+    started_at: Mapped[datetime] = mapped_column(DateTime)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime)
+
+
+class Episode(Base):
+    """One scenario solve within a run."""
+
+    __tablename__ = "episodes"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int | None] = mapped_column(ForeignKey("runs.id"))
+    branch_id: Mapped[int] = mapped_column(ForeignKey("branches.id"), index=True)
+    scenario: Mapped[str] = mapped_column(String(64))
+    condition: Mapped[str] = mapped_column(String(32))
+    model: Mapped[str | None] = mapped_column(String(64))
+    measure: Mapped[str | None] = mapped_column(String(64))
+    seed: Mapped[int | None] = mapped_column(BigInteger)
+    status: Mapped[str] = mapped_column(String(32))
+    summary: Mapped[dict[str, Any]]
+    started_at: Mapped[datetime] = mapped_column(DateTime)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime)
+
+
+class Snapshot(Base):
+    """A physics state a trial started from, stored once per content hash."""
+
+    __tablename__ = "snapshots"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    scene: Mapped[dict[str, Any]]
+    state: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class Trial(Base):
+    """One executed action: the unit of the lifelong training set."""
+
+    __tablename__ = "trials"
+    __table_args__ = (
+        Index("ix_trials_branch_id_id", "branch_id", "id"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    branch_id: Mapped[int] = mapped_column(ForeignKey("branches.id"))
+    run_id: Mapped[int | None] = mapped_column(ForeignKey("runs.id"))
+    episode_id: Mapped[int | None] = mapped_column(ForeignKey("episodes.id"))
+    source: Mapped[str] = mapped_column(String(16))
+    scenario: Mapped[str | None] = mapped_column(String(64))
+    action: Mapped[str] = mapped_column(String(32))
+    arguments: Mapped[list[Any]]
+    rate: Mapped[float] = mapped_column(Float)
+    movement_magnitude: Mapped[float] = mapped_column(Float)
+    orientation: Mapped[str] = mapped_column(String(16))
+    features: Mapped[list[Any]]
+    positive_visibility: Mapped[int] = mapped_column(SmallInteger)
+    negative_visibility: Mapped[int] = mapped_column(SmallInteger)
+    positive_reachability: Mapped[int] = mapped_column(SmallInteger)
+    negative_reachability: Mapped[int] = mapped_column(SmallInteger)
+    positive_touching: Mapped[int] = mapped_column(SmallInteger)
+    negative_touching: Mapped[int] = mapped_column(SmallInteger)
+    solved: Mapped[bool] = mapped_column(Boolean)
+    sim_steps: Mapped[int] = mapped_column(Integer)
+    wall_seconds: Mapped[float] = mapped_column(Float)
+    seed: Mapped[int] = mapped_column(BigInteger)
+    snapshot_id: Mapped[int | None] = mapped_column(ForeignKey("snapshots.id"))
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    extra: Mapped[dict[str, Any]]
+
+
+class Operator(Base):
+    """A learned operator (the knowledge-base expansion K')."""
+
+    __tablename__ = "operators"
+    __table_args__ = (
+        Index("ix_operators_branch_id_id", "branch_id", "id"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    branch_id: Mapped[int] = mapped_column(ForeignKey("branches.id"))
+    name: Mapped[str] = mapped_column(String(200))
+    pddl: Mapped[str] = mapped_column(Text)
+    definition: Mapped[dict[str, Any]]
+    scenario: Mapped[str | None] = mapped_column(String(64))
+    episode_id: Mapped[int | None] = mapped_column(ForeignKey("episodes.id"))
+    watermark: Mapped[int] = mapped_column(BigInteger)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class WorldModel(Base):
+    """A fitted world model as bytes in a format that cannot run code when loaded."""
+
+    __tablename__ = "world_models"
+    __table_args__ = (
+        Index("ix_world_models_branch_id_name_seed", "branch_id", "name", "seed"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    branch_id: Mapped[int] = mapped_column(ForeignKey("branches.id"))
+    name: Mapped[str] = mapped_column(String(64))
+    seed: Mapped[int] = mapped_column(BigInteger)
+    watermark: Mapped[int] = mapped_column(BigInteger)
+    artifact: Mapped[bytes] = mapped_column(LargeBinary)
+    sha256: Mapped[str] = mapped_column(String(64))
+    meta: Mapped[dict[str, Any]]
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+

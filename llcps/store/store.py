@@ -1,0 +1,938 @@
+"""The experience store: every trial the robot executes, on git-like branches.
+
+Visibility rule: a branch B with parent P forked at trial id f sees its own rows
+plus the rows P sees with id <= f (recursively, so the limit for a grandparent is
+the smaller of the two fork points). Trial ids only grow, so a branch's own trials
+all have ids above its fork point and "what B saw up to id w" is a prefix.
+Learned operators and world models follow the same rule, with their watermark
+(the largest trial id visible when they were made) in place of the id.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from contextlib import contextmanager
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from typing import Any, Iterator, Mapping, Sequence
+
+from sqlalchemy import (
+    URL,
+    ColumnElement,
+    Connection,
+    Engine,
+    and_,
+    delete,
+    func,
+    insert,
+    inspect,
+    or_,
+    select,
+    update,
+)
+from sqlalchemy.exc import IntegrityError, SQLAlchemyError
+
+import llcps
+from llcps.domain import TrialRecord
+from llcps.errors import LlcpsError, StoreError, UnknownNameError
+from llcps.store import engine as engines
+from llcps.store import migrations
+from llcps.store.records import (
+    BranchChange,
+    BranchInfo,
+    EpisodeRecord,
+    ModelArtifact,
+    NewTrial,
+    OperatorRecord,
+    RunRecord,
+    SnapshotRecord,
+    StoreStatus,
+)
+from llcps.store.schema import (
+    MAX_BRANCH_NAME,
+    Branch,
+    Episode,
+    Operator,
+    Run,
+    Setting,
+    Snapshot,
+    Trial,
+    WorldModel,
+)
+from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, iso_timestamp, trial_row
+
+#: The root branch every store starts with.
+MAIN_BRANCH = "main"
+
+CURRENT_BRANCH_KEY = "current_branch"
+
+#: ``at=`` / ``to=`` value meaning "the last visible pretraining trial".
+PRETRAIN = "pretrain"
+
+RESET_TARGETS: tuple[str, ...] = (PRETRAIN, "empty")
+
+_WHITESPACE = re.compile(r"\s")
+_INSERT_TRIAL = insert(Trial)
+_INSERT_TRIALS = insert(Trial).returning(Trial.id, sort_by_parameter_order=True)
+
+
+def validate_branch_name(name: str) -> str:
+    """Reject names that would be ambiguous on a command line or in a path."""
+    problem = None
+    if not name or not name.strip():
+        problem = "is empty"
+    elif _WHITESPACE.search(name):
+        problem = "contains whitespace"
+    elif "/" in name:
+        problem = "contains '/'"
+    elif ".." in name:
+        problem = "contains '..'"
+    elif len(name) > MAX_BRANCH_NAME:
+        problem = f"is longer than {MAX_BRANCH_NAME} characters"
+    elif name.startswith("-"):
+        problem = "starts with '-'"
+    elif not name.isprintable():
+        problem = "contains control characters"
+    if problem:
+        raise LlcpsError(f"invalid branch name {name[:40]!r}: it {problem}", hint="use letters, digits, '-', '_' or '.'")
+    return name
+
+
+def _now() -> datetime:
+    return datetime.now(timezone.utc).replace(tzinfo=None)
+
+
+def _db_error(exc: SQLAlchemyError) -> StoreError:
+    detail = str(getattr(exc, "orig", None) or exc).splitlines()[0]
+    lowered = detail.lower()
+    if "locked" in lowered or "busy" in lowered:
+        hint = "another process held the database for longer than the busy timeout; retry when it is done"
+    elif "readonly" in lowered or "read-only" in lowered or "permission" in lowered:
+        hint = "the database file or its directory is not writable"
+    elif "connect" in lowered:
+        hint = "check the --db URL and that the database server is running"
+    else:
+        hint = "check `llcps db status`"
+    return StoreError(f"database error: {detail}", hint=hint)
+
+
+@dataclass(frozen=True)
+class _Link:
+    """One branch of a visibility chain and the largest id visible from it (None: all)."""
+
+    branch_id: int
+    name: str
+    limit: int | None
+
+
+def _visible(chain: Sequence[_Link], branch_col: Any, id_col: Any) -> ColumnElement[bool]:
+    return or_(
+        *(
+            branch_col == link.branch_id if link.limit is None else and_(branch_col == link.branch_id, id_col <= link.limit)
+            for link in chain
+        )
+    )
+
+
+class Store:
+    """A handle on one experience database. Create it with :meth:`Store.open`.
+
+    Safe to share between threads; after ``os.fork`` open a new one in the child.
+    """
+
+    def __init__(self, engine: Engine, url: URL) -> None:
+        self._engine = engine
+        self._url = url
+        self._branch_ids: dict[str, int] = {}
+
+    # ------------------------------------------------------------------ opening
+
+    @classmethod
+    def open(cls, url_or_path: str, *, create: bool = False, allow_outdated: bool = False) -> Store:
+        """Open (or with ``create`` make) an llcps store.
+
+        Args:
+            url_or_path: a file path (SQLite) or an SQLAlchemy URL.
+            create: make a new store when the file is absent (or the database is
+                empty); an existing file that is not an llcps store is refused.
+            allow_outdated: accept a store at an older schema revision (for
+                ``db status`` and ``db upgrade``); otherwise it is refused with a hint.
+
+        Raises:
+            StoreError: the location cannot hold an llcps store, or its schema is
+                newer than this llcps or (without ``allow_outdated``) older.
+        """
+        url = engines.resolve_url(url_or_path)
+        path = engines.sqlite_path(url)
+        exists = engines.check_sqlite_file(path, create=create) if path is not None else True
+        engine = engines.make_engine(url)
+        store = cls(engine, url)
+        try:
+            try:
+                if not exists:
+                    engines.set_sqlite_application_id(engine)
+                    store.upgrade()
+                else:
+                    store._check_schema(create=create, allow_outdated=allow_outdated)
+            except SQLAlchemyError as exc:
+                raise _db_error(exc) from exc
+        except BaseException:
+            engine.dispose()
+            if not exists and path is not None:  # do not leave a half-made store behind
+                for suffix in ("", "-wal", "-shm"):
+                    path.with_name(path.name + suffix).unlink(missing_ok=True)
+            raise
+        return store
+
+    def _check_schema(self, *, create: bool, allow_outdated: bool) -> None:
+        try:
+            with self._engine.connect() as conn:
+                revision = migrations.current_revision(conn)
+                tables = inspect(conn).get_table_names() if revision is None else []
+        except SQLAlchemyError as exc:
+            raise _db_error(exc) from exc
+        if revision is None:
+            if tables:
+                raise StoreError(
+                    f"{self.url} holds tables but is not an llcps store",
+                    hint="choose another --db; the database was left untouched",
+                )
+            if not create:
+                raise StoreError(f"no llcps store at {self.url}", hint="create one with `llcps db init`")
+            self.upgrade()
+            return
+        head = migrations.head_revision()
+        if revision not in migrations.known_revisions():
+            raise StoreError(
+                f"the database is at schema revision {revision!r}, newer than this llcps knows (head {head!r})",
+                hint="upgrade the llcps package to open it; `llcps db upgrade` only moves databases forward",
+            )
+        if revision != head and not allow_outdated:
+            raise StoreError(
+                f"the database is at schema revision {revision!r}, older than this llcps needs ({head!r})",
+                hint="run `llcps db upgrade` to migrate it",
+            )
+
+    def close(self) -> None:
+        """Release pooled connections."""
+        self._engine.dispose()
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Store({self.url!r})"
+
+    @property
+    def url(self) -> str:
+        """The database URL, password hidden."""
+        return self._url.render_as_string(hide_password=True)
+
+    @property
+    def engine(self) -> Engine:
+        """The SQLAlchemy engine, for tools that need raw access (benchmarks, exports)."""
+        return self._engine
+
+    @property
+    def revision(self) -> str | None:
+        """The schema revision recorded in the database."""
+        with self._read() as conn:
+            return migrations.current_revision(conn)
+
+    @property
+    def head(self) -> str:
+        """The newest schema revision this llcps knows."""
+        return migrations.head_revision()
+
+    def upgrade(self) -> tuple[str | None, str]:
+        """Migrate the schema to the newest revision.
+
+        Returns:
+            (revision before, revision after).
+        """
+        before = self.revision
+        head = migrations.head_revision()
+        if before == head:
+            return before, head
+        file_backed = engines.sqlite_path(self._url) is not None
+        # SQLite needs foreign keys off while batch operations rebuild tables.
+        engine = engines.make_engine(self._url, foreign_keys=False, pooled=False) if file_backed else self._engine
+        try:
+            with engine.connect() as conn:
+                conn.execution_options(**{engines.WRITE_OPTION: True})
+                with conn.begin():
+                    migrations.upgrade(conn)
+        except SQLAlchemyError as exc:
+            raise _db_error(exc) from exc
+        finally:
+            if engine is not self._engine:
+                engine.dispose()
+        self._engine.dispose()
+        return before, head
+
+    def init(self) -> str:
+        """Bring the store to the newest schema and make sure a current branch exists.
+
+        Returns:
+            The schema revision after initialisation.
+        """
+        _, head = self.upgrade()
+        with self._write() as conn:
+            current = self._get_setting(conn, CURRENT_BRANCH_KEY)
+            names = set(conn.scalars(select(Branch.name)))
+            if current not in names:
+                self._set_setting(conn, CURRENT_BRANCH_KEY, MAIN_BRANCH if MAIN_BRANCH in names else sorted(names)[0])
+        return head
+
+    # --------------------------------------------------------------- sessions
+
+    @contextmanager
+    def _read(self) -> Iterator[Connection]:
+        try:
+            with self._engine.connect() as conn:
+                yield conn
+        except SQLAlchemyError as exc:
+            raise _db_error(exc) from exc
+
+    @contextmanager
+    def _write(self) -> Iterator[Connection]:
+        """One transaction that takes the write lock up front (SQLite: BEGIN IMMEDIATE)."""
+        try:
+            with self._engine.connect() as conn:
+                conn.execution_options(**{engines.WRITE_OPTION: True})
+                with conn.begin():
+                    yield conn
+        except SQLAlchemyError as exc:
+            raise _db_error(exc) from exc
+
+    @staticmethod
+    def _get_setting(conn: Connection, key: str) -> str | None:
+        return conn.scalar(select(Setting.value).where(Setting.key == key))
+
+    @staticmethod
+    def _set_setting(conn: Connection, key: str, value: str) -> None:
+        if conn.execute(update(Setting).where(Setting.key == key).values(value=value)).rowcount == 0:
+            conn.execute(insert(Setting).values(key=key, value=value))
+
+    # --------------------------------------------------------------- branches
+
+    def _branches(self, conn: Connection) -> list[Any]:
+        return list(conn.execute(select(Branch.id, Branch.name, Branch.parent_id, Branch.fork_point, Branch.created_at).order_by(Branch.id)))
+
+    def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[_Link]:
+        rows = self._branches(conn) if rows is None else rows
+        by_id = {r.id: r for r in rows}
+        row = next((r for r in rows if r.name == name), None)
+        if row is None:
+            raise UnknownNameError("branch", name, [r.name for r in rows])
+        chain: list[_Link] = []
+        limit: int | None = None
+        while True:
+            chain.append(_Link(row.id, row.name, limit))
+            if row.parent_id is None:
+                return chain
+            limit = row.fork_point if limit is None else min(limit, row.fork_point)
+            row = by_id[row.parent_id]
+
+    def _name(self, conn: Connection, name: str | None) -> str:
+        if name is not None:
+            return name
+        return self._get_setting(conn, CURRENT_BRANCH_KEY) or MAIN_BRANCH
+
+    def current_branch(self) -> str:
+        """The branch commands use when none is named."""
+        with self._read() as conn:
+            return self._name(conn, None)
+
+    def checkout(self, name: str) -> BranchInfo:
+        """Make ``name`` the current branch."""
+        with self._write() as conn:
+            self._chain(conn, name)
+            self._set_setting(conn, CURRENT_BRANCH_KEY, name)
+            return self._info(conn, name)
+
+    def resolve_branch(self, name: str | None) -> BranchInfo:
+        """The named branch, or the current one for None.
+
+        Raises:
+            UnknownNameError: no such branch (the message lists the known ones).
+        """
+        with self._read() as conn:
+            return self._info(conn, self._name(conn, name))
+
+    def _count(self, conn: Connection, chain: Sequence[_Link], *extra: ColumnElement[bool]) -> int:
+        return conn.scalar(select(func.count()).select_from(Trial).where(_visible(chain, Trial.branch_id, Trial.id), *extra)) or 0
+
+    def _max_visible(self, conn: Connection, chain: Sequence[_Link], *extra: ColumnElement[bool]) -> int:
+        best = 0
+        for link in chain:  # one index range per link beats one OR scan
+            stmt = select(func.max(Trial.id)).where(Trial.branch_id == link.branch_id, *extra)
+            if link.limit is not None:
+                stmt = stmt.where(Trial.id <= link.limit)
+            best = max(best, conn.scalar(stmt) or 0)
+        return best
+
+    def _info(self, conn: Connection, name: str, rows: list[Any] | None = None, current: str | None = None) -> BranchInfo:
+        rows = self._branches(conn) if rows is None else rows
+        chain = self._chain(conn, name, rows)
+        row = next(r for r in rows if r.name == name)
+        parent = next((r.name for r in rows if r.id == row.parent_id), None)
+        current = self._name(conn, None) if current is None else current
+        return BranchInfo(
+            id=row.id,
+            name=name,
+            parent=parent,
+            fork_point=row.fork_point,
+            own_trials=self._count(conn, chain[:1]),
+            visible_trials=self._count(conn, chain),
+            created_at=iso_timestamp(row.created_at) or "",
+            is_current=name == current,
+        )
+
+    def list_branches(self) -> list[BranchInfo]:
+        """Every branch with its parent, fork point and trial counts, oldest first."""
+        with self._read() as conn:
+            rows = self._branches(conn)
+            current = self._name(conn, None)
+            return [self._info(conn, r.name, rows, current) for r in rows]
+
+    def create_branch(self, name: str, *, from_branch: str | None = None, at: int | str | None = None) -> BranchInfo:
+        """Fork a new branch.
+
+        Args:
+            from_branch: the parent (default: the current branch).
+            at: the fork point: a trial id visible on the parent, ``"pretrain"`` for
+                the parent's last visible pretraining trial (0 if it has none), or
+                None for its latest visible trial.
+        """
+        validate_branch_name(name)
+        with self._write() as conn:
+            rows = self._branches(conn)
+            if any(r.name == name for r in rows):
+                raise StoreError(f"branch {name!r} already exists", hint="pick another name or `llcps db checkout` it")
+            parent_name = self._name(conn, from_branch)
+            chain = self._chain(conn, parent_name, rows)
+            fork = self._fork_point(conn, chain, at)
+            conn.execute(insert(Branch).values(name=name, parent_id=chain[0].branch_id, fork_point=fork, created_at=_now()))
+            return self._info(conn, name)
+
+    def _fork_point(self, conn: Connection, chain: Sequence[_Link], at: int | str | None) -> int:
+        if at is None:
+            return self._max_visible(conn, chain)
+        if isinstance(at, str):
+            if at == PRETRAIN:
+                return self._max_visible(conn, chain, Trial.source == PRETRAIN)
+            if not at.strip().isdigit():
+                raise LlcpsError(f"invalid fork point {at!r}", hint="pass a trial id or 'pretrain'")
+            at = int(at)
+        if at == 0:
+            return 0
+        if at < 0 or self._count(conn, chain, Trial.id == at) == 0:
+            raise LlcpsError(
+                f"trial {at} is not visible on branch {chain[0].name!r}",
+                hint=f"its visible trials end at id {self._max_visible(conn, chain)}; see `llcps inspect trials`",
+            )
+        return int(at)
+
+    def _removal(self, conn: Connection, name: str, action: str, to: str | None) -> tuple[BranchChange, dict[str, Any]]:
+        """Count what deleting/resetting ``name`` removes; refuse if children see any of it."""
+        rows = self._branches(conn)
+        chain = self._chain(conn, name, rows)
+        bid = chain[0].branch_id
+        keep = 0
+        if to == PRETRAIN:
+            keep = self._max_visible(conn, chain, Trial.source == PRETRAIN)
+        trial_clause = and_(Trial.branch_id == bid, Trial.id > keep)
+        op_clause = and_(Operator.branch_id == bid, Operator.watermark > keep)
+        model_clause = and_(WorldModel.branch_id == bid, WorldModel.watermark > keep)
+        if action == "delete":
+            episode_clause = Episode.branch_id == bid
+        else:
+            kept_episodes = select(Trial.episode_id).where(Trial.branch_id == bid, Trial.id <= keep, Trial.episode_id.is_not(None))
+            episode_clause = and_(Episode.branch_id == bid, Episode.id.not_in(kept_episodes))
+        children = [r for r in rows if r.parent_id == bid]
+        if action == "delete" and children:
+            raise StoreError(
+                f"branch {name!r} has child branches: {', '.join(r.name for r in children)}",
+                hint="delete them first",
+            )
+        first_removed = min(
+            (
+                v
+                for v in (
+                    conn.scalar(select(func.min(Trial.id)).where(trial_clause)),
+                    conn.scalar(select(func.min(Operator.watermark)).where(op_clause)),
+                    conn.scalar(select(func.min(WorldModel.watermark)).where(model_clause)),
+                )
+                if v is not None
+            ),
+            default=None,
+        )
+        blocking = [r.name for r in children if first_removed is not None and r.fork_point >= first_removed]
+        if blocking:
+            raise StoreError(
+                f"branch(es) {', '.join(blocking)} forked from {name!r} after trial {first_removed - 1}",
+                hint="they still see what a reset would remove; delete or reset them first",
+            )
+        change = BranchChange(
+            branch=name,
+            action=action,
+            to=to,
+            dry_run=True,
+            trials=conn.scalar(select(func.count()).select_from(Trial).where(trial_clause)) or 0,
+            operators=conn.scalar(select(func.count()).select_from(Operator).where(op_clause)) or 0,
+            world_models=conn.scalar(select(func.count()).select_from(WorldModel).where(model_clause)) or 0,
+            episodes=conn.scalar(select(func.count()).select_from(Episode).where(episode_clause)) or 0,
+            kept_until=keep if action == "reset" else None,
+        )
+        clauses = {"trial": trial_clause, "operator": op_clause, "model": model_clause, "episode": episode_clause, "branch_id": bid}
+        return change, clauses
+
+    def _apply_removal(self, conn: Connection, clauses: Mapping[str, Any]) -> None:
+        episode_ids = select(Episode.id).where(clauses["episode"])
+        conn.execute(delete(Operator).where(or_(clauses["operator"], Operator.episode_id.in_(episode_ids))))
+        conn.execute(delete(WorldModel).where(clauses["model"]))
+        conn.execute(delete(Trial).where(clauses["trial"]))
+        conn.execute(delete(Episode).where(clauses["episode"]))
+
+    def delete_branch(self, name: str, *, dry_run: bool) -> BranchChange:
+        """Remove a branch and everything it owns.
+
+        Refused for ``main``, the current branch and branches with children.
+        With ``dry_run`` only counts what would go.
+        """
+        with self._write() as conn:
+            if name == MAIN_BRANCH:
+                raise StoreError("the main branch cannot be deleted", hint="`llcps db reset --to empty` clears it")
+            self._chain(conn, name)
+            if name == self._name(conn, None):
+                raise StoreError(f"branch {name!r} is checked out", hint="`llcps db checkout main` first")
+            change, clauses = self._removal(conn, name, "delete", None)
+            if dry_run:
+                return change
+            self._apply_removal(conn, clauses)
+            conn.execute(delete(Branch).where(Branch.id == clauses["branch_id"]))
+        self._branch_ids.pop(name, None)
+        return _applied(change)
+
+    def reset_branch(self, name: str | None, *, to: str = PRETRAIN, dry_run: bool) -> BranchChange:
+        """Drop a branch's own experience after a point.
+
+        Args:
+            name: the branch (None: the current one).
+            to: ``"pretrain"`` keeps its own trials up to the last visible
+                pretraining trial (and operators/models with a watermark up to it);
+                ``"empty"`` removes all it owns.
+            dry_run: only count what would go.
+        """
+        if to not in RESET_TARGETS:
+            raise LlcpsError(f"unknown reset target {to!r}", hint=f"use one of: {', '.join(RESET_TARGETS)}")
+        with self._write() as conn:
+            name = self._name(conn, name)
+            change, clauses = self._removal(conn, name, "reset", to)
+            if not dry_run:
+                self._apply_removal(conn, clauses)
+        return change if dry_run else _applied(change)
+
+    # ------------------------------------------------------------- provenance
+
+    def start_run(self, *, command: str, seed: int | None, config: Mapping[str, Any], branch: str) -> int:
+        """Record the start of a CLI invocation or experiment sequence."""
+        with self._write() as conn:
+            self._chain(conn, branch)
+            return conn.execute(
+                insert(Run).values(
+                    command=command,
+                    seed=seed,
+                    config=dict(config),
+                    branch=branch,
+                    llcps_version=llcps.__version__,
+                    status="running",
+                    started_at=_now(),
+                )
+            ).inserted_primary_key[0]
+
+    def finish_run(self, run_id: int, *, status: str) -> None:
+        """Record how a run ended (e.g. ``ok``, ``failed``, ``interrupted``)."""
+        with self._write() as conn:
+            if conn.execute(update(Run).where(Run.id == run_id).values(status=status, finished_at=_now())).rowcount == 0:
+                raise LlcpsError(f"unknown run {run_id}", hint="see `llcps inspect runs`")
+
+    def start_episode(
+        self,
+        *,
+        run_id: int | None,
+        branch: str,
+        scenario: str,
+        condition: str,
+        model: str | None,
+        measure: str | None,
+        seed: int | None,
+    ) -> int:
+        """Record the start of one scenario solve."""
+        with self._write() as conn:
+            chain = self._chain(conn, branch)
+            return conn.execute(
+                insert(Episode).values(
+                    run_id=run_id,
+                    branch_id=chain[0].branch_id,
+                    scenario=scenario,
+                    condition=condition,
+                    model=model,
+                    measure=measure,
+                    seed=seed,
+                    status="running",
+                    summary={},
+                    started_at=_now(),
+                )
+            ).inserted_primary_key[0]
+
+    def finish_episode(self, episode_id: int, *, status: str, summary: Mapping[str, Any]) -> None:
+        """Record an episode's outcome and summary (trial counts, times, learned operator)."""
+        with self._write() as conn:
+            stmt = update(Episode).where(Episode.id == episode_id).values(status=status, summary=dict(summary), finished_at=_now())
+            if conn.execute(stmt).rowcount == 0:
+                raise LlcpsError(f"unknown episode {episode_id}", hint="see `llcps inspect runs`")
+
+    def list_runs(self, *, branch: str | None = None, limit: int | None = None) -> list[RunRecord]:
+        """Runs, newest first."""
+        stmt = select(Run).order_by(Run.id.desc()).limit(limit)
+        if branch is not None:
+            stmt = stmt.where(Run.branch == branch)
+        with self._read() as conn:
+            return [
+                RunRecord(
+                    id=r.id,
+                    command=r.command,
+                    seed=r.seed,
+                    config=r.config,
+                    branch=r.branch,
+                    llcps_version=r.llcps_version,
+                    status=r.status,
+                    started_at=iso_timestamp(r.started_at) or "",
+                    finished_at=iso_timestamp(r.finished_at),
+                )
+                for r in conn.execute(stmt)
+            ]
+
+    def list_episodes(
+        self,
+        *,
+        run_id: int | None = None,
+        branch: str | None = None,
+        scenario: str | None = None,
+        limit: int | None = None,
+    ) -> list[EpisodeRecord]:
+        """Episodes, newest first; ``branch`` means episodes run on that branch itself."""
+        stmt = (
+            select(Episode, Branch.name.label("branch_name"))
+            .join(Branch, Branch.id == Episode.branch_id)
+            .order_by(Episode.id.desc())
+            .limit(limit)
+        )
+        if run_id is not None:
+            stmt = stmt.where(Episode.run_id == run_id)
+        if branch is not None:
+            stmt = stmt.where(Branch.name == branch)
+        if scenario is not None:
+            stmt = stmt.where(Episode.scenario == scenario)
+        with self._read() as conn:
+            return [
+                EpisodeRecord(
+                    id=r.id,
+                    run_id=r.run_id,
+                    branch=r.branch_name,
+                    scenario=r.scenario,
+                    condition=r.condition,
+                    model=r.model,
+                    measure=r.measure,
+                    seed=r.seed,
+                    status=r.status,
+                    summary=r.summary,
+                    started_at=iso_timestamp(r.started_at) or "",
+                    finished_at=iso_timestamp(r.finished_at),
+                )
+                for r in conn.execute(stmt)
+            ]
+
+    # -------------------------------------------------------------- snapshots
+
+    @staticmethod
+    def snapshot_hash(scene: Mapping[str, Any], state: bytes) -> str:
+        """Content hash of a snapshot: canonical scene JSON, a NUL, the state bytes."""
+        digest = hashlib.sha256(json.dumps(scene, sort_keys=True, separators=(",", ":")).encode())
+        digest.update(b"\x00")
+        digest.update(state)
+        return digest.hexdigest()
+
+    def put_snapshot(self, *, scene: Mapping[str, Any], state: bytes) -> int:
+        """Store a physics state once; the same scene and bytes give the same id."""
+        sha = self.snapshot_hash(scene, state)
+        found = self._snapshot_id(sha)
+        if found is not None:
+            return found
+        try:
+            with self._engine.connect() as conn:
+                conn.execution_options(**{engines.WRITE_OPTION: True})
+                with conn.begin():
+                    return conn.execute(
+                        insert(Snapshot).values(sha256=sha, scene=dict(scene), state=bytes(state), created_at=_now())
+                    ).inserted_primary_key[0]
+        except IntegrityError:  # another writer stored the same content first
+            found = self._snapshot_id(sha)
+            if found is None:
+                raise
+            return found
+        except SQLAlchemyError as exc:
+            raise _db_error(exc) from exc
+
+    def _snapshot_id(self, sha: str) -> int | None:
+        with self._read() as conn:
+            return conn.scalar(select(Snapshot.id).where(Snapshot.sha256 == sha))
+
+    def get_snapshot(self, snapshot_id: int) -> SnapshotRecord:
+        """A stored physics state by id."""
+        with self._read() as conn:
+            row = conn.execute(select(Snapshot.id, Snapshot.scene, Snapshot.state, Snapshot.sha256).where(Snapshot.id == snapshot_id)).first()
+        if row is None:
+            raise LlcpsError(f"unknown snapshot {snapshot_id}", hint="snapshot ids come from a trial's snapshot_id")
+        return SnapshotRecord(id=row.id, scene=row.scene, state=bytes(row.state), sha256=row.sha256)
+
+    # ----------------------------------------------------------------- trials
+
+    def _branch_id(self, conn: Connection, name: str) -> int:
+        bid = self._branch_ids.get(name)
+        if bid is None:
+            bid = self._chain(conn, name)[0].branch_id
+            self._branch_ids[name] = bid
+        return bid
+
+    def add_trial(self, trial: NewTrial) -> int:
+        """Write one trial; it is committed (durable) when this returns its id."""
+        return self.add_trials([trial])[0]
+
+    def add_trials(self, trials: Sequence[NewTrial]) -> list[int]:
+        """Write several trials in one transaction; ids in input order."""
+        if not trials:
+            return []
+        now = _now()
+        try:
+            with self._write() as conn:
+                rows = [trial_row(t, branch_id=self._branch_id(conn, t.branch), created_at=now) for t in trials]
+                if len(rows) == 1:
+                    return [conn.execute(_INSERT_TRIAL, rows[0]).inserted_primary_key[0]]
+                result = conn.execute(_INSERT_TRIALS, rows)
+                return list(result.scalars())
+        except StoreError as exc:
+            if "FOREIGN KEY" in exc.message.upper() or "foreign key" in exc.message:
+                stale = {t.branch for t in trials}
+                self._branch_ids.clear()
+                raise StoreError(
+                    f"a trial refers to something that does not exist (branch {', '.join(sorted(stale))}, run, episode or snapshot)",
+                    hint="check the ids passed in; `llcps db list` shows the branches",
+                ) from exc
+            raise
+
+    def get_trial(self, trial_id: int) -> TrialRecord:
+        """One trial by id, on whatever branch owns it."""
+        with self._read() as conn:
+            names = {r.id: r.name for r in self._branches(conn)}
+            row = conn.execute(select(*TRIAL_COLUMNS).where(Trial.id == trial_id)).first()
+        if row is None:
+            raise LlcpsError(f"unknown trial {trial_id}", hint="see `llcps inspect trials` for trial ids")
+        return TrialDecoder(names)(row)
+
+    def _trial_filters(
+        self, source: str | None, scenario: str | None, solved: bool | None, after_id: int | None
+    ) -> list[ColumnElement[bool]]:
+        filters: list[ColumnElement[bool]] = []
+        if source is not None:
+            filters.append(Trial.source == source)
+        if scenario is not None:
+            filters.append(Trial.scenario == scenario)
+        if solved is not None:
+            filters.append(Trial.solved == solved)
+        if after_id is not None:
+            filters.append(Trial.id > after_id)
+        return filters
+
+    def visible_trials(
+        self,
+        branch: str | None,
+        *,
+        source: str | None = None,
+        scenario: str | None = None,
+        solved: bool | None = None,
+        limit: int | None = None,
+        after_id: int | None = None,
+        newest_first: bool = False,
+    ) -> list[TrialRecord]:
+        """The trials ``branch`` sees (None: the current branch), in id order.
+
+        Args:
+            after_id: only trials with a larger id (incremental loading).
+            limit: at most this many, taken from the start of the order.
+            newest_first: descending id order.
+        """
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            stmt = (
+                select(*TRIAL_COLUMNS)
+                .where(_visible(chain, Trial.branch_id, Trial.id), *self._trial_filters(source, scenario, solved, after_id))
+                .order_by(Trial.id.desc() if newest_first else Trial.id)
+                .limit(limit)
+            )
+            decode = TrialDecoder({link.branch_id: link.name for link in chain})
+            return [decode(row) for row in conn.execute(stmt)]
+
+    def count_visible_trials(self, branch: str | None, source: str | None = None) -> int:
+        """How many trials ``branch`` sees (optionally of one source)."""
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            return self._count(conn, chain, *self._trial_filters(source, None, None, None))
+
+    def max_visible_trial_id(self, branch: str | None) -> int:
+        """The largest trial id ``branch`` sees, 0 if none: the watermark of a fit on it."""
+        with self._read() as conn:
+            return self._max_visible(conn, self._chain(conn, self._name(conn, branch)))
+
+    # -------------------------------------------------------------- operators
+
+    def add_operator(
+        self,
+        *,
+        branch: str,
+        name: str,
+        pddl: str,
+        definition: Mapping[str, Any],
+        scenario: str | None,
+        episode_id: int | None,
+    ) -> int:
+        """Persist a learned operator on ``branch``, stamped with its current watermark."""
+        with self._write() as conn:
+            chain = self._chain(conn, branch)
+            return conn.execute(
+                insert(Operator).values(
+                    branch_id=chain[0].branch_id,
+                    name=name,
+                    pddl=pddl,
+                    definition=dict(definition),
+                    scenario=scenario,
+                    episode_id=episode_id,
+                    watermark=self._max_visible(conn, chain),
+                    created_at=_now(),
+                )
+            ).inserted_primary_key[0]
+
+    def visible_operators(self, branch: str | None) -> list[OperatorRecord]:
+        """The operators ``branch`` has learned or inherited, oldest first."""
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            names = {link.branch_id: link.name for link in chain}
+            stmt = select(Operator).where(_visible(chain, Operator.branch_id, Operator.watermark)).order_by(Operator.id)
+            return [
+                OperatorRecord(
+                    id=r.id,
+                    branch=names[r.branch_id],
+                    name=r.name,
+                    pddl=r.pddl,
+                    definition=r.definition,
+                    scenario=r.scenario,
+                    episode_id=r.episode_id,
+                    watermark=r.watermark,
+                    created_at=iso_timestamp(r.created_at) or "",
+                )
+                for r in conn.execute(stmt)
+            ]
+
+    # ----------------------------------------------------------- world models
+
+    def save_world_model(
+        self, *, branch: str, name: str, seed: int, watermark: int, artifact: bytes, meta: Mapping[str, Any]
+    ) -> int:
+        """Store a fitted world model's bytes (a safe format: npz, state_dict, JSON).
+
+        Args:
+            watermark: :meth:`max_visible_trial_id` of ``branch`` when the fit started.
+        """
+        if not isinstance(artifact, (bytes, bytearray, memoryview)):
+            raise LlcpsError("a world model artifact must be bytes", hint="serialise it as npz, a torch state_dict or JSON")
+        data = bytes(artifact)
+        with self._write() as conn:
+            chain = self._chain(conn, branch)
+            return conn.execute(
+                insert(WorldModel).values(
+                    branch_id=chain[0].branch_id,
+                    name=name,
+                    seed=int(seed),
+                    watermark=int(watermark),
+                    artifact=data,
+                    sha256=hashlib.sha256(data).hexdigest(),
+                    meta=dict(meta),
+                    created_at=_now(),
+                )
+            ).inserted_primary_key[0]
+
+    def latest_world_model(self, branch: str | None, name: str, seed: int) -> ModelArtifact | None:
+        """The visible model of that name and seed fitted on the most data (then the newest)."""
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            names = {link.branch_id: link.name for link in chain}
+            row = conn.execute(
+                select(WorldModel)
+                .where(_visible(chain, WorldModel.branch_id, WorldModel.watermark), WorldModel.name == name, WorldModel.seed == seed)
+                .order_by(WorldModel.watermark.desc(), WorldModel.id.desc())
+                .limit(1)
+            ).first()
+        if row is None:
+            return None
+        return ModelArtifact(
+            id=row.id,
+            branch=names[row.branch_id],
+            name=row.name,
+            seed=row.seed,
+            watermark=row.watermark,
+            artifact=bytes(row.artifact),
+            sha256=row.sha256,
+            meta=row.meta,
+            created_at=iso_timestamp(row.created_at) or "",
+        )
+
+    # ----------------------------------------------------------------- status
+
+    def status(self, branch: str | None = None) -> StoreStatus:
+        """What ``llcps db status`` shows: schema, branches and trial counts."""
+        head = migrations.head_revision()
+        with self._read() as conn:
+            revision = migrations.current_revision(conn)
+            current = self._name(conn, None)
+            name = current if branch is None else branch
+            # Only tables of the first revision are read, so an outdated store can report.
+            rows = self._branches(conn)
+            chain = self._chain(conn, name, rows)
+            by_source = dict(
+                conn.execute(
+                    select(Trial.source, func.count()).where(_visible(chain, Trial.branch_id, Trial.id)).group_by(Trial.source)
+                ).all()
+            )
+            return StoreStatus(
+                url=self.url,
+                revision=revision,
+                head=head,
+                up_to_date=revision == head,
+                current_branch=current,
+                branch=name,
+                branches=len(rows),
+                trials_total=conn.scalar(select(func.count()).select_from(Trial)) or 0,
+                visible_trials=sum(by_source.values()),
+                visible_by_source=by_source,
+            )
+
+
+def _applied(change: BranchChange) -> BranchChange:
+    return BranchChange(**{**change.as_json(), "dry_run": False})

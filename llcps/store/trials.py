@@ -1,0 +1,171 @@
+"""Trials between :class:`NewTrial` / :class:`~llcps.domain.TrialRecord` and table rows.
+
+Reading the lifelong training set is the hot path (every model refit loads it),
+so rows are read with Core selects that skip SQLAlchemy's JSON and datetime
+processing, and the immutable parts of a record that repeat across trials
+(controller settings, entity features, outcomes) are built once per load.
+"""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime
+from typing import Any, Mapping, Sequence
+
+from sqlalchemy import String, Text, type_coerce
+
+from llcps.domain import (
+    ACTIONS,
+    OUTCOME_NAMES,
+    TRIAL_SOURCES,
+    ControllerParams,
+    EntityFeatures,
+    Outcome,
+    TrialRecord,
+    TrialSpec,
+)
+from llcps.errors import LlcpsError
+from llcps.store.records import NewTrial
+from llcps.store.schema import Trial
+
+
+def trial_row(trial: NewTrial, *, branch_id: int, created_at: datetime) -> dict[str, Any]:
+    """The column values of a new trial, after checking what the domain types cannot."""
+    if trial.source not in TRIAL_SOURCES:
+        raise LlcpsError(f"unknown trial source {trial.source!r}", hint=f"known sources: {', '.join(TRIAL_SOURCES)}")
+    if len(trial.features) != len(trial.spec.arguments):
+        raise LlcpsError(
+            f"a trial needs one feature set per argument: {len(trial.spec.arguments)} argument(s), "
+            f"{len(trial.features)} feature set(s)",
+            hint="pass features in argument order",
+        )
+    params = trial.spec.params
+    row: dict[str, Any] = {
+        "branch_id": branch_id,
+        "run_id": trial.run_id,
+        "episode_id": trial.episode_id,
+        "source": trial.source,
+        "scenario": trial.scenario,
+        "action": trial.spec.action,
+        "arguments": list(trial.spec.arguments),
+        "rate": float(params.rate),
+        "movement_magnitude": float(params.movement_magnitude),
+        "orientation": params.orientation,
+        "features": [f.as_dict() for f in trial.features],
+        "solved": bool(trial.solved),
+        "sim_steps": int(trial.sim_steps),
+        "wall_seconds": float(trial.wall_seconds),
+        "seed": int(trial.seed),
+        "snapshot_id": trial.snapshot_id,
+        "created_at": created_at,
+        "extra": dict(trial.extra),
+    }
+    row.update(trial.outcome.as_dict())
+    return row
+
+
+#: Columns read for a TrialRecord, in the order :class:`TrialDecoder` unpacks them.
+TRIAL_COLUMNS = (
+    Trial.id,
+    Trial.branch_id,
+    Trial.run_id,
+    Trial.episode_id,
+    Trial.source,
+    Trial.scenario,
+    Trial.action,
+    type_coerce(Trial.arguments, Text),
+    Trial.rate,
+    Trial.movement_magnitude,
+    Trial.orientation,
+    type_coerce(Trial.features, Text),
+    *(getattr(Trial, name) for name in OUTCOME_NAMES),
+    Trial.solved,
+    Trial.sim_steps,
+    Trial.wall_seconds,
+    Trial.seed,
+    Trial.snapshot_id,
+    type_coerce(Trial.created_at, String),
+    type_coerce(Trial.extra, Text),
+)
+
+
+def _json(value: Any) -> Any:
+    """Decode a JSON column read as text (drivers that decode JSON themselves pass through)."""
+    return json.loads(value) if isinstance(value, str) else value
+
+
+def _key(value: Any) -> Any:
+    return value if isinstance(value, str) else json.dumps(value, sort_keys=True)
+
+
+def iso_timestamp(value: Any) -> str | None:
+    """One spelling of a stored timestamp: ISO 8601, UTC, no offset."""
+    if value is None:
+        return None
+    if isinstance(value, datetime):
+        return value.isoformat()
+    return str(value).replace(" ", "T", 1)
+
+
+class TrialDecoder:
+    """Builds TrialRecords from rows of :data:`TRIAL_COLUMNS`, sharing repeated parts.
+
+    Args:
+        branch_names: branch id -> name, for the ``branch`` field (the owning branch).
+    """
+
+    def __init__(self, branch_names: Mapping[int, str]) -> None:
+        self._names = branch_names
+        self._specs: dict[tuple[Any, ...], TrialSpec] = {}
+        self._features: dict[Any, tuple[EntityFeatures, ...]] = {}
+        self._outcomes: dict[tuple[int, ...], Outcome] = {}
+
+    def _spec(self, action: str, arguments: Any, rate: float, magnitude: float, orientation: str) -> TrialSpec:
+        key = (action, _key(arguments), rate, magnitude, orientation)
+        spec = self._specs.get(key)
+        if spec is None:
+            if action not in ACTIONS:
+                raise LlcpsError(f"stored trial has unknown action {action!r}", hint="upgrade llcps")
+            spec = TrialSpec(action, tuple(_json(arguments)), ControllerParams(rate, magnitude, orientation))
+            self._specs[key] = spec
+        return spec
+
+    def _feature_tuple(self, features: Any) -> tuple[EntityFeatures, ...]:
+        key = _key(features)
+        found = self._features.get(key)
+        if found is None:
+            found = tuple(EntityFeatures(**f) for f in _json(features))
+            self._features[key] = found
+        return found
+
+    def _outcome(self, bits: tuple[int, ...]) -> Outcome:
+        found = self._outcomes.get(bits)
+        if found is None:
+            found = Outcome.from_bits(bits)
+            self._outcomes[bits] = found
+        return found
+
+    def __call__(self, row: Sequence[Any]) -> TrialRecord:
+        (
+            id_, branch_id, run_id, episode_id, source, scenario, action, arguments, rate, magnitude,
+            orientation, features, b0, b1, b2, b3, b4, b5, solved, sim_steps, wall_seconds, seed,
+            snapshot_id, created_at, extra,
+        ) = row
+        return TrialRecord(
+            id=id_,
+            branch=self._names[branch_id],
+            source=source,
+            spec=self._spec(action, arguments, rate, magnitude, orientation),
+            features=self._feature_tuple(features),
+            outcome=self._outcome((b0, b1, b2, b3, b4, b5)),
+            solved=bool(solved),
+            sim_steps=sim_steps,
+            wall_seconds=wall_seconds,
+            seed=seed,
+            run_id=run_id,
+            episode_id=episode_id,
+            snapshot_id=snapshot_id,
+            scenario=scenario,
+            created_at=iso_timestamp(created_at),
+            extra={} if extra in ("{}", None) else _json(extra),
+        )
