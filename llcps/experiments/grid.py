@@ -253,6 +253,30 @@ PRESETS: dict[str, Preset] = {
 }
 
 
+def _rank(order: tuple[str, ...], name: str) -> tuple[int, str]:
+    return (order.index(name), "") if name in order else (len(order), name)
+
+
+def model_rank(model: str) -> tuple[int, str]:
+    """Sort key putting models in the ``full`` preset's order, unknown ones after by name."""
+    return _rank(PRESETS["full"].models, model)
+
+
+def measure_rank(measure: str) -> tuple[int, str]:
+    """Sort key putting measures in the ``full`` preset's order (the paper's first)."""
+    return _rank(PRESETS["full"].measures, measure)
+
+
+def scenario_rank(scenario: str) -> tuple[int, str]:
+    """Sort key following :data:`SCENARIO_SEQUENCE`."""
+    return _rank(SCENARIO_SEQUENCE, scenario)
+
+
+def condition_rank(condition: str) -> tuple[int, str]:
+    """Sort key putting ``update`` before ``reset``."""
+    return _rank(EXPERIMENT_CONDITIONS, condition)
+
+
 def get_preset(name: str) -> Preset:
     """The preset called ``name``, or an error listing the known ones."""
     try:
