@@ -1,0 +1,237 @@
+"""Plots of an experiment, each written as PNG and SVG.
+
+Figures are built on :class:`matplotlib.figure.Figure` with the Agg canvas directly,
+never through pyplot, so plotting works headless and never changes a global
+backend. SVGs carry a fixed hash salt and no date, so the same results give the same
+files.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+
+from llcps.experiments.grid import (
+    SCENARIO_SEQUENCE,
+    condition_rank,
+    measure_rank,
+    model_rank,
+)
+from llcps.experiments.results import ResultsTable
+from llcps.experiments.stats import (
+    ALPHA,
+    FIGURE2_SCENARIOS,
+    PAPER_FIGURE2,
+    CumulativePoint,
+    Figure2Row,
+)
+
+#: Colours of the two conditions, used by every plot.
+CONDITION_COLORS = {"update": "#1f77b4", "reset": "#ff7f0e"}
+#: Heatmap colours span update/reset ratios from 1/8 to 8 (log2 from -3 to 3).
+LOG2_RATIO_LIMIT = 3.0
+FORMATS: tuple[str, ...] = ("png", "svg")
+
+
+def save(fig: Figure, stem: str | Path) -> tuple[Path, ...]:
+    """Write ``fig`` as ``stem.png`` and ``stem.svg``; returns the paths."""
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    FigureCanvasAgg(fig)
+    paths = []
+    with matplotlib.rc_context({"svg.hashsalt": "llcps", "svg.fonttype": "none"}):
+        for fmt in FORMATS:
+            path = stem.with_suffix(f".{fmt}")
+            metadata = {"Date": None} if fmt == "svg" else {"Software": None}
+            fig.savefig(path, format=fmt, dpi=120, bbox_inches="tight", metadata=metadata)
+            paths.append(path)
+    return tuple(paths)
+
+
+def format_pct(value: float | None) -> str:
+    """A percent change as the paper prints it: ``-17%``, ``+inf%``, ``n/a``."""
+    if value is None or math.isnan(value):
+        return "n/a"
+    if math.isinf(value):
+        return "+inf%" if value > 0 else "-inf%"
+    return f"{value:+.0f}%" if round(value) != 0 else "0%"
+
+
+def _log2_ratio(pct: float | None) -> float:
+    # Colour by log2(update / reset) so halving and doubling are equally strong.
+    if pct is None or math.isnan(pct):
+        return math.nan
+    ratio = 1.0 + pct / 100.0
+    if ratio <= 0:
+        return -LOG2_RATIO_LIMIT
+    return float(np.clip(math.log2(ratio), -LOG2_RATIO_LIMIT, LOG2_RATIO_LIMIT))
+
+
+def _heatmap_panel(
+    fig: Figure,
+    ax: object,
+    values: np.ndarray,
+    labels: list[list[str]],
+    row_names: list[str],
+    col_names: list[str],
+    title: str,
+) -> object:
+    cmap = matplotlib.colormaps["RdBu"].copy()
+    cmap.set_bad("#dddddd")
+    image = ax.imshow(  # type: ignore[attr-defined]
+        np.ma.masked_invalid(values),
+        cmap=cmap,
+        norm=Normalize(-LOG2_RATIO_LIMIT, LOG2_RATIO_LIMIT),
+        aspect="auto",
+    )
+    for i, row in enumerate(labels):
+        for j, text in enumerate(row):
+            strong = not math.isnan(values[i, j]) and abs(values[i, j]) > 0.6 * LOG2_RATIO_LIMIT
+            ax.text(j, i, text, ha="center", va="center", fontsize=8, color="white" if strong else "black")  # type: ignore[attr-defined]
+    ax.set_xticks(range(len(col_names)), col_names, fontsize=8)  # type: ignore[attr-defined]
+    ax.set_yticks(range(len(row_names)), row_names, fontsize=8)  # type: ignore[attr-defined]
+    ax.set_title(title, fontsize=10)  # type: ignore[attr-defined]
+    return image
+
+
+def figure2_heatmap(rows: Iterable[Figure2Row], stem: str | Path, *, with_paper: bool = True) -> tuple[Path, ...]:
+    """Figure 2 as a heatmap: model x measure against scenario x pretraining size.
+
+    Red is less exploration with updates (as in the paper), blue more; the colour is
+    log2(update / reset). ``*`` marks p < 0.05 (Wilcoxon, uncorrected), ``**`` also
+    after Holm's correction. With ``with_paper``, the paper's numbers for the same
+    cells are drawn beside ours.
+    """
+    shown = [r for r in rows if r.in_figure2]
+    pairs = sorted({(r.model, r.measure) for r in shown}, key=lambda k: (model_rank(k[0]), measure_rank(k[1])))
+    cols = sorted({(r.pretrain_size, r.scenario) for r in shown}, key=lambda k: (-k[0], SCENARIO_SEQUENCE.index(k[1])))
+    if not pairs:
+        pairs, cols = [("-", "-")], [(0, FIGURE2_SCENARIOS[0])]
+    index = {(r.model, r.measure, r.pretrain_size, r.scenario): r for r in shown}
+    ours = np.full((len(pairs), len(cols)), math.nan)
+    ours_text = [["n/a"] * len(cols) for _ in pairs]
+    paper = np.full_like(ours, math.nan)
+    paper_text = [[""] * len(cols) for _ in pairs]
+    for i, (model, measure) in enumerate(pairs):
+        for j, (size, scenario) in enumerate(cols):
+            row = index.get((model, measure, size, scenario))
+            if row is not None:
+                ours[i, j] = _log2_ratio(row.pct_change)
+                stars = "**" if row.p_holm < ALPHA else "*" if row.significant else ""
+                ours_text[i][j] = f"{format_pct(row.pct_change)}{stars}"
+            published = PAPER_FIGURE2.get((model, measure, size, scenario))
+            paper[i, j] = _log2_ratio(published)
+            paper_text[i][j] = format_pct(published) if published is not None else ""
+    show_paper = with_paper and not np.all(np.isnan(paper))
+    row_names = [f"{m} / {me}" for m, me in pairs]
+    col_names = [f"{s.replace('scenario', 'S')}\np{size}" for size, s in cols]
+    width = 1.6 + 0.9 * len(cols)
+    fig = Figure(figsize=(width * (2 if show_paper else 1) + 1.5, 1.2 + 0.42 * len(pairs)), layout="constrained")
+    axes = fig.subplots(1, 2 if show_paper else 1, squeeze=False)[0]
+    n = max((r.n_seeds for r in shown), default=0)
+    image = _heatmap_panel(fig, axes[0], ours, ours_text, row_names, col_names, f"ours (n <= {n} seeds per cell)")
+    if show_paper:
+        _heatmap_panel(fig, axes[1], paper, paper_text, row_names, col_names, "paper (4 runs per cell)")
+        axes[1].set_yticks([])
+    bar = fig.colorbar(image, ax=list(axes), shrink=0.8)
+    ticks = np.arange(-LOG2_RATIO_LIMIT, LOG2_RATIO_LIMIT + 1)
+    bar.set_ticks(ticks, labels=[format_pct(100 * (2.0**t - 1)) for t in ticks])
+    bar.set_label("exploration % change with updates", fontsize=8)
+    fig.suptitle("% change in exploration with model updates vs reset (Figure 2)", fontsize=11)
+    return save(fig, stem)
+
+
+def _cell_order(keys: Iterable[tuple[str, str, int]]) -> list[tuple[str, str, int]]:
+    return sorted(set(keys), key=lambda k: (model_rank(k[0]), measure_rank(k[1]), -k[2]))
+
+
+def exploration_distribution(table: ResultsTable, stem: str | Path, *, metric: str = "exploration_trials") -> tuple[Path, ...]:
+    """Box plot plus every seed's value, per cell and condition, one panel per scenario."""
+    cells = _cell_order((r.model, r.measure, r.pretrain_size) for r in table)
+    scenarios = [s for s in SCENARIO_SEQUENCE if any(r.scenario == s for r in table)] or list(SCENARIO_SEQUENCE[:1])
+    conditions = sorted({r.condition for r in table}, key=condition_rank) or ["update"]
+    values: dict[tuple[str, str, int, str, str], list[float]] = {}
+    for r in table:
+        values.setdefault((r.model, r.measure, r.pretrain_size, r.condition, r.scenario), []).append(r.metric(metric))
+    fig = Figure(figsize=(3.2 * len(scenarios) + 2.0, 1.0 + 0.45 * max(len(cells), 1)), layout="constrained")
+    axes = fig.subplots(1, len(scenarios), sharey=True, squeeze=False)[0]
+    jitter = np.random.default_rng(0)
+    offsets = np.linspace(-0.2, 0.2, len(conditions))
+    for ax, scenario in zip(axes, scenarios):
+        for k, condition in enumerate(conditions):
+            data = [values.get((*cell, condition, scenario), []) for cell in cells]
+            positions = [i + offsets[k] for i in range(len(cells))]
+            present = [(p, d) for p, d in zip(positions, data) if d]
+            if present:
+                ax.boxplot(
+                    [d for _, d in present],
+                    positions=[p for p, _ in present],
+                    vert=False,
+                    widths=0.3 if len(conditions) > 1 else 0.6,
+                    showfliers=False,
+                    patch_artist=True,
+                    boxprops={"facecolor": CONDITION_COLORS.get(condition, "grey"), "alpha": 0.35},
+                    medianprops={"color": "black"},
+                    manage_ticks=False,
+                )
+            for p, d in present:
+                ax.scatter(
+                    d, p + jitter.uniform(-0.08, 0.08, len(d)), s=6, color=CONDITION_COLORS.get(condition, "grey"),
+                    label=condition if p == present[0][0] else None, zorder=3,
+                )
+        ax.set_title(scenario, fontsize=10)
+        ax.set_xlabel(metric.replace("_", " "), fontsize=8)
+        ax.grid(axis="x", alpha=0.3)
+    axes[0].set_yticks(range(len(cells)), [f"{m} / {me} / p{s}" for m, me, s in cells], fontsize=8)
+    axes[0].invert_yaxis()
+    axes[-1].legend(fontsize=8, loc="lower right")
+    fig.suptitle(f"{metric.replace('_', ' ')} per cell (boxes: quartiles; dots: seeds)", fontsize=11)
+    return save(fig, stem)
+
+
+def cumulative_plot(points: Sequence[CumulativePoint], stem: str | Path, *, metric: str = "exploration_trials") -> tuple[Path, ...]:
+    """Mean cumulative exploration along the scenario sequence, update vs reset, with 95% CI bands.
+
+    One panel per model x measure (rows) and pretraining size (columns).
+    """
+    pairs = sorted({(p.model, p.measure) for p in points}, key=lambda k: (model_rank(k[0]), measure_rank(k[1])))
+    sizes = sorted({p.pretrain_size for p in points}, reverse=True)
+    pairs, sizes = pairs or [("-", "-")], sizes or [0]
+    fig = Figure(figsize=(3.2 * len(sizes) + 0.8, 0.6 + 1.7 * len(pairs)), layout="constrained")
+    axes = fig.subplots(len(pairs), len(sizes), sharex=True, squeeze=False)
+    x = np.arange(len(SCENARIO_SEQUENCE))
+    lines: dict[tuple[str, str, int, str], dict[str, CumulativePoint]] = {}
+    for p in points:
+        lines.setdefault((p.model, p.measure, p.pretrain_size, p.condition), {})[p.scenario] = p
+    for i, (model, measure) in enumerate(pairs):
+        for j, size in enumerate(sizes):
+            ax = axes[i, j]
+            for condition in sorted({k[3] for k in lines}, key=condition_rank):
+                line = lines.get((model, measure, size, condition))
+                if not line:
+                    continue
+                pts = [line.get(s) for s in SCENARIO_SEQUENCE]
+                mean = np.array([p.mean if p else math.nan for p in pts])
+                low = np.array([p.ci_low if p else math.nan for p in pts])
+                high = np.array([p.ci_high if p else math.nan for p in pts])
+                color = CONDITION_COLORS.get(condition, "grey")
+                ax.plot(x, mean, marker="o", ms=3, color=color, label=condition)
+                ax.fill_between(x, low, high, color=color, alpha=0.2, linewidth=0)
+            ax.set_title(f"{model} / {measure} / p{size}", fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+            if (i, j) == (0, 0) and ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=7, loc="upper left")
+    for ax in axes[-1]:
+        ax.set_xticks(x, [s.replace("scenario", "S") for s in SCENARIO_SEQUENCE])
+    for ax in axes[:, 0]:
+        ax.set_ylabel(f"cumulative\n{metric.replace('_', ' ')}", fontsize=7)
+    fig.suptitle("cumulative exploration over the scenario sequence (mean, 95% bootstrap CI)", fontsize=10)
+    return save(fig, stem)
