@@ -24,12 +24,12 @@ from pddl.logic.functions import EqualTo as NumericEqualTo
 from pddl.logic.functions import Metric, NumericFunction, NumericValue
 from pddl.logic.predicates import Predicate
 from pddl.logic.terms import Constant, Variable
-from pddl.parser.domain import DomainParser
 from pddl.requirements import Requirements
 
 from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, State, fluent
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.symbolic.operators import LearnedOperator, parse_operator_name
+from llcps.symbolic.pddl_text import parse_domain_text
 from llcps.symbolic.schema import (
     PDDL_NAME,
     TOTAL_COST,
@@ -52,7 +52,7 @@ def _parse_error(what: str, exc: Exception) -> LlcpsError:
 def parse_domain(text: str) -> Domain:
     """Parse a PDDL domain with the `pddl` library, turning its errors into one project error."""
     try:
-        return DomainParser()(text)
+        return parse_domain_text(text)
     except (LarkError, PDDLValidationError, ValueError, AssertionError) as exc:
         raise _parse_error("domain", exc) from exc
 

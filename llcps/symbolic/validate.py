@@ -4,9 +4,10 @@ It reads the domain and problem *text* with the `pddl` library and replays the p
 under its own reading of PDDL (STRIPS with typing, negative preconditions, equality and
 action costs): every step must name a domain action with the right number of
 well-typed objects, its precondition must hold, its effects are applied (deletes, then
-adds), and the goal must hold at the end. It shares no code with the planner or the
-knowledge base, so a plan that passes here is right by the PDDL, not by the planner's
-own bookkeeping. PDDL names are case-insensitive; everything is compared in lower case.
+adds), and the goal must hold at the end. It shares nothing with the planner or the
+knowledge base but the PDDL reader, so a plan that passes here is right by the PDDL
+text, not by the planner's own bookkeeping. PDDL names are case-insensitive;
+everything is compared in lower case.
 """
 
 from __future__ import annotations
@@ -22,8 +23,8 @@ from pddl.logic.functions import EqualTo as NumericEqualTo
 from pddl.logic.functions import Increase, NumericFunction, NumericValue
 from pddl.logic.predicates import EqualTo, Predicate
 from pddl.logic.terms import Term, Variable
-from pddl.parser.domain import DomainParser
-from pddl.parser.problem import ProblemParser
+
+from llcps.symbolic.pddl_text import parse_domain_text, parse_problem_text
 
 Atom = tuple[str, ...]
 
@@ -124,8 +125,8 @@ def validate(domain_pddl: str, problem_pddl: str, plan: Sequence[tuple[str, Sequ
         plan: steps as ``(action name, (object, ...))``.
     """
     try:
-        domain = DomainParser()(domain_pddl)
-        problem = ProblemParser()(problem_pddl)
+        domain = parse_domain_text(domain_pddl)
+        problem = parse_problem_text(problem_pddl)
     except (LarkError, PDDLValidationError, ValueError, AssertionError) as exc:
         return ValidationResult(False, None, f"cannot parse: {str(exc).strip().splitlines()[0] if str(exc).strip() else exc!r}")
     if str(problem.domain_name).lower() != str(domain.name).lower():

@@ -1,0 +1,75 @@
+"""Property: every plan the planner returns passes the independent validator."""
+
+from __future__ import annotations
+
+import itertools
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from llcps.domain import ControllerParams, TrialSpec, fluent
+from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.operators import learn_operator, refine_failed_action
+from llcps.symbolic.planner import plan, plan_cost
+from llcps.symbolic.schema import GroundAction
+from llcps.symbolic.validate import validate
+
+OBJECTS = {"cube": "item", "ball": "item", "tray": "container", "bin": "container"}
+EVERYTHING = [*OBJECTS, "table"]
+ATOMS = sorted(
+    {fluent(p, e) for p in ("visible", "reachable", "holding") for e in EVERYTHING}
+    | {fluent(p, a, b) for p in ("touching", "near", "on", "in") for a, b in itertools.permutations(EVERYTHING, 2)}
+)
+
+
+def _k_prime() -> KnowledgeBase:
+    """K expanded by a learned push of the tray that brings the cube in it within reach."""
+    kb = KnowledgeBase.default()
+    before = frozenset({fluent("visible", "tray"), fluent("in", "cube", "tray")})
+    after = before | {fluent("reachable", "cube")}
+    spec = TrialSpec("push", ("tray",), ControllerParams(0.2, 0.3, "front"))
+    learned = learn_operator(spec=spec, before=before, after=after, objects=OBJECTS)
+    failed = next(op for op in kb.operators() if op.name == "remove_from_container").ground(("cube", "tray"))
+    assert isinstance(failed, GroundAction)
+    return refine_failed_action(kb, failed, learned, before)
+
+
+KNOWLEDGE = [KnowledgeBase.default(), _k_prime()]
+
+#: Goal literals some operator can achieve, so that plans are more than empty.
+ACHIEVABLE = sorted(
+    {fluent("in", i, c) for i in ("cube", "ball") for c in ("tray", "bin")}
+    | {fluent("on", i, "table") for i in ("cube", "ball")}
+    | {fluent("touching", a, b) for a, b in itertools.combinations(OBJECTS, 2)}
+    | {fluent("reachable", "cube")}
+)
+
+
+@st.composite
+def tasks(draw: st.DrawFn) -> Task:
+    objects = draw(st.sets(st.sampled_from(sorted(OBJECTS)), min_size=2))
+    names = {*objects, "table"}
+
+    def known(atoms: set) -> frozenset:
+        return frozenset(a for a in atoms if set(a[1:]) <= names)
+
+    hidden = draw(st.sets(st.sampled_from(sorted(objects)), max_size=1))
+    visible = set(objects) - hidden
+    init = known(draw(st.sets(st.sampled_from(ATOMS), max_size=10))) | {fluent("visible", o) for o in visible}
+    achievable = sorted(known(set(ACHIEVABLE)))
+    goal_pos = frozenset(draw(st.sets(st.sampled_from(achievable), min_size=1, max_size=3)))
+    goal_neg = frozenset(draw(st.sets(st.sampled_from(achievable), max_size=1))) - goal_pos
+    return Task({o: OBJECTS[o] for o in objects}, init, goal_pos, goal_neg)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(task=tasks(), which=st.sampled_from(range(len(KNOWLEDGE))))
+def test_every_plan_passes_the_validator(task: Task, which: int) -> None:
+    kb = KNOWLEDGE[which]
+    steps = plan(kb, task)
+    if steps is None:
+        return
+    verdict = validate(kb.to_pddl(), task.problem_pddl(kb), [(s.name, s.args) for s in steps])
+    assert verdict.ok, verdict.reason
+    assert verdict.cost == plan_cost(steps)
+    assert plan(kb, task) == steps  # deterministic
