@@ -1,0 +1,200 @@
+"""The world model interface W : (a, r, nabla, X) -> Omega, and its safe artifact format.
+
+Every model predicts, for each candidate trial, the probability of each of the six
+Omega bits (Table 2). A fitted model serializes to an *artifact*: a zip of ``.npy``
+arrays written and read without pickle, plus a JSON-able ``meta`` dict. Loading an
+artifact from a database someone sent you reads numbers, never code.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import re
+import zipfile
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+
+from llcps.domain import OUTCOME_NAMES, TrialRecord, WorldModelInput
+from llcps.errors import LlcpsError
+
+#: ``meta["format"]`` of every artifact, and the version this code writes and reads.
+ARTIFACT_FORMAT = "llcps-world-model"
+ARTIFACT_VERSION = 1
+
+#: Largest total (uncompressed) array payload an artifact may declare: a guard
+#: against a crafted archive that would exhaust memory when read.
+MAX_ARTIFACT_BYTES = 1 << 30
+
+_ARRAY_NAME = re.compile(r"^[A-Za-z0-9_./-]{1,128}$")
+_FIXED_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
+
+
+class WorldModel(ABC):
+    """A multi-label predictor of Omega from a trial's inputs.
+
+    Attributes:
+        name: the registry name (descriptions live in the registry).
+        seed: all randomness of fitting and predicting derives from it.
+        n_trials: size of the training set of the last fit.
+    """
+
+    name: ClassVar[str]
+
+    def __init__(self, seed: int) -> None:
+        self.seed = int(seed)
+        self.n_trials = 0
+
+    @abstractmethod
+    def fit(self, records: Sequence[TrialRecord]) -> WorldModel:
+        """Fit on the training set (any size, including 0), replacing earlier fits."""
+
+    @abstractmethod
+    def predict_proba(self, candidates: Sequence[WorldModelInput | TrialRecord]) -> np.ndarray:
+        """Predicted P(bit = 1) per candidate: float64 (n, 6) in [0, 1], OUTCOME_NAMES order."""
+
+    @abstractmethod
+    def _export(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """The fitted state as arrays and JSON-able meta (without the common keys)."""
+
+    @classmethod
+    @abstractmethod
+    def _import(cls, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], seed: int) -> WorldModel:
+        """Rebuild a fitted model from :meth:`_export` output; may raise anything on bad input."""
+
+    def to_artifact(self) -> tuple[bytes, dict[str, Any]]:
+        """Serialize the fitted model to (bytes, meta) that load without executing code."""
+        arrays, meta = self._export()
+        data = pack_arrays(arrays)
+        common = {
+            "format": ARTIFACT_FORMAT,
+            "version": ARTIFACT_VERSION,
+            "model": self.name,
+            "seed": self.seed,
+            "n_trials": self.n_trials,
+            "outcome_names": list(OUTCOME_NAMES),
+            "sha256": hashlib.sha256(data).hexdigest(),
+        }
+        return data, {**meta, **common}
+
+    @classmethod
+    def from_artifact(cls, artifact: bytes, meta: Mapping[str, Any], seed: int) -> WorldModel:
+        """Load a model written by :meth:`to_artifact`.
+
+        Raises:
+            LlcpsError: the artifact is not an intact artifact of this model (wrong
+                format or model, checksum mismatch, not an array archive, object
+                arrays, unexpected shapes). Nothing in it is ever executed.
+        """
+        hint = "delete the stored model and refit it from the trials (it is refitted automatically when missing)"
+        if not isinstance(meta, Mapping) or meta.get("format") != ARTIFACT_FORMAT:
+            raise LlcpsError(f"not a {cls.name!r} world-model artifact: unknown format", hint=hint)
+        if meta.get("version") != ARTIFACT_VERSION:
+            raise LlcpsError(
+                f"{cls.name!r} world-model artifact has version {meta.get('version')!r}; "
+                f"this llcps reads version {ARTIFACT_VERSION}",
+                hint=hint,
+            )
+        if meta.get("model") != cls.name:
+            raise LlcpsError(f"artifact holds world model {meta.get('model')!r}, not {cls.name!r}", hint=hint)
+        if not isinstance(artifact, (bytes, bytearray, memoryview)):
+            raise LlcpsError(f"{cls.name!r} world-model artifact is not bytes", hint=hint)
+        artifact = bytes(artifact)
+        if hashlib.sha256(artifact).hexdigest() != meta.get("sha256"):
+            raise LlcpsError(f"{cls.name!r} world-model artifact is corrupt (checksum mismatch)", hint=hint)
+        try:
+            arrays = unpack_arrays(artifact)
+            model = cls._import(arrays, meta, seed)
+        except LlcpsError as exc:
+            raise LlcpsError(f"{cls.name!r} world-model artifact rejected: {exc.message}", hint=hint) from None
+        except Exception as exc:  # noqa: BLE001 - any failure to parse means a bad artifact
+            raise LlcpsError(
+                f"{cls.name!r} world-model artifact rejected: {type(exc).__name__}: {exc}", hint=hint
+            ) from None
+        model.n_trials = int(meta.get("n_trials", 0))
+        return model
+
+
+def pack_arrays(arrays: Mapping[str, np.ndarray]) -> bytes:
+    """Write named arrays as a deflated zip of ``.npy`` files (no pickle anywhere).
+
+    Entries carry a fixed timestamp so the same arrays always give the same bytes.
+    """
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for key in sorted(arrays):
+            if not _ARRAY_NAME.match(key):
+                raise ValueError(f"bad array name {key!r}")
+            value = np.asarray(arrays[key])
+            if value.dtype.hasobject:
+                raise ValueError(f"array {key!r} holds Python objects; artifacts hold numbers only")
+            info = zipfile.ZipInfo(f"{key}.npy", date_time=_FIXED_ZIP_TIME)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            with archive.open(info, "w") as member:
+                np.lib.format.write_array(member, value, allow_pickle=False)
+    return buffer.getvalue()
+
+
+def unpack_arrays(data: bytes) -> dict[str, np.ndarray]:
+    """Read arrays written by :func:`pack_arrays`, refusing anything but plain arrays.
+
+    Raises:
+        LlcpsError: not a zip of ``.npy`` files, an oversized payload, or object arrays
+            (which would need pickle: ``allow_pickle=False`` refuses them).
+    """
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(data))
+    except zipfile.BadZipFile:
+        raise LlcpsError("not an array archive (expected a zip of .npy files)") from None
+    arrays: dict[str, np.ndarray] = {}
+    with archive:
+        infos = archive.infolist()
+        if sum(info.file_size for info in infos) > MAX_ARTIFACT_BYTES:
+            raise LlcpsError("array archive declares more than 1 GiB of data")
+        for info in infos:
+            key = info.filename[: -len(".npy")]
+            if not info.filename.endswith(".npy") or not _ARRAY_NAME.match(key):
+                raise LlcpsError(f"unexpected member {info.filename!r} in array archive")
+            with archive.open(info) as member:
+                try:
+                    arrays[key] = np.lib.format.read_array(member, allow_pickle=False)
+                except ValueError as exc:
+                    raise LlcpsError(f"array {key!r} cannot be read safely: {exc}") from None
+    return arrays
+
+
+def array(arrays: Mapping[str, np.ndarray], key: str, shape: tuple[int | None, ...], kind: str = "f") -> np.ndarray:
+    """Fetch one artifact array and check its shape and dtype kind (None = any length).
+
+    Raises:
+        LlcpsError: missing, wrong shape or dtype, or (for floats) non-finite values.
+    """
+    if key not in arrays:
+        raise LlcpsError(f"array {key!r} is missing")
+    value = arrays[key]
+    if value.ndim != len(shape) or any(want is not None and got != want for got, want in zip(value.shape, shape)):
+        raise LlcpsError(f"array {key!r} has shape {value.shape}, expected {shape}")
+    if value.dtype.kind not in kind:
+        raise LlcpsError(f"array {key!r} has dtype {value.dtype}, expected kind {kind!r}")
+    if value.dtype.kind == "f" and not np.all(np.isfinite(value)):
+        raise LlcpsError(f"array {key!r} holds non-finite values")
+    return value
+
+
+def label_prior(outcomes: np.ndarray) -> np.ndarray:
+    """Laplace-smoothed frequency of each Omega bit: (k + 1) / (n + 2).
+
+    What a model predicts for a bit it cannot learn: with no trials every bit is
+    0.5; a bit never (always) seen in n trials is 1/(n+2) ((n+1)/(n+2)).
+    """
+    n = len(outcomes)
+    return (outcomes.sum(axis=0, dtype=np.float64) + 1.0) / (n + 2.0)
+
+
+def learnable_labels(outcomes: np.ndarray) -> np.ndarray:
+    """Boolean mask of the bits with both classes in the training set."""
+    if len(outcomes) == 0:
+        return np.zeros(len(OUTCOME_NAMES), dtype=bool)
+    return outcomes.min(axis=0) != outcomes.max(axis=0)

@@ -1,0 +1,128 @@
+"""Baselines to judge the paper's two models against.
+
+``random`` is no model at all: it gives every candidate pseudo-random scores, so any
+measure orders candidates at random (a seeded order). ``logreg`` (a linear model) and
+``forest`` (a non-linear ensemble) are ordinary scikit-learn multi-label learners.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+from sklearn.ensemble import RandomForestClassifier
+from sklearn.linear_model import LogisticRegression
+
+from llcps.domain import TrialRecord, WorldModelInput
+from llcps.models.base import WorldModel, array
+from llcps.models.features import encode_inputs
+from llcps.models.learned import N_FEATURES, N_LABELS, EncodedWorldModel, SklearnPerLabelModel
+
+_U64 = np.uint64
+_MASK64 = (1 << 64) - 1
+
+
+def _splitmix64(x: np.ndarray) -> np.ndarray:
+    """The SplitMix64 finalizer, elementwise on uint64 (wrapping arithmetic)."""
+    z = x + _U64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> _U64(30))) * _U64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> _U64(27))) * _U64(0x94D049BB133111EB)
+    return z ^ (z >> _U64(31))
+
+
+class RandomModel(WorldModel):
+    """No model: a seeded pseudo-random score per candidate and bit.
+
+    The score hashes the seed with the candidate's raw Table-1 row, so a candidate
+    keeps its score however the candidate list is filtered or reordered, and the
+    exploration order stays one fixed random permutation across refits.
+    Candidates with identical features get identical scores; the measure's seeded
+    tie-break orders those.
+    """
+
+    name: ClassVar[str] = "random"
+
+    def fit(self, records: Sequence[TrialRecord]) -> RandomModel:
+        """Nothing to learn; remembers only how many trials it was given."""
+        self.n_trials = len(records)
+        return self
+
+    def predict_proba(self, candidates: Sequence[WorldModelInput | TrialRecord]) -> np.ndarray:
+        """Uniform pseudo-random values in [0, 1), a function of (seed, candidate)."""
+        raw = np.ascontiguousarray(encode_inputs(candidates))
+        state = np.full(len(raw), self.seed & _MASK64, dtype=np.uint64)
+        for column in raw.view(np.uint64).T:
+            state = _splitmix64(state ^ column)
+        bits = np.stack([_splitmix64(state ^ _U64(j)) for j in range(N_LABELS)], axis=1)
+        return (bits >> _U64(11)).astype(np.float64) * 2.0**-53
+
+    def _export(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        return {}, {}
+
+    @classmethod
+    def _import(cls, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], seed: int) -> RandomModel:
+        if arrays:
+            raise ValueError("the random model's artifact holds no arrays")
+        return cls(seed)
+
+
+class LogisticRegressionModel(SklearnPerLabelModel):
+    """L2-regularized logistic regression, one per Omega bit."""
+
+    name: ClassVar[str] = "logreg"
+
+    state_shapes: ClassVar[Mapping[str, tuple[int | str, ...]]] = {
+        "classes_": (2,),
+        "coef_": (1, "d"),
+        "intercept_": (1,),
+    }
+
+    def _make_estimator(self) -> Any:
+        return LogisticRegression(C=1.0, max_iter=1000)
+
+
+class RandomForestModel(EncodedWorldModel):
+    """A multi-output random forest over the learnable Omega bits.
+
+    Trees are awkward to export as plain arrays without relying on scikit-learn
+    internals, so the artifact holds the encoded training set instead and loading
+    refits deterministically (same data, same seed, one job: the same trees).
+    """
+
+    name: ClassVar[str] = "forest"
+    n_estimators: ClassVar[int] = 100
+
+    def _reset(self) -> None:
+        self._forest: RandomForestClassifier | None = None
+        self._train: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _fit_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
+        self._train = (features, outcomes)
+        self._forest = RandomForestClassifier(
+            n_estimators=self.n_estimators, random_state=self.seed & 0xFFFFFFFF, n_jobs=1
+        ).fit(features, outcomes[:, self.learned])
+
+    def _predict_encoded(self, features: np.ndarray) -> np.ndarray:
+        assert self._forest is not None
+        per_label = self._forest.predict_proba(features)
+        if not isinstance(per_label, list):
+            per_label = [per_label]
+        proba = np.zeros((len(features), N_LABELS))
+        for j, label_proba in zip(np.flatnonzero(self.learned), per_label):
+            proba[:, j] = label_proba[:, 1]
+        return proba
+
+    def _export_learner(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        assert self._train is not None
+        features, outcomes = self._train
+        return {"train/features": features, "train/outcomes": outcomes}, {"refit_on_load": True}
+
+    def _import_learner(self, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
+        features = array(arrays, "train/features", (None, N_FEATURES)).astype(np.float32, copy=False)
+        outcomes = array(arrays, "train/outcomes", (len(features), N_LABELS), kind="iub")
+        if not np.isin(outcomes, (0, 1)).all():
+            raise ValueError("training outcomes must be 0/1")
+        if not np.array_equal(outcomes.min(axis=0) != outcomes.max(axis=0), self.learned):
+            raise ValueError("training outcomes disagree with the learned-bit mask")
+        self._reset()
+        self._fit_encoded(features, outcomes.astype(np.uint8))

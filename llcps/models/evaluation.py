@@ -1,0 +1,127 @@
+"""Held-out evaluation of a world model, next to the majority-class baseline.
+
+The paper splits its data into a training and a testing set; this does the same
+with a seeded shuffle and reports, per Omega bit, accuracy and F1 at threshold 0.5
+and the Brier score, beside a baseline that ignores the inputs: the training
+set's majority class for accuracy and F1, its label frequency for the Brier score.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Sequence
+
+import numpy as np
+from sklearn.metrics import accuracy_score, f1_score
+
+from llcps.domain import OUTCOME_NAMES, TrialRecord
+from llcps.errors import LlcpsError
+from llcps.models.features import outcome_matrix
+from llcps.models.registry import make_world_model
+
+
+@dataclass(frozen=True)
+class LabelMetrics:
+    """Held-out metrics of one Omega bit."""
+
+    label: str
+    #: Fraction of 1s in the training and the test split.
+    train_frequency: float
+    test_frequency: float
+    #: Both classes occur in the test split (F1 is informative only then).
+    both_classes: bool
+    accuracy: float
+    f1: float
+    brier: float
+    baseline_accuracy: float
+    baseline_f1: float
+    baseline_brier: float
+
+
+@dataclass(frozen=True)
+class EvaluationReport:
+    """A model's held-out metrics per Omega bit."""
+
+    model: str
+    seed: int
+    n_train: int
+    n_test: int
+    labels: tuple[LabelMetrics, ...]
+
+    def mean(self, metric: str) -> float:
+        """Mean of one LabelMetrics field over the six bits."""
+        return float(np.mean([getattr(label, metric) for label in self.labels]))
+
+    def beats_baseline_f1(self) -> list[str]:
+        """Bits with both classes in the test split where the model's F1 beats the baseline's."""
+        return [m.label for m in self.labels if m.both_classes and m.f1 > m.baseline_f1]
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "model": self.model,
+            "seed": self.seed,
+            "n_train": self.n_train,
+            "n_test": self.n_test,
+            "labels": [asdict(label) for label in self.labels],
+        }
+
+
+def split(n: int, *, seed: int, test_fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Seeded (train, test) index arrays; the test split has round(n * fraction) items, at least 1.
+
+    Raises:
+        LlcpsError: fewer than 2 trials, or a fraction outside (0, 1).
+    """
+    if not 0.0 < test_fraction < 1.0:
+        raise LlcpsError(f"test fraction must lie in (0, 1), got {test_fraction}")
+    if n < 2:
+        raise LlcpsError(
+            f"a held-out evaluation needs at least 2 trials, the branch has {n}",
+            hint="collect trials first: llcps pretrain --n 200",
+        )
+    n_test = min(n - 1, max(1, round(n * test_fraction)))
+    order = np.random.default_rng(seed).permutation(n)
+    return np.sort(order[n_test:]), np.sort(order[:n_test])
+
+
+def label_metrics(label: str, truth: np.ndarray, proba: np.ndarray, train_truth: np.ndarray) -> LabelMetrics:
+    """Metrics of one bit: predictions vs truth, and the baseline fitted on train_truth."""
+    frequency = float(train_truth.mean()) if len(train_truth) else 0.5
+    majority = int(frequency > 0.5)
+    predicted = (proba >= 0.5).astype(int)
+    constant = np.full(len(truth), majority)
+    return LabelMetrics(
+        label=label,
+        train_frequency=frequency,
+        test_frequency=float(truth.mean()),
+        both_classes=bool(truth.min() != truth.max()),
+        accuracy=float(accuracy_score(truth, predicted)),
+        f1=float(f1_score(truth, predicted, zero_division=0.0)),
+        brier=float(np.mean((proba - truth) ** 2)),
+        baseline_accuracy=float(accuracy_score(truth, constant)),
+        baseline_f1=float(f1_score(truth, constant, zero_division=0.0)),
+        baseline_brier=float(np.mean((frequency - truth) ** 2)),
+    )
+
+
+def evaluate(
+    name: str, records: Sequence[TrialRecord], *, seed: int, test_fraction: float = 0.25
+) -> EvaluationReport:
+    """Fit ``name`` on a seeded training split of ``records`` and score it on the rest.
+
+    Args:
+        name: a WORLD_MODELS name.
+        records: the trials to split (e.g. a branch's visible trials).
+        seed: seeds the split and the model.
+        test_fraction: share of trials held out.
+    """
+    train_index, test_index = split(len(records), seed=seed, test_fraction=test_fraction)
+    train = [records[i] for i in train_index]
+    test = [records[i] for i in test_index]
+    model = make_world_model(name, seed).fit(train)
+    proba = model.predict_proba(test)
+    truth, train_truth = outcome_matrix(test), outcome_matrix(train)
+    labels = tuple(
+        label_metrics(label, truth[:, j], proba[:, j], train_truth[:, j]) for j, label in enumerate(OUTCOME_NAMES)
+    )
+    return EvaluationReport(model=name, seed=seed, n_train=len(train), n_test=len(test), labels=labels)

@@ -1,0 +1,166 @@
+"""What every learned world model shares: Table-1 encoding, the label prior for
+bits it cannot learn, and the artifact layout of encoder + prior + model arrays.
+
+A bit with a single class in the training set (the paper's 4-trial "no a priori
+training" case has mostly such bits; with 0 trials every bit is one) is not given to
+the learner: the model predicts its Laplace-smoothed frequency instead. That keeps
+degenerate fits finite and honest: never certainty from a handful of trials.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+
+from llcps.domain import OUTCOME_NAMES, TrialRecord, WorldModelInput
+from llcps.models.base import WorldModel, array, label_prior, learnable_labels
+from llcps.models.features import (
+    CONTINUOUS_COLUMNS,
+    ENCODED_FEATURE_NAMES,
+    FeatureEncoder,
+    TrialTable,
+    encode_inputs,
+    outcome_matrix,
+)
+
+N_LABELS = len(OUTCOME_NAMES)
+N_FEATURES = len(ENCODED_FEATURE_NAMES)
+
+
+class EncodedWorldModel(WorldModel):
+    """A world model that learns from encoded features (see the module docstring)."""
+
+    def __init__(self, seed: int) -> None:
+        super().__init__(seed)
+        self.encoder = FeatureEncoder().fit(encode_inputs([]))
+        self.prior = label_prior(outcome_matrix([]))
+        self.learned = learnable_labels(outcome_matrix([]))
+        self._table = TrialTable()
+
+    def fit(self, records: Sequence[TrialRecord]) -> EncodedWorldModel:
+        """Fit the encoder and the learner on every trial in ``records``."""
+        raw, outcomes = self._table.encode(records)
+        self.n_trials = len(raw)
+        self.encoder = FeatureEncoder()
+        features = self.encoder.fit_transform(raw)
+        self.prior = label_prior(outcomes)
+        self.learned = learnable_labels(outcomes)
+        self._reset()
+        if self.learned.any():
+            self._fit_encoded(features, outcomes)
+        return self
+
+    def predict_proba(self, candidates: Sequence[WorldModelInput | TrialRecord]) -> np.ndarray:
+        """P(bit = 1) per candidate; bits not learned get the training prior."""
+        raw = encode_inputs(candidates)
+        proba = np.tile(self.prior, (len(raw), 1))
+        if self.learned.any() and len(raw):
+            predicted = self._predict_encoded(self.encoder.transform(raw))
+            proba[:, self.learned] = predicted[:, self.learned]
+        return np.clip(proba, 0.0, 1.0)
+
+    @abstractmethod
+    def _reset(self) -> None:
+        """Forget the learner's fitted state."""
+
+    @abstractmethod
+    def _fit_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
+        """Fit on encoded float32 features (n, d) and 0/1 outcomes (n, 6); the bits to
+        learn are ``self.learned`` (each has both classes)."""
+
+    @abstractmethod
+    def _predict_encoded(self, features: np.ndarray) -> np.ndarray:
+        """(m, 6) probabilities; only the ``self.learned`` columns are used."""
+
+    @abstractmethod
+    def _export_learner(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """The learner's fitted state (arrays, JSON-able meta)."""
+
+    @abstractmethod
+    def _import_learner(self, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
+        """Restore :meth:`_export_learner` output into this (encoder-ready) instance."""
+
+    def _export(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        arrays, meta = self._export_learner() if self.learned.any() else ({}, {})
+        encoder = self.encoder.params()
+        arrays = {
+            **arrays,
+            "encoder/mean": encoder["mean"],
+            "encoder/scale": encoder["scale"],
+            "prior": self.prior,
+            "learned": self.learned,
+        }
+        meta = {**meta, "feature_names": list(ENCODED_FEATURE_NAMES), "learned": [
+            name for name, ok in zip(OUTCOME_NAMES, self.learned) if ok
+        ]}
+        return arrays, meta
+
+    @classmethod
+    def _import(cls, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], seed: int) -> EncodedWorldModel:
+        model = cls(seed)
+        width = len(CONTINUOUS_COLUMNS)
+        model.encoder = FeatureEncoder.from_params(
+            {"mean": array(arrays, "encoder/mean", (width,)), "scale": array(arrays, "encoder/scale", (width,))}
+        )
+        prior = array(arrays, "prior", (N_LABELS,))
+        if np.any((prior <= 0) | (prior >= 1)):
+            raise ValueError("label prior must lie strictly inside (0, 1)")
+        model.prior = prior.astype(np.float64)
+        model.learned = array(arrays, "learned", (N_LABELS,), kind="b").astype(bool)
+        if model.learned.any():
+            model._import_learner(arrays, meta)
+        return model
+
+
+class SklearnPerLabelModel(EncodedWorldModel):
+    """One scikit-learn binary classifier per learnable Omega bit.
+
+    Subclasses name the estimator and the fitted attributes that fully determine its
+    ``predict_proba``; those attributes are exported as arrays and set back on a
+    fresh estimator when loading (shapes checked against :attr:`state_shapes`, where
+    ``"d"`` is the encoded width).
+    """
+
+    state_shapes: ClassVar[Mapping[str, tuple[int | str, ...]]]
+    #: dtype kind of each state attribute that is not a float array.
+    state_kinds: ClassVar[Mapping[str, str]] = {"classes_": "iu"}
+
+    @abstractmethod
+    def _make_estimator(self) -> Any:
+        """A fresh, unfitted estimator for one bit."""
+
+    def _reset(self) -> None:
+        self._estimators: dict[int, Any] = {}
+
+    def _fit_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
+        for j in np.flatnonzero(self.learned):
+            self._estimators[int(j)] = self._make_estimator().fit(features, outcomes[:, j])
+
+    def _predict_encoded(self, features: np.ndarray) -> np.ndarray:
+        proba = np.zeros((len(features), N_LABELS))
+        for j, estimator in self._estimators.items():
+            proba[:, j] = estimator.predict_proba(features)[:, 1]
+        return proba
+
+    def _export_learner(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        arrays = {
+            f"label{j}/{attr}": np.asarray(getattr(estimator, attr))
+            for j, estimator in self._estimators.items()
+            for attr in self.state_shapes
+        }
+        return arrays, {}
+
+    def _import_learner(self, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
+        self._reset()
+        for j in np.flatnonzero(self.learned):
+            estimator = self._make_estimator()
+            for attr, shape in self.state_shapes.items():
+                want = tuple(N_FEATURES if size == "d" else size for size in shape)
+                value = array(arrays, f"label{j}/{attr}", want, kind=self.state_kinds.get(attr, "f"))
+                setattr(estimator, attr, value)
+            if list(estimator.classes_) != [0, 1]:
+                raise ValueError(f"label {j} classifier must have classes [0, 1]")
+            estimator.n_features_in_ = N_FEATURES
+            self._estimators[int(j)] = estimator

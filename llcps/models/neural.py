@@ -1,0 +1,150 @@
+"""Model 1 of the paper: a feed-forward network, 3 hidden layers of 256, trained with
+binary cross-entropy and a decaying learning rate.
+
+CPU only and deterministic for a seed: weights are initialized and minibatches
+drawn from a local ``torch.Generator`` (the global torch RNG is never touched), and
+fitting and predicting run on one intra-op thread with deterministic algorithms,
+so the floating-point reduction order does not depend on the machine's core count.
+Training is bounded (at most :attr:`NeuralNetworkModel.max_steps` minibatch steps,
+stopping early when the epoch loss plateaus) so a refit at 10,000 trials stays
+within seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+from typing import Any, ClassVar, Iterator, Mapping
+
+import numpy as np
+import torch
+from torch import nn
+
+from llcps.models.base import array
+from llcps.models.learned import N_FEATURES, N_LABELS, EncodedWorldModel
+
+
+@contextmanager
+def _deterministic_torch() -> Iterator[None]:
+    """One intra-op thread and deterministic kernels, restored afterwards."""
+    threads = torch.get_num_threads()
+    deterministic = torch.are_deterministic_algorithms_enabled()
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(deterministic)
+        torch.set_num_threads(threads)
+
+
+def build_network(hidden: tuple[int, ...], generator: torch.Generator | None) -> nn.Sequential:
+    """The MLP ``34 -> hidden... -> 6`` (logits), ReLU between layers.
+
+    With a generator the layers get PyTorch's default Linear initialization drawn
+    from it; without one they are left uninitialized (to be loaded).
+    """
+    layers: list[nn.Module] = []
+    width = N_FEATURES
+    for size in (*hidden, N_LABELS):
+        linear = nn.utils.skip_init(nn.Linear, width, size)
+        if generator is not None:
+            nn.init.kaiming_uniform_(linear.weight, a=math.sqrt(5), generator=generator)
+            bound = 1.0 / math.sqrt(width)
+            nn.init.uniform_(linear.bias, -bound, bound, generator=generator)
+        layers += [linear, nn.ReLU()]
+        width = size
+    return nn.Sequential(*layers[:-1])
+
+
+class NeuralNetworkModel(EncodedWorldModel):
+    """Paper model 1: a multi-label feed-forward network."""
+
+    name: ClassVar[str] = "nn"
+
+    hidden: ClassVar[tuple[int, ...]] = (256, 256, 256)
+    batch_size: ClassVar[int] = 128
+    #: Upper bounds on minibatch steps (the refit-time budget) and on epochs (against
+    #: memorizing a small training set).
+    max_steps: ClassVar[int] = 400
+    max_epochs: ClassVar[int] = 60
+    learning_rate: ClassVar[float] = 2e-3
+    #: The learning rate decays exponentially to this fraction over the planned steps.
+    final_lr_fraction: ClassVar[float] = 0.05
+    weight_decay: ClassVar[float] = 1e-4
+    #: Stop after this many epochs without the epoch loss improving by min_improvement.
+    patience: ClassVar[int] = 10
+    min_improvement: ClassVar[float] = 1e-3
+
+    def _reset(self) -> None:
+        self._network: nn.Sequential | None = None
+        self.training_log: dict[str, Any] = {}
+
+    def _fit_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
+        with _deterministic_torch():
+            generator = torch.Generator().manual_seed(self.seed & 0xFFFF_FFFF_FFFF_FFFF)
+            network = build_network(self.hidden, generator)
+            inputs = torch.from_numpy(np.ascontiguousarray(features, dtype=np.float32))
+            targets = torch.from_numpy(outcomes.astype(np.float32))
+            optimizer = torch.optim.Adam(network.parameters(), lr=self.learning_rate, weight_decay=self.weight_decay)
+            n, batch = len(inputs), min(self.batch_size, len(inputs))
+            planned = min(self.max_steps, self.max_epochs * math.ceil(n / batch))
+            gamma = self.final_lr_fraction ** (1.0 / planned)
+            schedule = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=gamma)
+            loss_fn = nn.BCEWithLogitsLoss()
+            steps = epochs = stale = 0
+            best = math.inf
+            epoch_loss = math.nan
+            network.train()
+            while steps < planned and stale < self.patience:
+                order = torch.randperm(n, generator=generator)
+                total, seen = 0.0, 0
+                for start in range(0, n, batch):
+                    if steps == planned:
+                        break
+                    index = order[start : start + batch]
+                    optimizer.zero_grad(set_to_none=True)
+                    loss = loss_fn(network(inputs[index]), targets[index])
+                    loss.backward()
+                    optimizer.step()
+                    schedule.step()
+                    steps += 1
+                    total += loss.item() * len(index)
+                    seen += len(index)
+                epochs += 1
+                epoch_loss = total / max(seen, 1)
+                if epoch_loss < best - self.min_improvement:
+                    best, stale = epoch_loss, 0
+                else:
+                    stale += 1
+            network.eval()
+        self._network = network
+        self.training_log = {"steps": steps, "epochs": epochs, "final_loss": epoch_loss}
+
+    def _predict_encoded(self, features: np.ndarray) -> np.ndarray:
+        assert self._network is not None
+        with _deterministic_torch(), torch.inference_mode():
+            logits = self._network(torch.from_numpy(np.ascontiguousarray(features, dtype=np.float32)))
+            return torch.sigmoid(logits).double().numpy()
+
+    def _export_learner(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        assert self._network is not None
+        arrays = {f"net/{key}": value.detach().numpy().copy() for key, value in self._network.state_dict().items()}
+        meta = {
+            "hidden": list(self.hidden),
+            "training": self.training_log,
+            "max_steps": self.max_steps,
+            "batch_size": self.batch_size,
+        }
+        return arrays, meta
+
+    def _import_learner(self, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
+        network = build_network(self.hidden, None)
+        state = {
+            key: torch.from_numpy(array(arrays, f"net/{key}", tuple(value.shape)).astype(np.float32))
+            for key, value in network.state_dict().items()
+        }
+        network.load_state_dict(state, strict=True)
+        network.eval()
+        self._network = network
+        self.training_log = dict(meta.get("training", {}))

@@ -1,0 +1,96 @@
+"""WORLD_MODELS: the one list of world models (CLI choices, docs, test parameters).
+
+Entries import their module on first use, so ``import llcps.models`` (and every CLI
+command that only needs the names) does not pay for importing scikit-learn or torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from llcps.errors import UnknownNameError
+from llcps.models.base import WorldModel
+
+
+@dataclass(frozen=True)
+class WorldModelEntry:
+    """A registered world model; calling it with a seed makes an unfitted model."""
+
+    name: str
+    module: str
+    class_name: str
+    description: str
+    #: One of the paper's two models (the others are baselines).
+    paper: bool = False
+
+    def model_class(self) -> type[WorldModel]:
+        return getattr(importlib.import_module(self.module), self.class_name)
+
+    def __call__(self, seed: int) -> WorldModel:
+        return self.model_class()(seed)
+
+    def load(self, artifact: bytes, meta: Mapping[str, Any], seed: int) -> WorldModel:
+        """Load a stored artifact of this model (see :meth:`WorldModel.from_artifact`)."""
+        return self.model_class().from_artifact(artifact, meta, seed)
+
+
+def _entries(*entries: WorldModelEntry) -> dict[str, WorldModelEntry]:
+    return {entry.name: entry for entry in entries}
+
+
+#: name -> factory(seed) of every world model.
+WORLD_MODELS: dict[str, WorldModelEntry] = _entries(
+    WorldModelEntry(
+        "nb",
+        "llcps.models.naive_bayes",
+        "NaiveBayesModel",
+        "Bernoulli naive Bayes, one classifier per Omega bit (paper model 2)",
+        paper=True,
+    ),
+    WorldModelEntry(
+        "nn",
+        "llcps.models.neural",
+        "NeuralNetworkModel",
+        "feed-forward network, 3 x 256 hidden, BCE loss, decaying learning rate (paper model 1)",
+        paper=True,
+    ),
+    WorldModelEntry("random", "llcps.models.baselines", "RandomModel", "no model: a seeded random exploration order"),
+    WorldModelEntry(
+        "logreg", "llcps.models.baselines", "LogisticRegressionModel", "logistic regression per Omega bit (linear)"
+    ),
+    WorldModelEntry(
+        "forest", "llcps.models.baselines", "RandomForestModel", "random forest over all Omega bits (non-linear)"
+    ),
+)
+
+#: The paper's models, the default of commands that fit "the models".
+PAPER_MODELS: tuple[str, ...] = tuple(name for name, entry in WORLD_MODELS.items() if entry.paper)
+
+
+def world_model_entry(name: str) -> WorldModelEntry:
+    """The registry entry of ``name``.
+
+    Raises:
+        UnknownNameError: listing the known names.
+    """
+    try:
+        return WORLD_MODELS[name]
+    except KeyError:
+        raise UnknownNameError("world model", name, list(WORLD_MODELS)) from None
+
+
+def make_world_model(name: str, seed: int) -> WorldModel:
+    """An unfitted world model by registry name."""
+    return world_model_entry(name)(seed)
+
+
+def load_world_model(artifact: bytes, meta: Mapping[str, Any], *, seed: int) -> WorldModel:
+    """Load a stored artifact, dispatching on ``meta["model"]``.
+
+    Raises:
+        LlcpsError: unknown model name, or a rejected artifact.
+    """
+    name = meta.get("model") if isinstance(meta, Mapping) else None
+    return world_model_entry(str(name)).load(artifact, meta, seed)
