@@ -100,7 +100,7 @@ CUBE_BUCKET = {"cube": "item", "bucket": "container"}
             id="not-near-places",
         ),
         pytest.param(
-            {"ball": "item", "bin": "container"},
+            {"ball": "item", "bin": "container", "table": "surface"},  # naming the constant is allowed
             {F("visible", "ball"), F("visible", "bin"), F("on", "ball", "table"), F("on", "bin", "table")},
             {F("in", "ball", "bin")},
             set(),
@@ -174,8 +174,9 @@ def test_plan_steps_carry_their_controller_call():
         (Task({"cube": "gadget"}, frozenset()), LlcpsError),
         (Task({"cube.1": "item"}, frozenset()), LlcpsError),
         (Task({"cube": "item"}, frozenset({F("on", "cube")})), LlcpsError),
+        (Task({"table": "item"}, frozenset()), LlcpsError),
     ],
-    ids=["unknown-object", "unknown-predicate", "unknown-type", "bad-name", "wrong-arity"],
+    ids=["unknown-object", "unknown-predicate", "unknown-type", "bad-name", "wrong-arity", "retyped-constant"],
 )
 def test_tasks_that_do_not_fit_k_are_project_errors(task, error):
     with pytest.raises(error):
