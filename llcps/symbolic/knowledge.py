@@ -124,7 +124,7 @@ class KnowledgeBase:
             if str(parts["name"]) in ACTIONS:
                 actions.append(_domain_action_operator(parts))
             else:
-                learned.append(LearnedOperator.from_operator(Operator(**parts, controller=_placeholder_controller(parts))))  # type: ignore[arg-type]
+                learned.append(LearnedOperator.from_fields(**parts))  # type: ignore[arg-type]
         learned.sort(key=lambda op: op.name)
         return cls(
             name=str(domain.name),
@@ -294,19 +294,6 @@ def _type_parents(domain: Domain) -> tuple[tuple[str, str | None], ...]:
             parents.setdefault(p, None)
     parents.pop("object", None)
     return tuple(sorted(parents.items()))
-
-
-def _placeholder_controller(parts: dict[str, object]) -> Controller:
-    """A syntactically valid controller so that a learned operator's fields can be checked
-    before :meth:`LearnedOperator.from_operator` derives the real one from its name."""
-    parsed = parse_operator_name(str(parts["name"]))
-    variables = [v for v, _ in parts["parameters"]]  # type: ignore[attr-defined]
-    if parsed is None or len(variables) < ACTION_ARITY[parsed[0]]:
-        raise LlcpsError(
-            f"action {parts['name']} is neither one of {ACTIONS} nor a learned operator",
-            hint="learned operators are named like push_front_r0p2_m0p3 and take the controller's arguments first",
-        )
-    return Controller(action=parsed[0], arguments=tuple(variables[: ACTION_ARITY[parsed[0]]]))
 
 
 @functools.cache

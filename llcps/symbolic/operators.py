@@ -140,37 +140,60 @@ class LearnedOperator:
 
     @classmethod
     def from_operator(cls, op: Operator) -> LearnedOperator:
-        """Recognise a learned operator read back from PDDL by its name.
+        """Recognise a learned operator (read back from PDDL) by its name; see :meth:`from_fields`."""
+        return cls.from_fields(
+            name=op.name,
+            parameters=op.parameters,
+            preconditions=op.preconditions,
+            negative_preconditions=op.negative_preconditions,
+            add=op.add,
+            delete=op.delete,
+            cost=op.cost,
+        )
+
+    @classmethod
+    def from_fields(
+        cls,
+        *,
+        name: str,
+        parameters: tuple[tuple[str, str], ...],
+        preconditions: frozenset[Fluent],
+        negative_preconditions: frozenset[Fluent],
+        add: frozenset[Fluent],
+        delete: frozenset[Fluent],
+        cost: float,
+    ) -> LearnedOperator:
+        """A learned operator from an action's parts; the controller comes from the name.
 
         The controller's physical arguments are the first parameters, as many as the
         controller takes.
 
         Raises:
-            LlcpsError: the name does not encode controller settings, or the operator
-                has negative preconditions (learned operators have none).
+            LlcpsError: the name does not encode controller settings, there are too few
+                parameters, or there are negative preconditions (learned operators have none).
         """
-        parsed = parse_operator_name(op.name)
+        parsed = parse_operator_name(name)
         if parsed is None:
             raise LlcpsError(
-                f"action {op.name} is neither one of {ACTIONS} nor a learned operator",
+                f"action {name} is neither one of {ACTIONS} nor a learned operator",
                 hint="learned operators are named like push_front_r0p2_m0p3",
             )
-        if op.negative_preconditions:
-            raise LlcpsError(f"learned operator {op.name} has negative preconditions", hint="learned operators have positive preconditions only")
+        if negative_preconditions:
+            raise LlcpsError(f"learned operator {name} has negative preconditions", hint="learned operators have positive preconditions only")
         action, params, _ = parsed
         arity = ACTION_ARITY[action]
-        if len(op.parameters) < arity:
-            raise LlcpsError(f"learned operator {op.name} has fewer parameters than the {action} controller takes ({arity})")
+        if len(parameters) < arity:
+            raise LlcpsError(f"learned operator {name} has fewer parameters than the {action} controller takes ({arity})")
         return cls(
-            name=op.name,
+            name=name,
             action=action,
-            arguments=op.variables[:arity],
+            arguments=tuple(v for v, _ in parameters[:arity]),
             params=params,
-            parameters=op.parameters,
-            preconditions=op.preconditions,
-            add=op.add,
-            delete=op.delete,
-            cost=op.cost,
+            parameters=parameters,
+            preconditions=preconditions,
+            add=add,
+            delete=delete,
+            cost=cost,
         )
 
     def renamed(self, name: str) -> LearnedOperator:

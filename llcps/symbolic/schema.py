@@ -202,29 +202,22 @@ class Operator:
         if len(args) != len(self.parameters):
             raise ValueError(f"{self.name} takes {len(self.parameters)} argument(s), got {tuple(args)}")
         binding = dict(zip(self.variables, args))
-
-        def split(atoms: frozenset[Fluent]) -> tuple[frozenset[Fluent], list[tuple[str, str]]]:
-            state_atoms, tests = set(), []
+        for negated, atoms in ((False, self.preconditions), (True, self.negative_preconditions)):
             for atom in atoms:
-                ground = substitute(atom, binding) if atom[0] != EQUALITY else (EQUALITY, *(binding.get(t, t) for t in atom[1:]))
-                if atom[0] == EQUALITY:
-                    tests.append((ground[1], ground[2]))
-                else:
-                    state_atoms.add(ground)
-            return frozenset(state_atoms), tests
+                if atom[0] == EQUALITY and (binding.get(atom[1], atom[1]) == binding.get(atom[2], atom[2])) == negated:
+                    return None
 
-        positive, equal = split(self.preconditions)
-        negative, unequal = split(self.negative_preconditions)
-        if any(a != b for a, b in equal) or any(a == b for a, b in unequal):
-            return None
+        def bound(atoms: frozenset[Fluent]) -> frozenset[Fluent]:
+            return frozenset(substitute(a, binding) for a in atoms if a[0] != EQUALITY)
+
         return GroundAction(
             name=self.name,
             args=tuple(args),
-            preconditions=positive,
-            add=frozenset(substitute(a, binding) for a in self.add),
-            delete=frozenset(substitute(a, binding) for a in self.delete),
+            preconditions=bound(self.preconditions),
+            add=bound(self.add),
+            delete=bound(self.delete),
             cost=self.cost,
-            negative_preconditions=negative,
+            negative_preconditions=bound(self.negative_preconditions),
             controller=self.controller.bind(binding),
         )
 
@@ -302,7 +295,7 @@ def _term_name(term: Term) -> str:
     return f"?{term.name}" if isinstance(term, Variable) else str(term.name)
 
 
-def _literals(action: str, formula: Formula | None) -> tuple[set[Fluent], set[Fluent], list[Formula]]:
+def _literals(formula: Formula | None) -> tuple[set[Fluent], set[Fluent], list[Formula]]:
     """Split a conjunction of literals into positive atoms, negative atoms and the rest."""
     if formula is None:
         return set(), set(), []
@@ -337,10 +330,10 @@ def operator_parts_from_pddl(action: Action) -> dict[str, object]:
         if len(tags) > 1:
             raise _unsupported(name, f"(either {' '.join(tags)})")
         parameters.append((f"?{p.name}", tags[0] if tags else "object"))
-    pre_pos, pre_neg, rest = _literals(name, action.precondition)
+    pre_pos, pre_neg, rest = _literals(action.precondition)
     if rest:
         raise _unsupported(name, rest[0])
-    add, delete, rest = _literals(name, action.effect)
+    add, delete, rest = _literals(action.effect)
     if any(a[0] == EQUALITY for a in add | delete):
         raise _unsupported(name, "an equality in an effect")
     cost = 0.0
