@@ -745,7 +745,7 @@ class Store:
             row = conn.execute(select(*TRIAL_COLUMNS).where(Trial.id == trial_id)).first()
         if row is None:
             raise LlcpsError(f"unknown trial {trial_id}", hint="see `llcps inspect trials` for trial ids")
-        return TrialDecoder(names)(row)
+        return TrialDecoder(names).decode([row])[0]
 
     def _trial_filters(
         self, source: str | None, scenario: str | None, solved: bool | None, after_id: int | None
@@ -787,8 +787,8 @@ class Store:
                 .order_by(Trial.id.desc() if newest_first else Trial.id)
                 .limit(limit)
             )
-            decode = TrialDecoder({link.branch_id: link.name for link in chain})
-            return [decode(row) for row in conn.execute(stmt)]
+            decoder = TrialDecoder({link.branch_id: link.name for link in chain})
+            return decoder.decode(conn.execute(stmt).all())  # fetchall: far cheaper than row iteration
 
     def count_visible_trials(self, branch: str | None, source: str | None = None) -> int:
         """How many trials ``branch`` sees (optionally of one source)."""
