@@ -38,6 +38,12 @@ CONDITION_COLORS = {"update": "#1f77b4", "reset": "#ff7f0e"}
 #: Heatmap colours span update/reset ratios from 1/8 to 8 (log2 from -3 to 3).
 LOG2_RATIO_LIMIT = 3.0
 FORMATS: tuple[str, ...] = ("png", "svg")
+# Matplotlib 3.10 replaced boxplot's ``vert`` with ``orientation``.
+_HORIZONTAL: dict[str, object] = (
+    {"orientation": "horizontal"}
+    if tuple(int(p) for p in matplotlib.__version__.split(".")[:2]) >= (3, 10)
+    else {"vert": False}
+)
 
 
 def save(fig: Figure, stem: str | Path) -> tuple[Path, ...]:
@@ -83,8 +89,7 @@ def _heatmap_panel(
     col_names: list[str],
     title: str,
 ) -> object:
-    cmap = matplotlib.colormaps["RdBu"].copy()
-    cmap.set_bad("#dddddd")
+    cmap = matplotlib.colormaps["RdBu"].with_extremes(bad="#dddddd")
     image = ax.imshow(  # type: ignore[attr-defined]
         np.ma.masked_invalid(values),
         cmap=cmap,
@@ -160,8 +165,10 @@ def exploration_distribution(table: ResultsTable, stem: str | Path, *, metric: s
     values: dict[tuple[str, str, int, str, str], list[float]] = {}
     for r in table:
         values.setdefault((r.model, r.measure, r.pretrain_size, r.condition, r.scenario), []).append(r.metric(metric))
-    fig = Figure(figsize=(3.2 * len(scenarios) + 2.0, 1.0 + 0.45 * max(len(cells), 1)), layout="constrained")
+    height = 1.0 + 0.45 * max(len(cells), 1)
+    fig = Figure(figsize=(3.2 * len(scenarios) + 2.0, height))
     axes = fig.subplots(1, len(scenarios), sharey=True, squeeze=False)[0]
+    fig.subplots_adjust(wspace=0.08, top=1 - 0.5 / height, bottom=0.5 / height)
     jitter = np.random.default_rng(0)
     offsets = np.linspace(-0.2, 0.2, len(conditions))
     for ax, scenario in zip(axes, scenarios):
@@ -173,7 +180,7 @@ def exploration_distribution(table: ResultsTable, stem: str | Path, *, metric: s
                 ax.boxplot(
                     [d for _, d in present],
                     positions=[p for p, _ in present],
-                    vert=False,
+                    **_HORIZONTAL,
                     widths=0.3 if len(conditions) > 1 else 0.6,
                     showfliers=False,
                     patch_artist=True,
@@ -191,8 +198,10 @@ def exploration_distribution(table: ResultsTable, stem: str | Path, *, metric: s
         ax.grid(axis="x", alpha=0.3)
     axes[0].set_yticks(range(len(cells)), [f"{m} / {me} / p{s}" for m, me, s in cells], fontsize=8)
     axes[0].invert_yaxis()
-    axes[-1].legend(fontsize=8, loc="lower right")
-    fig.suptitle(f"{metric.replace('_', ' ')} per cell (boxes: quartiles; dots: seeds)", fontsize=11)
+    axes[-1].legend(fontsize=8, loc="best")
+    fig.suptitle(
+        f"{metric.replace('_', ' ')} per cell (boxes: quartiles; dots: seeds)", fontsize=11, y=1 - 0.15 / height
+    )
     return save(fig, stem)
 
 
@@ -204,8 +213,12 @@ def cumulative_plot(points: Sequence[CumulativePoint], stem: str | Path, *, metr
     pairs = sorted({(p.model, p.measure) for p in points}, key=lambda k: (model_rank(k[0]), measure_rank(k[1])))
     sizes = sorted({p.pretrain_size for p in points}, reverse=True)
     pairs, sizes = pairs or [("-", "-")], sizes or [0]
-    fig = Figure(figsize=(3.2 * len(sizes) + 0.8, 0.6 + 1.7 * len(pairs)), layout="constrained")
+    # Fixed spacing instead of constrained layout: with dozens of panels (the full
+    # grid) the layout solver costs far more than drawing.
+    height = 0.6 + 1.7 * len(pairs)
+    fig = Figure(figsize=(3.2 * len(sizes) + 0.8, height))
     axes = fig.subplots(len(pairs), len(sizes), sharex=True, squeeze=False)
+    fig.subplots_adjust(hspace=0.45, wspace=0.25, top=1 - 0.45 / height, bottom=0.35 / height)
     x = np.arange(len(SCENARIO_SEQUENCE))
     lines: dict[tuple[str, str, int, str], dict[str, CumulativePoint]] = {}
     for p in points:
@@ -233,5 +246,7 @@ def cumulative_plot(points: Sequence[CumulativePoint], stem: str | Path, *, metr
         ax.set_xticks(x, [s.replace("scenario", "S") for s in SCENARIO_SEQUENCE])
     for ax in axes[:, 0]:
         ax.set_ylabel(f"cumulative\n{metric.replace('_', ' ')}", fontsize=7)
-    fig.suptitle("cumulative exploration over the scenario sequence (mean, 95% bootstrap CI)", fontsize=10)
+    fig.suptitle(
+        "cumulative exploration over the scenario sequence (mean, 95% bootstrap CI)", fontsize=10, y=1 - 0.1 / height
+    )
     return save(fig, stem)

@@ -366,7 +366,7 @@ def reduction_summary(cells: Iterable[tuple[str, int, float]]) -> tuple[Reductio
         which = 0 if pct < 0 else 1 if pct == 0 else 2
         for key in ((size, None), (size, model)):
             counts.setdefault(key, [0, 0, 0])[which] += 1
-    order = sorted(counts, key=lambda k: (-k[0], k[1] is not None, k[1] or ""))
+    order = sorted(counts, key=lambda k: (-k[0], k[1] is not None, model_rank(k[1] or "")))
     return tuple(Reduction(size, model, sum(c), c[0], c[1], c[2]) for (size, model), c in ((k, counts[k]) for k in order))
 
 

@@ -1,0 +1,487 @@
+"""The experiment report: tables, CSV/JSON, plots and a markdown page from a results table.
+
+:func:`build_report` needs only a :class:`~llcps.experiments.results.ResultsTable`, so a
+report can be rebuilt from a saved ``results.csv`` or from the store at any time
+without re-running anything. The markdown puts our Figure 2 beside the paper's and
+ends with a plain-words summary generated from the numbers; the interpretation of
+why we agree or differ is written by hand in ``docs/results.md``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+from llcps.errors import LlcpsError
+from llcps.experiments import plots
+from llcps.experiments.grid import SCENARIO_SEQUENCE, condition_rank
+from llcps.experiments.results import METRICS, ResultsTable
+from llcps.experiments.stats import (
+    ALPHA,
+    BASELINE_MODEL,
+    DEFAULT_RESAMPLES,
+    FIGURE2_SCENARIOS,
+    PAPER_CAPTION_FRACTION_REDUCED,
+    PAPER_FIGURE2,
+    PAPER_RUNS_PER_CELL,
+    CumulativePoint,
+    Figure2Row,
+    RandomComparison,
+    Reduction,
+    cumulative_exploration,
+    figure2_table,
+    our_cells,
+    paper_cells,
+    random_comparison,
+    reduction_summary,
+)
+
+format_pct = plots.format_pct
+
+#: How the paper names its two pretraining sizes.
+PRETRAIN_NAMES = {200: "Apriori Training", 4: "No Apriori Training"}
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """Every statistic of one results table, computed once for the files and the page."""
+
+    metric: str
+    resamples: int
+    seed: int
+    figure2: tuple[Figure2Row, ...]
+    ours_reduction: tuple[Reduction, ...]
+    paper_reduction: tuple[Reduction, ...]
+    random: tuple[RandomComparison, ...]
+    cumulative: tuple[CumulativePoint, ...]
+    overview: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class ReportPaths:
+    """Where :func:`build_report` wrote each file."""
+
+    out_dir: Path
+    results_csv: Path
+    figure2_csv: Path
+    figure2_json: Path
+    random_csv: Path | None
+    report_md: Path
+    plots: Mapping[str, tuple[Path, ...]]
+
+    def all(self) -> tuple[Path, ...]:
+        """Every file written, for listing or checking."""
+        files = [self.results_csv, self.figure2_csv, self.figure2_json, self.report_md]
+        if self.random_csv is not None:
+            files.append(self.random_csv)
+        for paths in self.plots.values():
+            files.extend(paths)
+        return tuple(files)
+
+
+def _overview(table: ResultsTable) -> dict[str, Any]:
+    complete = table.complete_sequences()
+    sequences = {r.sequence for r in table}
+    unsolved = [r for r in table if not r.solved]
+    seeds = sorted(table.unique("seed"))
+    return {
+        "rows": len(table),
+        "presets": list(table.unique("preset")),
+        "models": list(table.unique("model")),
+        "measures": list(table.unique("measure")),
+        "pretrain_sizes": sorted(table.unique("pretrain_size"), reverse=True),
+        "conditions": sorted(table.unique("condition"), key=condition_rank),
+        "seeds": len(seeds),
+        "seed_range": [seeds[0], seeds[-1]] if seeds else None,
+        "cells": len({r.cell for r in table}),
+        "sequences": len(sequences),
+        "complete_sequences": len(complete & sequences),
+        "unsolved_episodes": len(unsolved),
+        "solved_fraction": (1.0 - len(unsolved) / len(table)) if len(table) else None,
+        "sim_seconds": sum(r.sim_seconds for r in table),
+        "wall_seconds": sum(r.wall_seconds for r in table),
+    }
+
+
+def analyse(
+    table: ResultsTable, *, metric: str = "exploration_trials", resamples: int = DEFAULT_RESAMPLES, seed: int = 0
+) -> Analysis:
+    """Run every statistic of :mod:`llcps.experiments.stats` on ``table``."""
+    if metric not in METRICS:
+        raise LlcpsError(f"unknown metric {metric!r}", hint=f"choose one of: {', '.join(METRICS)}")
+    if resamples < 100:
+        raise LlcpsError(f"{resamples} bootstrap resamples are too few for a 95% interval", hint="use 1000 or more")
+    if len(table) == 0:
+        raise LlcpsError("the results table is empty: nothing to report", hint="run `llcps experiment run` first")
+    rows = figure2_table(table, metric=metric, resamples=resamples, seed=seed)
+    return Analysis(
+        metric=metric,
+        resamples=resamples,
+        seed=seed,
+        figure2=rows,
+        ours_reduction=reduction_summary(our_cells(rows)),
+        paper_reduction=reduction_summary(paper_cells()),
+        random=random_comparison(table, metric=metric),
+        cumulative=cumulative_exploration(table, metric=metric, resamples=resamples, seed=seed),
+        overview=_overview(table),
+    )
+
+
+# --------------------------------------------------------------------------------------
+# Data out: JSON and CSV
+# --------------------------------------------------------------------------------------
+def _clean(value: Any) -> Any:
+    """JSON has no NaN or infinity: write them as null (CSV keeps ``nan``/``inf``)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def _reduction_json(r: Reduction) -> dict[str, Any]:
+    return {**asdict(r), "fraction_reduced": r.fraction_reduced, "fraction_not_increased": r.fraction_not_increased}
+
+
+def analysis_json(analysis: Analysis) -> dict[str, Any]:
+    """The analysis as plain, strict JSON data (NaN and infinity become null)."""
+    return _clean(
+        {
+            "metric": analysis.metric,
+            "bootstrap": {"resamples": analysis.resamples, "seed": analysis.seed, "level": 0.95, "method": "percentile"},
+            "alpha": ALPHA,
+            "overview": dict(analysis.overview),
+            "figure2": [asdict(r) for r in analysis.figure2],
+            "reduction": {
+                "ours": [_reduction_json(r) for r in analysis.ours_reduction],
+                "paper_table": [_reduction_json(r) for r in analysis.paper_reduction],
+                "paper_caption": {str(k): v for k, v in PAPER_CAPTION_FRACTION_REDUCED.items()},
+            },
+            "random_comparison": [asdict(r) for r in analysis.random],
+        }
+    )
+
+
+def report_json(
+    table: ResultsTable, *, metric: str = "exploration_trials", resamples: int = DEFAULT_RESAMPLES, seed: int = 0
+) -> dict[str, Any]:
+    """The Figure-2 table and its companions as data, for ``--json``."""
+    return analysis_json(analyse(table, metric=metric, resamples=resamples, seed=seed))
+
+
+def _write_rows_csv(path: Path, rows: Iterable[Any], columns: Iterable[str]) -> Path:
+    columns = list(columns)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        writer = csv.DictWriter(fh, fieldnames=columns, lineterminator="\n")
+        writer.writeheader()
+        for row in rows:
+            record = asdict(row)
+            writer.writerow({k: "" if record[k] is None else record[k] for k in columns})
+    return path
+
+
+# --------------------------------------------------------------------------------------
+# Markdown
+# --------------------------------------------------------------------------------------
+def _num(value: float, digits: int = 1) -> str:
+    return "n/a" if value is None or math.isnan(value) else f"{value:.{digits}f}"
+
+
+def format_p(value: float, reason: str = "") -> str:
+    """A p-value for a table: three decimals, ``<0.001``, or ``n/a`` with the reason."""
+    if value is None or math.isnan(value):
+        return f"n/a ({reason})" if reason else "n/a"
+    return "<0.001" if value < 0.001 else f"{value:.3f}"
+
+
+def format_ci(low: float, high: float) -> str:
+    if math.isnan(low) or math.isnan(high):
+        return "n/a"
+    return f"[{format_pct(low)}, {format_pct(high)}]"
+
+
+def _stars(row: Figure2Row) -> str:
+    return "**" if row.p_holm < ALPHA else "*" if row.significant else ""
+
+
+def _table(header: list[str], body: Iterable[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines.extend("| " + " | ".join(cells) + " |" for cells in body)
+    return lines
+
+
+def _pretrain_title(size: int) -> str:
+    name = PRETRAIN_NAMES.get(size)
+    return f"{size} pretraining points" + (f' (the paper\'s "{name}")' if name else "")
+
+
+def _figure2_side_by_side(rows: tuple[Figure2Row, ...]) -> list[str]:
+    """The paper's layout: one block per pretraining size, ours next to the paper's."""
+    out: list[str] = []
+    shown = [r for r in rows if r.in_figure2]
+    for size in sorted({r.pretrain_size for r in shown}, reverse=True):
+        block = [r for r in shown if r.pretrain_size == size]
+        scenarios = [s for s in FIGURE2_SCENARIOS if any(r.scenario == s for r in block)]
+        header = ["model", "measure"]
+        for s in scenarios:
+            header += [f"{s} ours", "95% CI", "p", f"{s} paper"]
+        index = {(r.model, r.measure, r.scenario): r for r in block}
+        body = []
+        for model, measure in dict.fromkeys((r.model, r.measure) for r in block):
+            cells = [model, measure]
+            for s in scenarios:
+                r = index.get((model, measure, s))
+                if r is None:
+                    cells += ["", "", "", format_pct(PAPER_FIGURE2.get((model, measure, size, s)))]
+                    continue
+                paper = "" if r.paper_pct_change is None else format_pct(r.paper_pct_change)
+                cells += [f"{format_pct(r.pct_change)}{_stars(r)}", format_ci(r.ci_low, r.ci_high), format_p(r.p_value), paper]
+            body.append(cells)
+        out += [f"### {_pretrain_title(size)}", "", *_table(header, body), ""]
+    return out
+
+
+def _figure2_long(rows: tuple[Figure2Row, ...]) -> list[str]:
+    header = [
+        "model", "measure", "pretraining", "scenario", "n", "mean update", "mean reset",
+        "% change", "95% CI", "Wilcoxon p", "Holm p", "solved update", "solved reset",
+    ]  # fmt: skip
+    body = [
+        [
+            r.model, r.measure, str(r.pretrain_size), r.scenario, str(r.n_seeds), _num(r.mean_update),
+            _num(r.mean_reset), format_pct(r.pct_change), format_ci(r.ci_low, r.ci_high),
+            format_p(r.p_value, r.p_reason), format_p(r.p_holm) if r.in_figure2 else "-",
+            f"{r.solved_update:.0%}", f"{r.solved_reset:.0%}",
+        ]  # fmt: skip
+        for r in rows
+    ]
+    return _table(header, body)
+
+
+def _reduction_table(analysis: Analysis) -> list[str]:
+    paper = {(r.pretrain_size, r.model): r for r in analysis.paper_reduction}
+    header = [
+        "pretraining", "model", "cells", "reduced (ours)", "reduced or unchanged (ours)",
+        "reduced (paper table)", "reduced or unchanged (paper table)", "paper caption",
+    ]  # fmt: skip
+    body = []
+    for r in analysis.ours_reduction:
+        p = paper.get((r.pretrain_size, r.model))
+        caption = PAPER_CAPTION_FRACTION_REDUCED.get(r.pretrain_size) if r.model is None else None
+        body.append(
+            [
+                str(r.pretrain_size), r.model or "all", str(r.n_cells),
+                f"{r.n_reduced}/{r.n_cells} ({r.fraction_reduced:.0%})",
+                f"{r.n_reduced + r.n_unchanged}/{r.n_cells} ({r.fraction_not_increased:.0%})",
+                f"{p.n_reduced}/{p.n_cells} ({p.fraction_reduced:.0%})" if p else "",
+                f"{p.n_reduced + p.n_unchanged}/{p.n_cells} ({p.fraction_not_increased:.0%})" if p else "",
+                f"{caption:.0%}" if caption is not None else "",
+            ]  # fmt: skip
+        )
+    return _table(header, body)
+
+
+def _random_table(comparisons: tuple[RandomComparison, ...]) -> list[str]:
+    header = [
+        "model", "measure", "pretraining", "condition", "scenario", "n", f"n {BASELINE_MODEL}",
+        "median", f"median {BASELINE_MODEL}", "% change of median", "test", "p",
+    ]  # fmt: skip
+    body = [
+        [
+            c.model, c.measure, str(c.pretrain_size), c.condition, c.scenario, str(c.n_model), str(c.n_random),
+            _num(c.median_model), _num(c.median_random), format_pct(c.pct_change_median), c.test,
+            format_p(c.p_value, c.p_reason),
+        ]  # fmt: skip
+        for c in comparisons
+    ]
+    return _table(header, body)
+
+
+def _sign(value: float) -> int:
+    return 0 if value == 0 else (1 if value > 0 else -1)
+
+
+def summary_lines(analysis: Analysis) -> list[str]:
+    """Plain-words findings generated from the numbers (no interpretation of causes)."""
+    lines: list[str] = []
+    rows = analysis.figure2
+    fig2 = [r for r in rows if r.in_figure2]
+    paper = {(r.pretrain_size, r.model): r for r in analysis.paper_reduction}
+    for r in analysis.ours_reduction:
+        if r.model is not None:
+            continue
+        p = paper.get((r.pretrain_size, None))
+        caption = PAPER_CAPTION_FRACTION_REDUCED.get(r.pretrain_size)
+        text = (
+            f"With {r.pretrain_size} pretraining points, updating the world model reduced mean exploration in "
+            f"{r.n_reduced} of {r.n_cells} Figure-2 cells ({r.fraction_reduced:.0%})"
+        )
+        if p is not None:
+            text += (
+                f"; the paper's table shows {p.n_reduced} of {p.n_cells} ({p.fraction_reduced:.0%}; "
+                f"{p.fraction_not_increased:.0%} counting its 0% cells)"
+            )
+            if caption is not None:
+                text += f" and its caption states {caption:.0%}"
+        lines.append(text + ".")
+    if fig2:
+        sig = [r for r in fig2 if r.significant]
+        holm = [r for r in fig2 if r.p_holm < ALPHA]
+        text = (
+            f"{len(sig)} of {len(fig2)} Figure-2 cells differ between update and reset at p < {ALPHA} "
+            f"(paired Wilcoxon over seeds, uncorrected); {len(holm)} remain after Holm's correction"
+        )
+        if holm:
+            text += ": " + "; ".join(
+                f"{r.model}/{r.measure}/p{r.pretrain_size}/{r.scenario} {format_pct(r.pct_change)}" for r in holm
+            )
+        lines.append(text + ".")
+    compared = [r for r in fig2 if r.paper_pct_change is not None]
+    if compared:
+        nonzero = [r for r in compared if r.paper_pct_change != 0]
+        same = [r for r in nonzero if _sign(r.pct_change) == _sign(r.paper_pct_change)]
+        outside = [
+            r for r in compared
+            if not math.isnan(r.ci_low) and not (r.ci_low <= r.paper_pct_change <= r.ci_high)
+        ]  # fmt: skip
+        lines.append(
+            f"Where the paper reports a change, our estimate points the same way in {len(same)} of {len(nonzero)} "
+            f"cells; the paper's value lies outside our 95% interval in {len(outside)} of {len(compared)} cells "
+            f"(the paper averaged {PAPER_RUNS_PER_CELL} runs per cell, without intervals)."
+        )
+    control = [r for r in rows if r.scenario == SCENARIO_SEQUENCE[0]]
+    if control:
+        identical = [r for r in control if r.p_reason == "all paired differences are zero"]
+        sig = [r for r in control if r.significant]
+        worst = max(control, key=lambda r: abs(r.pct_change) if not math.isnan(r.pct_change) else -1.0)
+        lines.append(
+            f"Control: in {SCENARIO_SEQUENCE[0]} both conditions start from the pretraining set, so they should agree. "
+            f"{len(identical)} of {len(control)} cells are identical seed by seed, {len(sig)} differ at p < {ALPHA}, "
+            f"the largest change is {format_pct(worst.pct_change)} ({worst.model}/{worst.measure}/p{worst.pretrain_size})."
+        )
+    if analysis.random:
+        better = [c for c in analysis.random if c.pct_change_median < 0 and c.p_value < ALPHA]
+        worse = [c for c in analysis.random if c.pct_change_median > 0 and c.p_value < ALPHA]
+        lines.append(
+            f"Against the {BASELINE_MODEL} order, {len(better)} of {len(analysis.random)} model x measure x "
+            f"condition x scenario cells explore significantly less and {len(worse)} significantly more (p < {ALPHA}, uncorrected)."
+        )
+    unsolved = analysis.overview.get("unsolved_episodes", 0)
+    if unsolved:
+        lines.append(
+            f"{unsolved} episode(s) ended without solving their scenario; their exploration counts are the budget "
+            f"spent, a lower bound on what solving would have taken."
+        )
+    return lines
+
+
+def render_markdown(analysis: Analysis, plot_paths: Mapping[str, tuple[Path, ...]], out_dir: Path) -> str:
+    """The report page; plots are linked relative to ``out_dir``."""
+    o = analysis.overview
+    metric = analysis.metric.replace("_", " ")
+    seed_range = f" (seeds {o['seed_range'][0]}-{o['seed_range'][1]})" if o.get("seed_range") else ""
+    lines = [
+        "# Experiment report",
+        "",
+        f"Preset(s) {', '.join(o['presets'])}: {o['cells']} cells, {o['seeds']} seeds{seed_range}, "
+        f"{o['sequences']} sequences ({o['complete_sequences']} complete), {o['rows']} episodes, "
+        f"{o['unsolved_episodes']} unsolved. Simulated {o['sim_seconds']:.0f} s in {o['wall_seconds']:.0f} s of wall time.",
+        "",
+        f"Measure of exploration: **{metric}**. % change with updates = 100 x (mean update - mean reset) / mean reset "
+        f"over seeds run under both conditions (0% when both are 0). 95% intervals: percentile bootstrap over seeds "
+        f"resampled as update/reset pairs ({analysis.resamples} resamples, seed {analysis.seed}). p: two-sided paired "
+        f"Wilcoxon signed-rank over seeds; Holm's correction over the scenario 2 and 3 cells. "
+        f"`*` p < {ALPHA}, `**` also after Holm.",
+        "",
+        "## Summary (generated from the numbers)",
+        "",
+        *[f"- {line}" for line in summary_lines(analysis)],
+        "",
+        "## Figure 2: % change in exploration with model updates, ours beside the paper's",
+        "",
+        *_figure2_side_by_side(analysis.figure2),
+    ]
+    if "figure2" in plot_paths:
+        lines += [f"![Figure 2 heatmap]({_rel(plot_paths['figure2'][0], out_dir)})", ""]
+    lines += [
+        "## How often updating reduced exploration",
+        "",
+        *_reduction_table(analysis),
+        "",
+        "## Every cell, every scenario",
+        "",
+        f"{SCENARIO_SEQUENCE[0]} is a control: both conditions start it from the pretraining set.",
+        "",
+        *_figure2_long(analysis.figure2),
+        "",
+    ]
+    if analysis.random:
+        lines += [f"## Model-guided vs {BASELINE_MODEL} order", "", *_random_table(analysis.random), ""]
+    lines += ["## Plots", ""]
+    captions = {
+        "distribution": f"{metric} per cell and condition",
+        "cumulative": "cumulative exploration over the scenario sequence",
+    }
+    for name, caption in captions.items():
+        if name in plot_paths:
+            lines += [f"### {caption.capitalize()}", "", f"![{caption}]({_rel(plot_paths[name][0], out_dir)})", ""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _rel(path: Path, base: Path) -> str:
+    try:
+        return path.relative_to(base).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+# --------------------------------------------------------------------------------------
+# Everything at once
+# --------------------------------------------------------------------------------------
+def build_report(
+    table: ResultsTable,
+    out_dir: str | Path,
+    *,
+    metric: str = "exploration_trials",
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+) -> ReportPaths:
+    """Write results.csv, figure2.csv/json, random_comparison.csv, the plots and report.md.
+
+    Args:
+        table: the results to report on.
+        out_dir: directory for every file (created; existing report files are overwritten).
+        metric: which of :data:`~llcps.experiments.results.METRICS` counts as exploration.
+        resamples: bootstrap resamples per interval.
+        seed: seed of the bootstrap streams; same table and seed give identical files.
+    """
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise LlcpsError(f"cannot create report directory {out}: {exc.strerror}") from None
+    analysis = analyse(table, metric=metric, resamples=resamples, seed=seed)
+    results_csv = table.write_csv(out / "results.csv")
+    figure2_csv = _write_rows_csv(out / "figure2.csv", analysis.figure2, (f.name for f in fields(Figure2Row)))
+    figure2_json = out / "figure2.json"
+    figure2_json.write_text(json.dumps(analysis_json(analysis), indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    random_csv = None
+    if analysis.random:
+        random_csv = _write_rows_csv(
+            out / "random_comparison.csv", analysis.random, (f.name for f in fields(RandomComparison))
+        )
+    plot_dir = out / "plots"
+    plot_paths = {
+        "figure2": plots.figure2_heatmap(analysis.figure2, plot_dir / "figure2"),
+        "distribution": plots.exploration_distribution(table, plot_dir / "distribution", metric=metric),
+        "cumulative": plots.cumulative_plot(analysis.cumulative, plot_dir / "cumulative", metric=metric),
+    }
+    report_md = out / "report.md"
+    report_md.write_text(render_markdown(analysis, plot_paths, out), encoding="utf-8")
+    return ReportPaths(out, results_csv, figure2_csv, figure2_json, random_csv, report_md, plot_paths)

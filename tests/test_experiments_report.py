@@ -1,0 +1,290 @@
+"""The experiment data flow: grid and branch names, the results table, and the written report."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from llcps.errors import LlcpsError
+from llcps.experiments import grid
+from llcps.experiments.grid import PRESETS, SCENARIO_SEQUENCE, Cell, Preset, Sequence, parse_branch
+from llcps.experiments.report import build_report, report_json
+from llcps.experiments.results import COLUMNS, ResultRow, ResultsTable, table_from_episodes
+
+# -- grid ----------------------------------------------------------------------------------
+
+EXPECTED_SIZES = {"paper": (2 * 4 * 2 * 2, 20), "full": (5 * 5 * 2 * 2, 20), "smoke": (2, 2)}
+
+
+def test_every_preset_has_a_documented_size() -> None:
+    assert set(PRESETS) == set(EXPECTED_SIZES)
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_preset_size_and_default_seeds(name: str) -> None:
+    preset = PRESETS[name]
+    cells, seeds = EXPECTED_SIZES[name]
+    assert len(preset.cells()) == len(set(preset.cells())) == cells
+    assert len(preset.sequences()) == cells * seeds
+    assert len(preset.sequences(3)) == cells * 3
+    assert {s.seed for s in preset.sequences([5, 9])} == {5, 9}
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_branch_names_are_valid_unique_and_parse_back(name: str) -> None:
+    sequences = PRESETS[name].sequences(3)
+    names = [s.branch_name for s in sequences]
+    assert len(set(names)) == len(names)
+    episode_branches: set[str] = set()
+    for seq in sequences:
+        assert grid.is_valid_branch_name(seq.branch_name) and "/" not in seq.branch_name
+        assert parse_branch(seq.branch_name) == grid.ParsedBranch(seq, None)
+        for scenario in SCENARIO_SEQUENCE:
+            branch = seq.episode_branch(scenario)
+            assert grid.is_valid_branch_name(branch)
+            parsed = parse_branch(branch)
+            assert parsed is not None and parsed.sequence == seq
+            assert parsed.scenario == (scenario if seq.cell.condition == "reset" else None)
+            episode_branches.add(branch)
+        assert parse_branch(seq.pretrain_branch) is None
+    # Update sequences share one branch across scenarios, reset sequences get one per scenario.
+    n_update = sum(s.cell.condition == "update" for s in sequences)
+    assert len(episode_branches) == n_update + 3 * (len(sequences) - n_update)
+
+
+def test_pretraining_branch_is_shared_by_models_and_conditions() -> None:
+    a = Sequence("paper", Cell("nn", "most-changes", 4, "update"), 3)
+    b = Sequence("paper", Cell("nb", "least-destructive", 4, "reset"), 3)
+    assert a.pretrain_branch == b.pretrain_branch
+    assert a.pretrain_branch != Sequence("paper", Cell("nn", "most-changes", 200, "update"), 3).pretrain_branch
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["main", "exp-paper", "exp-paper-nb-most-changes-p200-maybe-s3", "exp-paper-nb-most-changes-p200-update-s03",
+     "exp-paper-nb-most-changes-p200-update-s3-scenario2", "exp-paper-nb-most-changes-p200-reset-s3-scenario9",
+     "exp-paper-pretrain-p200-s3", "exp-paper-nb--p200-update-s3"],
+)  # fmt: skip
+def test_other_branch_names_do_not_parse(name: str) -> None:
+    assert parse_branch(name) is None
+
+
+def test_measures_with_separators_parse_back() -> None:
+    seq = Sequence("full", Cell("logreg", "least-negative-changes", 200, "reset"), 12)
+    assert parse_branch(seq.episode_branch("scenario3")) == grid.ParsedBranch(seq, "scenario3")
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: Cell("n-n", "most-changes", 4, "update"),
+        lambda: Cell("nb", "Most Changes", 4, "update"),
+        lambda: Cell("nb", "most-changes", -1, "update"),
+        lambda: Cell("nb", "most-changes", 4, "sometimes"),
+        lambda: Sequence("pa-per", Cell("nb", "most-changes", 4, "update"), 0),
+        lambda: Sequence("paper", Cell("nb", "most-changes", 4, "update"), -2),
+        lambda: Sequence("paper", Cell("nb", "m" * 80, 4, "reset"), 0),
+        lambda: PRESETS["paper"].sequences(0),
+        lambda: grid.get_preset("huge"),
+    ],
+)
+def test_bad_grid_input_is_a_project_error(make) -> None:  # noqa: ANN001
+    with pytest.raises(LlcpsError):
+        make()
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_preset_names_exist_in_the_registries(name: str) -> None:
+    try:
+        from llcps.models import WORLD_MODELS  # noqa: F401
+        from llcps.models.measures import MEASURES  # noqa: F401
+    except ImportError as exc:  # the registries arrive with the world models
+        pytest.skip(f"model registries not importable yet: {exc}")
+    grid.validate_preset(PRESETS[name])
+
+
+# -- results table -------------------------------------------------------------------------
+
+TEST_PRESET = Preset(
+    "test",
+    models=("nn", "nb", "random"),
+    measures=("least-destructive", "most-changes"),
+    pretrain_sizes=(200, 4),
+    default_seeds=4,
+)
+
+
+def synthetic_table(seeds: int = 4, rng_seed: int = 0) -> ResultsTable:
+    """Exploration that updates cut by about a third in scenarios 2 and 3; scenario 1 equal."""
+    rng = np.random.default_rng(rng_seed)
+    rows = []
+    for seq in TEST_PRESET.sequences(seeds):
+        for i, scenario in enumerate(SCENARIO_SEQUENCE):
+            if i == 0:  # the control: identical under both conditions
+                trials = 10 + seq.seed
+            else:
+                base = 30.0 if seq.cell.model == "random" else 20.0 + 5 * i
+                trials = int(rng.poisson(base * (0.65 if seq.cell.condition == "update" else 1.0)))
+            rows.append(
+                ResultRow(
+                    preset=seq.preset,
+                    model=seq.cell.model,
+                    measure=seq.cell.measure,
+                    pretrain_size=seq.cell.pretrain_size,
+                    condition=seq.cell.condition,
+                    seed=seq.seed,
+                    scenario=scenario,
+                    solved=trials < 40,
+                    exploration_trials=trials,
+                    sim_seconds=0.05 * trials,
+                    wall_seconds=0.1 * trials + 0.5,
+                    episode_id=len(rows) + 1,
+                    branch=seq.episode_branch(scenario),
+                )
+            )
+    return ResultsTable(rows)
+
+
+def test_csv_and_json_round_trip(tmp_path) -> None:  # noqa: ANN001
+    table = synthetic_table(seeds=2)
+    assert ResultsTable.read(table.write_csv(tmp_path / "r.csv")) == table
+    assert ResultsTable.read(table.write_json(tmp_path / "r.json")) == table
+    assert ResultsTable.read(tmp_path / "r.csv").rows[0].episode_id == table.rows[0].episode_id
+    header = (tmp_path / "r.csv").read_text().splitlines()[0]
+    assert header.split(",") == list(COLUMNS)
+
+
+def test_bad_results_file_is_a_project_error(tmp_path) -> None:  # noqa: ANN001
+    path = synthetic_table(seeds=1).write_csv(tmp_path / "r.csv")
+    text = path.read_text().splitlines()
+    text[1] = text[1].replace(",True,", ",perhaps,").replace(",False,", ",perhaps,")
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(LlcpsError, match="solved"):
+        ResultsTable.read_csv(path)
+    with pytest.raises(LlcpsError):
+        ResultsTable.read_csv(tmp_path / "missing.csv")
+
+
+def _summary(seq: Sequence, scenario: str, trials: int, episode_id: int, **extra: object) -> dict[str, object]:
+    """The shape of ``SolveResult.as_json()`` as the store keeps it."""
+    return {
+        "scenario": scenario,
+        "condition": "novelty",
+        "model": seq.cell.model,
+        "measure": seq.cell.measure,
+        "seed": seq.seed,
+        "branch": seq.episode_branch(scenario),
+        "solved": True,
+        "status": "solved",
+        "exploration_trials": trials,
+        "sim_seconds": 1.5,
+        "wall_seconds": 2.25,
+        "episode_id": episode_id,
+        **extra,
+    }
+
+
+class _Episode:
+    """A stored episode as the store returns it: an object with a ``summary``."""
+
+    def __init__(self, summary: dict[str, object]) -> None:
+        self.summary = summary
+
+
+def test_table_from_episodes_parses_branches_and_keeps_the_latest() -> None:
+    update, reset = PRESETS["smoke"].sequences(1)
+    episodes = [_Episode(_summary(update, s, 10 + i, i + 1)) for i, s in enumerate(SCENARIO_SEQUENCE)]
+    episodes += [_summary(reset, s, 20 + i, 10 + i) for i, s in enumerate(SCENARIO_SEQUENCE)]
+    episodes += [
+        _summary(reset, "scenario2", 99, 5),  # an older attempt at the same scenario
+        _summary(update, "scenario3", 7, 50, status="running"),  # cut off mid-episode
+        {**_summary(update, "scenario1", 1, 60), "branch": "main"},  # someone's own branch
+        _summary(update, "scenario1", 1, 61, condition="original"),
+    ]
+    imported = table_from_episodes(episodes)
+    table = imported.table
+    assert len(table) == 6
+    assert table.complete_sequences() == {update, reset}
+    row = next(r for r in table if r.condition == "reset" and r.scenario == "scenario2")
+    assert (row.exploration_trials, row.episode_id, row.preset, row.pretrain_size) == (21, 11, "smoke", 4)
+    assert imported.skipped == {
+        "superseded by a later episode": 1,
+        "unfinished episode": 1,
+        "not an experiment branch": 1,
+        "not the novelty condition": 1,
+    }
+
+
+def test_missing_lists_incomplete_sequences_in_order() -> None:
+    table = synthetic_table(seeds=2)
+    partial = ResultsTable(r for r in table if not (r.seed == 1 and r.scenario == "scenario3"))
+    wanted = TEST_PRESET.sequences(3)
+    missing = partial.missing(wanted)
+    assert missing == tuple(s for s in wanted if s.seed in (1, 2))
+
+
+# -- report --------------------------------------------------------------------------------
+
+
+def _strict_json(text: str) -> object:
+    def refuse(name: str) -> None:
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_build_report_writes_every_file(tmp_path) -> None:  # noqa: ANN001
+    table = synthetic_table()
+    paths = build_report(table, tmp_path / "report", resamples=1000, seed=0)
+    for path in paths.all():
+        assert path.is_file() and path.stat().st_size > 0, path
+    assert set(paths.plots) == {"figure2", "distribution", "cumulative"}
+    assert {p.suffix for ps in paths.plots.values() for p in ps} == {".png", ".svg"}
+    assert paths.random_csv is not None
+    assert ResultsTable.read(paths.results_csv) == table
+
+    data = _strict_json(paths.figure2_json.read_text())
+    assert data == report_json(table, resamples=1000, seed=0)
+    figure2 = data["figure2"]
+    # 2 non-random models... and random too: 3 models x 2 measures x 2 sizes x 3 scenarios.
+    assert len(figure2) == 3 * 2 * 2 * 3
+    nb = next(r for r in figure2 if (r["model"], r["measure"], r["pretrain_size"], r["scenario"]) == ("nb", "most-changes", 4, "scenario2"))
+    assert nb["paper_pct_change"] == 640.0 and nb["n_seeds"] == 4
+    assert nb["ci_low"] <= nb["pct_change"] <= nb["ci_high"]
+    control = [r for r in figure2 if r["scenario"] == "scenario1"]
+    assert all(r["pct_change"] == 0 and r["p_value"] is None and "zero" in r["p_reason"] for r in control)
+
+    md = paths.report_md.read_text()
+    row = next(r for r in figure2 if (r["model"], r["measure"], r["pretrain_size"], r["scenario"]) == ("nn", "least-destructive", 200, "scenario2"))
+    from llcps.experiments.plots import format_pct
+
+    assert f"| nn | least-destructive | {format_pct(row['pct_change'])}" in md
+    assert "| +182% |" in md  # the paper's NN / least destructive / scenario 2 with 200 points
+    assert "| 4 | all | 16 |" not in md and "| 4 | all | 12 |" in md  # 3 models x 2 measures x 2 scenarios
+    assert "![Figure 2 heatmap](plots/figure2.png)" in md
+    assert "## Model-guided vs random order" in md
+    assert "are identical seed by seed" in md
+
+
+def test_report_is_reproducible(tmp_path) -> None:  # noqa: ANN001
+    table = synthetic_table(seeds=3)
+    first = build_report(table, tmp_path / "a", resamples=500, seed=4)
+    second = build_report(table, tmp_path / "b", resamples=500, seed=4)
+    for a, b in zip(first.all(), second.all()):
+        if a.suffix != ".png":
+            assert a.read_bytes() == b.read_bytes(), a.name
+
+
+def test_report_of_nothing_is_a_project_error(tmp_path) -> None:  # noqa: ANN001
+    with pytest.raises(LlcpsError, match="empty"):
+        build_report(ResultsTable(), tmp_path)
+
+
+def test_report_json_of_a_table_without_pairs_has_no_figure2_rows() -> None:
+    table = synthetic_table(seeds=2).filter(condition="update")
+    data = report_json(table, resamples=200)
+    assert data["figure2"] == [] and data["reduction"]["ours"] == []
+    assert all(not isinstance(v, float) or math.isfinite(v) for v in data["overview"].values())
