@@ -187,16 +187,9 @@ def _summary(seq: Sequence, scenario: str, trials: int, episode_id: int, **extra
     }
 
 
-class _Episode:
-    """A stored episode as the store returns it: an object with a ``summary``."""
-
-    def __init__(self, summary: dict[str, object]) -> None:
-        self.summary = summary
-
-
 def test_table_from_episodes_parses_branches_and_keeps_the_latest() -> None:
     update, reset = PRESETS["smoke"].sequences(1)
-    episodes = [_Episode(_summary(update, s, 10 + i, i + 1)) for i, s in enumerate(SCENARIO_SEQUENCE)]
+    episodes = [_summary(update, s, 10 + i, i + 1) for i, s in enumerate(SCENARIO_SEQUENCE)]
     episodes += [_summary(reset, s, 20 + i, 10 + i) for i, s in enumerate(SCENARIO_SEQUENCE)]
     episodes += [
         _summary(reset, "scenario2", 99, 5),  # an older attempt at the same scenario
@@ -216,6 +209,37 @@ def test_table_from_episodes_parses_branches_and_keeps_the_latest() -> None:
         "not an experiment branch": 1,
         "not the novelty condition": 1,
     }
+
+
+def test_table_from_a_real_store(tmp_path) -> None:  # noqa: ANN001
+    from llcps.store import Store
+
+    store = Store.open(str(tmp_path / "exp.db"), create=True)
+    store.init()
+    try:
+        update, reset = PRESETS["smoke"].sequences(1)
+        expected = {}
+        for seq in (update, reset):
+            for i, scenario in enumerate(SCENARIO_SEQUENCE):
+                branch = seq.episode_branch(scenario)
+                if branch not in {b.name for b in store.list_branches()}:
+                    store.create_branch(branch, from_branch="main", at="pretrain")
+                cell = seq.cell
+                episode = store.start_episode(
+                    run_id=None, branch=branch, scenario=scenario, condition="novelty",
+                    model=cell.model, measure=cell.measure, seed=seq.seed,
+                )  # fmt: skip
+                if seq is update and scenario == "scenario3":
+                    continue  # killed mid-episode: stays "running" with an empty summary
+                trials = 3 * i + (cell.condition == "reset")
+                store.finish_episode(episode, status="solved", summary=_summary(seq, scenario, trials, episode))
+                expected[(cell.condition, scenario)] = (trials, episode)
+        imported = table_from_episodes(store.list_episodes())
+    finally:
+        store.close()
+    assert imported.skipped == {"unfinished episode": 1}
+    assert {(r.condition, r.scenario): (r.exploration_trials, r.episode_id) for r in imported.table} == expected
+    assert imported.table.missing(PRESETS["smoke"].sequences(1)) == (update,)
 
 
 def test_missing_lists_incomplete_sequences_in_order() -> None:

@@ -233,6 +233,22 @@ class ResultsTable:
         return cls.read_csv(path)
 
 
+def _episode_summary(episode: Any) -> Mapping[str, Any] | None:
+    if isinstance(episode, Mapping):
+        return episode
+    summary = getattr(episode, "summary", None)
+    if not isinstance(summary, Mapping):
+        return None
+    merged = dict(summary)
+    # The record's columns are authoritative; the summary may predate the episode's end.
+    columns = ("branch", "status", "scenario", "condition", "model", "measure")
+    for key, attribute in (*((c, c) for c in columns), ("episode_id", "id")):
+        value = getattr(episode, attribute, None)
+        if value is not None:
+            merged[key] = value
+    return merged
+
+
 @dataclass(frozen=True)
 class EpisodeImport:
     """A table built from stored episodes, and what was left out and why."""
@@ -244,10 +260,11 @@ class EpisodeImport:
 def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
     """Build the results table from the experience store's episodes.
 
-    Each episode is a mapping or an object with a ``summary`` mapping holding
-    ``SolveResult.as_json()`` (scenario, condition, model, measure, seed, branch,
-    solved, status, exploration_trials, sim_seconds, wall_seconds, episode_id). The
-    cell and seed come from the branch name; the summary must agree with it.
+    Each episode is a mapping holding ``SolveResult.as_json()`` (scenario, condition,
+    model, measure, seed, branch, solved, status, exploration_trials, sim_seconds,
+    wall_seconds, episode_id), or a store ``EpisodeRecord`` whose ``summary`` holds it;
+    the record's own ``branch``, ``status`` and ``id`` take precedence. The cell and
+    seed come from the branch name; the summary must agree with it.
 
     Episodes on other branches, in the original condition, or still ``running``
     (a run cut off mid-episode) are skipped and counted. When one (sequence,
@@ -260,8 +277,8 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
         skipped[reason] = skipped.get(reason, 0) + 1
 
     for order, episode in enumerate(episodes):
-        summary = episode if isinstance(episode, Mapping) else getattr(episode, "summary", None)
-        if not isinstance(summary, Mapping):
+        summary = _episode_summary(episode)
+        if summary is None:
             skip("no summary")
             continue
         parsed = parse_branch(str(summary.get("branch", "")))
