@@ -1,0 +1,216 @@
+"""``llcps db``: create, inspect, migrate, branch and export the experience store."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from llcps.cli._common import (
+    JsonFlag,
+    YesFlag,
+    choice_enum,
+    message,
+    new_app,
+    open_store,
+    print_json,
+    print_table,
+    selected_branch,
+)
+from llcps.errors import LlcpsError
+from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
+from llcps.store.export import EXPORT_FORMATS, export_trials
+
+app = new_app("Create, inspect, migrate, branch and export the experience store.")
+
+ResetTarget = choice_enum("ResetTarget", RESET_TARGETS)
+ExportFormat = choice_enum("ExportFormat", EXPORT_FORMATS)
+
+BranchName = Annotated[str, typer.Argument(metavar="NAME", help="Branch name (no whitespace, '/', '..'; at most 100 characters).", show_default=False)]
+
+
+def _print_status(store: Store, branch: str | None, as_json: bool) -> None:
+    status = store.status(branch)
+    if as_json:
+        print_json(status.as_json())
+        return
+    by_source = ", ".join(f"{k} {v}" for k, v in sorted(status.visible_by_source.items())) or "none"
+    schema = status.revision if status.up_to_date else f"{status.revision} (outdated; head {status.head}: run `llcps db upgrade`)"
+    print_table(
+        None,
+        ("", ""),
+        [
+            ("database", status.url),
+            ("schema revision", schema),
+            ("current branch", status.current_branch),
+            ("branch shown", status.branch),
+            ("branches", status.branches),
+            ("trials in database", status.trials_total),
+            ("visible trials", f"{status.visible_trials} ({by_source})"),
+        ],
+        show_header=False,
+    )
+
+
+def _print_branch(info: BranchInfo, as_json: bool, text: str) -> None:
+    if as_json:
+        print_json(info.as_json())
+    message(text)
+
+
+def _confirm(change: BranchChange, as_json: bool, yes: bool) -> None:
+    """Show a dry run; without --yes stop with an error so scripts notice."""
+    if yes:
+        return
+    if as_json:
+        print_json(change.as_json())
+    raise LlcpsError(f"{change.summary}; nothing changed", hint="rerun with --yes to do it")
+
+
+@app.command("init")
+def init_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
+    """Create the store with a `main` branch, or migrate an existing one to the newest schema."""
+    with open_store(ctx, create=True, allow_outdated=True) as store:
+        before = store.revision
+        after = store.init()
+        if before not in (None, after):
+            message(f"upgraded {store.url} from schema {before} to {after}")
+        message(f"llcps store ready at {store.url} (schema {after}, current branch {store.current_branch()})")
+        if as_json:
+            _print_status(store, selected_branch(ctx), True)
+
+
+@app.command("status")
+def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
+    """Show the database URL, schema revision, current branch and trial counts."""
+    with open_store(ctx, allow_outdated=True) as store:
+        _print_status(store, selected_branch(ctx), as_json)
+
+
+@app.command("list")
+def list_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
+    """List branches with parent, fork point, own and visible trial counts."""
+    with open_store(ctx) as store:
+        branches = store.list_branches()
+    if as_json:
+        print_json([b.as_json() for b in branches])
+        return
+    print_table(
+        None,
+        ("", "branch", "parent", "fork point", "own trials", "visible trials", "created (UTC)"),
+        [
+            ("*" if b.is_current else "", b.name, b.parent or "-", b.fork_point, b.own_trials, b.visible_trials, b.created_at[:19])
+            for b in branches
+        ],
+    )
+
+
+@app.command("branch")
+def branch_cli(
+    ctx: typer.Context,
+    name: BranchName,
+    from_branch: Annotated[
+        Optional[str], typer.Option("--from", metavar="NAME", help="Parent branch (default: --branch, else the current branch).", show_default=False)
+    ] = None,
+    at: Annotated[
+        Optional[str],
+        typer.Option(
+            "--at",
+            metavar="TRIAL_ID|pretrain",
+            help="Fork point: a trial id the parent sees, or 'pretrain' for its last pretraining trial "
+            "(default: the parent's latest trial).",
+            show_default=False,
+        ),
+    ] = None,
+    as_json: JsonFlag = False,
+) -> None:
+    """Create a branch that sees its parent's trials up to the fork point (it is not checked out)."""
+    fork: int | str | None = at
+    if at is not None and at != PRETRAIN:
+        if not at.strip().isdigit():
+            raise LlcpsError(f"invalid --at {at!r}", hint="pass a trial id or 'pretrain'")
+        fork = int(at)
+    with open_store(ctx) as store:
+        info = store.create_branch(name, from_branch=from_branch or selected_branch(ctx), at=fork)
+    _print_branch(
+        info,
+        as_json,
+        f"created branch {info.name} from {info.parent} at trial {info.fork_point} "
+        f"({info.visible_trials} visible trials); switch with `llcps db checkout {info.name}`",
+    )
+
+
+@app.command("checkout")
+def checkout_cli(ctx: typer.Context, name: BranchName, as_json: JsonFlag = False) -> None:
+    """Make a branch the current one (the default of --branch)."""
+    with open_store(ctx) as store:
+        info = store.checkout(name)
+    _print_branch(info, as_json, f"switched to branch {info.name} ({info.visible_trials} visible trials)")
+
+
+@app.command("reset")
+def reset_cli(
+    ctx: typer.Context,
+    to: Annotated[
+        ResetTarget,  # type: ignore[valid-type]
+        typer.Option("--to", help="'pretrain' keeps the branch's trials up to its last pretraining trial; 'empty' removes all it owns."),
+    ] = ResetTarget(PRETRAIN),  # type: ignore[assignment]
+    yes: YesFlag = False,
+    as_json: JsonFlag = False,
+) -> None:
+    """Drop the own experience of --branch (default: the current branch) after a point."""
+    with open_store(ctx) as store:
+        name = store.resolve_branch(selected_branch(ctx)).name
+        target = str(to.value)  # type: ignore[attr-defined]
+        _confirm(store.reset_branch(name, to=target, dry_run=True), as_json, yes)
+        change = store.reset_branch(name, to=target, dry_run=False)
+    if as_json:
+        print_json(change.as_json())
+    message(change.summary)
+
+
+@app.command("delete")
+def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_json: JsonFlag = False) -> None:
+    """Delete a branch and everything it owns (not main, the current branch, or a parent)."""
+    with open_store(ctx) as store:
+        _confirm(store.delete_branch(name, dry_run=True), as_json, yes)
+        change = store.delete_branch(name, dry_run=False)
+    if as_json:
+        print_json(change.as_json())
+    message(change.summary)
+
+
+@app.command("upgrade")
+def upgrade_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
+    """Migrate the store to the newest schema revision this llcps knows."""
+    with open_store(ctx, allow_outdated=True) as store:
+        before, after = store.upgrade()
+    if as_json:
+        print_json({"from": before, "to": after, "changed": before != after})
+    message(f"upgraded from schema {before} to {after}" if before != after else f"already at schema {after}")
+
+
+@app.command("export")
+def export_cli(
+    ctx: typer.Context,
+    fmt: Annotated[
+        ExportFormat,  # type: ignore[valid-type]
+        typer.Option("--format", help="csv: one flat row per trial; jsonl: one JSON trial per line."),
+    ] = ExportFormat("csv"),  # type: ignore[assignment]
+    out: Annotated[
+        Optional[Path], typer.Option("--out", metavar="FILE", help="File to write (default: stdout).", show_default=False, dir_okay=False)
+    ] = None,
+) -> None:
+    """Export the trials --branch (default: the current branch) sees, in id order."""
+    with open_store(ctx) as store:
+        branch = store.resolve_branch(selected_branch(ctx)).name
+        if out is None:
+            count = export_trials(store, branch, str(fmt.value), sys.stdout)  # type: ignore[attr-defined]
+        else:
+            if not out.parent.is_dir():
+                raise LlcpsError(f"directory {out.parent} does not exist", hint="create it first or choose another --out")
+            with out.open("w", newline="", encoding="utf-8") as fh:
+                count = export_trials(store, branch, str(fmt.value), fh)  # type: ignore[attr-defined]
+    message(f"exported {count} trial(s) of branch {branch}" + (f" to {out}" if out else ""))

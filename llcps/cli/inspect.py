@@ -1,0 +1,73 @@
+"""``llcps inspect``: look at what the store holds (more subcommands attach to ``app``)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Optional
+
+import typer
+
+from llcps.cli._common import JsonFlag, choice_enum, new_app, open_store, print_json, print_table, selected_branch
+from llcps.domain import OUTCOME_NAMES, TRIAL_SOURCES, TrialRecord
+
+app = new_app("Inspect the experience store: trials and what was learned from them.")
+
+TrialSource = choice_enum("TrialSource", TRIAL_SOURCES)
+
+_OUTCOME_SHORT = {name: ("+" if name.startswith("positive") else "-") + name.split("_", 1)[1][:5] for name in OUTCOME_NAMES}
+
+
+def outcome_text(record: TrialRecord) -> str:
+    """Omega in a few characters, e.g. ``+touch -reach``."""
+    return " ".join(_OUTCOME_SHORT[name] for name, bit in record.outcome.as_dict().items() if bit) or "-"
+
+
+@app.command("trials")
+def trials_cli(
+    ctx: typer.Context,
+    scenario: Annotated[Optional[str], typer.Option("--scenario", metavar="NAME", help="Only trials of this scenario.", show_default=False)] = None,
+    source: Annotated[
+        Optional[TrialSource],  # type: ignore[valid-type]
+        typer.Option("--source", help="Only trials from this source.", show_default=False),
+    ] = None,
+    solved: Annotated[
+        Optional[bool],
+        typer.Option("--solved/--unsolved", help="Only trials that solved (or did not solve) their task.", show_default=False),
+    ] = None,
+    limit: Annotated[int, typer.Option("--limit", min=0, metavar="N", help="Show the newest N matching trials; 0 shows all.")] = 20,
+    as_json: JsonFlag = False,
+) -> None:
+    """List the trials --branch (default: the current branch) sees, oldest of the selection first."""
+    with open_store(ctx) as store:
+        branch = store.resolve_branch(selected_branch(ctx)).name
+        records = store.visible_trials(
+            branch,
+            source=None if source is None else str(source.value),  # type: ignore[attr-defined]
+            scenario=scenario,
+            solved=solved,
+            limit=limit or None,
+            newest_first=True,
+        )
+    records.reverse()
+    if as_json:
+        print_json([r.as_json() for r in records])
+        return
+    print_table(
+        f"trials visible on {branch} ({len(records)} shown)",
+        ("id", "branch", "source", "scenario", "action", "rate m/s, magnitude m, side", "outcome", "solved", "steps", "seconds", "seed"),
+        [
+            (
+                r.id,
+                r.branch,
+                r.source,
+                r.scenario or "-",
+                f"{r.spec.action}({', '.join(r.spec.arguments)})",
+                f"{r.spec.params.rate:g}, {r.spec.params.movement_magnitude:g}, {r.spec.params.orientation}",
+                outcome_text(r),
+                "yes" if r.solved else "no",
+                r.sim_steps,
+                f"{r.wall_seconds:.3f}",
+                r.seed,
+            )
+            for r in records
+        ],
+    )

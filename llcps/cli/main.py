@@ -1,0 +1,58 @@
+"""The ``llcps`` command: global options and the registry of command modules.
+
+Each command module is option parsing and presentation over a library function
+(see llcps/cli/_common.py for the shared helpers). To add commands, write a
+module and register it below with ONE line:
+
+* a command group (``llcps db ...``): ``app.add_typer(module.app, name="db")``
+* a single command (``llcps solve``): ``app.command("solve")(module.solve_cli)``
+* more subcommands of an existing group (``llcps inspect model``): decorate with
+  ``@inspect.app.command("model")`` in your module and import it here.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Optional
+
+import typer
+
+from llcps.cli import db, inspect
+from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
+
+app = new_app(
+    "Life-long creative problem solving: a robot that explores novelties and learns world models "
+    "from every trial, kept in a branchable experience store.",
+    cls=LlcpsGroup,
+)
+
+
+@app.callback()
+def _global_options(
+    ctx: typer.Context,
+    db_location: Annotated[
+        str,
+        typer.Option("--db", envvar="LLCPS_DB", metavar="PATH|URL", help="Experience store: a SQLite file path or an SQLAlchemy URL."),
+    ] = DEFAULT_DB,
+    branch: Annotated[
+        Optional[str],
+        typer.Option(
+            "--branch", envvar="LLCPS_BRANCH", metavar="NAME", help="Branch to read and write (default: the store's current branch).", show_default=False
+        ),
+    ] = None,
+) -> None:
+    """Life-long creative problem solving with world models trained on an experience store."""
+    ctx.obj = CliContext(db=db_location, branch=branch)
+
+
+# Command registry: one line per module.
+app.add_typer(db.app, name="db")
+app.add_typer(inspect.app, name="inspect")
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app(prog_name="llcps")
+
+
+if __name__ == "__main__":
+    main()
