@@ -26,6 +26,10 @@ class LlcpsError(Exception):
         return self.message if not self.hint else f"{self.message} ({self.hint})"
 
 
+def _plural(noun: str) -> str:
+    return noun + ("es" if noun.endswith(("s", "sh", "ch", "x")) else "s")
+
+
 class StoreError(LlcpsError):
     """The experience store cannot be opened, read or written as asked."""
 
@@ -36,5 +40,5 @@ class UnknownNameError(LlcpsError):
     def __init__(self, kind: str, name: str, known: list[str] | tuple[str, ...]) -> None:
         super().__init__(
             f"unknown {kind} {name!r}",
-            hint=f"known {kind}s: {', '.join(known) if known else '(none)'}",
+            hint=f"known {_plural(kind)}: {', '.join(known) if known else '(none)'}",
         )
