@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from llcps.models.base import WorldModel
 from llcps.models.measures import MEASURES, PAPER_MEASURES, rank
+from llcps.models.persistence import fit_or_load
 from llcps.models.registry import PAPER_MODELS, WORLD_MODELS, load_world_model, make_world_model
 
 __all__ = [
@@ -16,6 +17,7 @@ __all__ = [
     "PAPER_MODELS",
     "WORLD_MODELS",
     "WorldModel",
+    "fit_or_load",
     "load_world_model",
     "make_world_model",
     "rank",

@@ -1,0 +1,59 @@
+"""World models stored on their branch: fit once per training set, reuse until newer trials arrive.
+
+A stored model carries its *watermark*, the largest trial id its branch could see
+when it was fitted. A branch's visible trials only grow (new trials get larger ids),
+so a stored model whose watermark equals the branch's current one was fitted on
+exactly today's training set and is loaded instead of refitted. Artifacts load
+without executing anything (see :mod:`llcps.models.base`); one that fails to load
+is refitted and replaced, with a warning.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING, Sequence
+
+from llcps.domain import TrialRecord
+from llcps.errors import LlcpsError
+from llcps.models.base import WorldModel
+from llcps.models.registry import world_model_entry
+
+if TYPE_CHECKING:
+    from llcps.store import Store
+
+logger = logging.getLogger(__name__)
+
+
+def fit_or_load(
+    store: Store, branch: str, name: str, seed: int, *, records: Sequence[TrialRecord] | None = None
+) -> WorldModel:
+    """The world model ``name`` fitted on every trial ``branch`` sees.
+
+    Args:
+        store: the experience store.
+        branch: the branch whose trials train the model and which owns the artifact.
+        name: a WORLD_MODELS name.
+        seed: the model's seed (part of the stored model's identity).
+        records: the branch's visible trials, if the caller already loaded them
+            (reloaded from the store when they do not reach its watermark).
+
+    Returns:
+        The stored model when it is current, else a fresh fit (which is stored).
+
+    Raises:
+        UnknownNameError: ``name`` is not a registered world model.
+    """
+    entry = world_model_entry(name)
+    watermark = store.max_visible_trial_id(branch)
+    stored = store.latest_world_model(branch, name, seed)
+    if stored is not None and stored.watermark == watermark:
+        try:
+            return entry.load(stored.artifact, stored.meta, seed)
+        except LlcpsError as exc:
+            logger.warning("stored world model %s (id %s) is unusable, refitting: %s", name, stored.id, exc)
+    if records is None or max((r.id for r in records), default=0) != watermark:
+        records = store.visible_trials(branch)
+    model = entry(seed).fit(records)
+    artifact, meta = model.to_artifact()
+    store.save_world_model(branch=branch, name=name, seed=seed, watermark=watermark, artifact=artifact, meta=meta)
+    return model

@@ -1,0 +1,98 @@
+"""World models on their branch of a real SQLite store: fitted once per training set,
+reused while current, refitted when trials arrive, and never trusted blindly."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from llcps.models import fit_or_load
+from llcps.models.synthetic import synthetic_trials
+from llcps.store import NewTrial
+
+
+def add_toy_trials(store, n, *, seed, branch="main"):
+    store.add_trials(
+        [
+            NewTrial(
+                branch=branch,
+                source="pretrain",
+                spec=r.spec,
+                features=r.features,
+                outcome=r.outcome,
+                solved=False,
+                sim_steps=0,
+                wall_seconds=0.0,
+                seed=seed,
+            )
+            for r in synthetic_trials(n, seed=seed)
+        ]
+    )
+
+
+@pytest.fixture
+def candidates():
+    return [r.model_input for r in synthetic_trials(40, seed=99)]
+
+
+def stored_ids(store, branch, name, seed=0):
+    latest = store.latest_world_model(branch, name, seed)
+    return None if latest is None else (latest.id, latest.watermark)
+
+
+@pytest.mark.parametrize("name", ["nb", "nn"])
+def test_fit_once_then_load_until_new_trials(store, candidates, name):
+    add_toy_trials(store, 120, seed=1)
+    first = fit_or_load(store, "main", name, 0)
+    saved = stored_ids(store, "main", name)
+    assert saved == (saved[0], store.max_visible_trial_id("main"))
+    again = fit_or_load(store, "main", name, 0)
+    assert stored_ids(store, "main", name) == saved  # loaded, not refitted
+    assert np.array_equal(again.predict_proba(candidates), first.predict_proba(candidates))
+    add_toy_trials(store, 10, seed=2)
+    refit = fit_or_load(store, "main", name, 0)
+    assert stored_ids(store, "main", name)[1] == store.max_visible_trial_id("main") > saved[1]
+    assert refit.n_trials == 130
+
+
+def test_empty_branch_fits_the_prior(store, candidates):
+    model = fit_or_load(store, "main", "nb", 0)
+    assert np.array_equal(model.predict_proba(candidates), np.full((len(candidates), 6), 0.5))
+    assert stored_ids(store, "main", "nb")[1] == 0
+
+
+def test_stale_caller_records_are_replaced_by_the_store(store):
+    add_toy_trials(store, 30, seed=1)
+    stale = store.visible_trials("main")[:10]
+    assert fit_or_load(store, "main", "nb", 0, records=stale).n_trials == 30
+
+
+def test_a_child_branch_reuses_its_parents_model_at_the_fork(store):
+    add_toy_trials(store, 50, seed=1)
+    fit_or_load(store, "main", "nb", 0)
+    parent = stored_ids(store, "main", "nb")
+    store.create_branch("child", from_branch="main")
+    fit_or_load(store, "child", "nb", 0)
+    assert stored_ids(store, "child", "nb") == parent
+    add_toy_trials(store, 5, seed=2, branch="child")
+    fit_or_load(store, "child", "nb", 0)
+    assert stored_ids(store, "child", "nb")[0] != parent[0]
+    assert stored_ids(store, "main", "nb") == parent  # the parent never sees the child's model
+
+
+def test_a_tampered_stored_model_is_refitted_not_executed(store, candidates, caplog):
+    add_toy_trials(store, 60, seed=1)
+    honest = fit_or_load(store, "main", "nb", 0)
+    artifact, meta = honest.to_artifact()
+    watermark = store.max_visible_trial_id("main")
+    store.save_world_model(
+        branch="main", name="nb", seed=0, watermark=watermark, artifact=b"\x80\x04cos\nsystem\n", meta=meta
+    )
+    with caplog.at_level(logging.WARNING, logger="llcps.models.persistence"):
+        model = fit_or_load(store, "main", "nb", 0)
+    assert "unusable" in caplog.text
+    assert np.array_equal(model.predict_proba(candidates), honest.predict_proba(candidates))
+    latest = store.latest_world_model("main", "nb", 0)
+    assert latest.artifact == artifact  # the refit replaced the tampered row as the latest
