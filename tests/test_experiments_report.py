@@ -275,14 +275,23 @@ def test_build_report_writes_every_file(tmp_path) -> None:  # noqa: ANN001
     figure2 = data["figure2"]
     # 2 non-random models... and random too: 3 models x 2 measures x 2 sizes x 3 scenarios.
     assert len(figure2) == 3 * 2 * 2 * 3
-    nb = next(r for r in figure2 if (r["model"], r["measure"], r["pretrain_size"], r["scenario"]) == ("nb", "most-changes", 4, "scenario2"))
+    nb = next(
+        r
+        for r in figure2
+        if (r["model"], r["measure"], r["pretrain_size"], r["scenario"]) == ("nb", "most-changes", 4, "scenario2")
+    )
     assert nb["paper_pct_change"] == 640.0 and nb["n_seeds"] == 4
     assert nb["ci_low"] <= nb["pct_change"] <= nb["ci_high"]
     control = [r for r in figure2 if r["scenario"] == "scenario1"]
     assert all(r["pct_change"] == 0 and r["p_value"] is None and "zero" in r["p_reason"] for r in control)
 
     md = paths.report_md.read_text()
-    row = next(r for r in figure2 if (r["model"], r["measure"], r["pretrain_size"], r["scenario"]) == ("nn", "least-destructive", 200, "scenario2"))
+    row = next(
+        r
+        for r in figure2
+        if (r["model"], r["measure"], r["pretrain_size"], r["scenario"])
+        == ("nn", "least-destructive", 200, "scenario2")
+    )
     from llcps.experiments.plots import format_pct
 
     assert f"| nn | least-destructive | {format_pct(row['pct_change'])}" in md

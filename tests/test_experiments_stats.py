@@ -61,12 +61,20 @@ def test_pct_change_and_zero_denominator() -> None:
     assert stats.pct_change(30, 20) == pytest.approx(50.0)
     assert stats.pct_change(0, 0) == 0.0
     assert stats.pct_change(5, 0) == math.inf
-    np.testing.assert_array_equal(stats.pct_change(np.array([0.0, 2.0, 1.0]), np.array([0.0, 0.0, 2.0])), [0, np.inf, -50])
+    np.testing.assert_array_equal(
+        stats.pct_change(np.array([0.0, 2.0, 1.0]), np.array([0.0, 0.0, 2.0])), [0, np.inf, -50]
+    )
 
 
 def test_figure2_row_matches_hand_computation() -> None:
     (row,) = stats.figure2_table(_fixed_table(), resamples=10_000, seed=3)
-    assert (row.model, row.measure, row.pretrain_size, row.scenario, row.n_seeds) == ("nb", "most-changes", 4, "scenario2", 3)
+    assert (row.model, row.measure, row.pretrain_size, row.scenario, row.n_seeds) == (
+        "nb",
+        "most-changes",
+        4,
+        "scenario2",
+        3,
+    )
     assert row.mean_update == pytest.approx(67 / 3)
     assert row.mean_reset == pytest.approx(27.0)
     assert row.pct_change == pytest.approx(100 * (67 / 3 - 27) / 27)  # -17.28 %
@@ -92,7 +100,9 @@ def test_bootstrap_is_reproducible_and_contains_the_estimate() -> None:
     assert first == again
     assert first != other
     assert first[0] <= stats.pct_change(u.mean(), r.mean()) <= first[1]
-    assert stats.bootstrap_pct_change_ci(u[:1], r[:1], rng=stats.cell_rng(0)) == pytest.approx((math.nan, math.nan), nan_ok=True)
+    assert stats.bootstrap_pct_change_ci(u[:1], r[:1], rng=stats.cell_rng(0)) == pytest.approx(
+        (math.nan, math.nan), nan_ok=True
+    )
 
 
 def test_wilcoxon_missing_cases_have_reasons() -> None:

@@ -157,7 +157,9 @@ def _cell_order(keys: Iterable[tuple[str, str, int]]) -> list[tuple[str, str, in
     return sorted(set(keys), key=lambda k: (model_rank(k[0]), measure_rank(k[1]), -k[2]))
 
 
-def exploration_distribution(table: ResultsTable, stem: str | Path, *, metric: str = "exploration_trials") -> tuple[Path, ...]:
+def exploration_distribution(
+    table: ResultsTable, stem: str | Path, *, metric: str = "exploration_trials"
+) -> tuple[Path, ...]:
     """Box plot plus every seed's value, per cell and condition, one panel per scenario."""
     cells = _cell_order((r.model, r.measure, r.pretrain_size) for r in table)
     scenarios = [s for s in SCENARIO_SEQUENCE if any(r.scenario == s for r in table)] or list(SCENARIO_SEQUENCE[:1])
@@ -190,8 +192,12 @@ def exploration_distribution(table: ResultsTable, stem: str | Path, *, metric: s
                 )
             for p, d in present:
                 ax.scatter(
-                    d, p + jitter.uniform(-0.08, 0.08, len(d)), s=6, color=CONDITION_COLORS.get(condition, "grey"),
-                    label=condition if p == present[0][0] else None, zorder=3,
+                    d,
+                    p + jitter.uniform(-0.08, 0.08, len(d)),
+                    s=6,
+                    color=CONDITION_COLORS.get(condition, "grey"),
+                    label=condition if p == present[0][0] else None,
+                    zorder=3,
                 )
         ax.set_title(scenario, fontsize=10)
         ax.set_xlabel(metric.replace("_", " "), fontsize=8)
@@ -205,7 +211,9 @@ def exploration_distribution(table: ResultsTable, stem: str | Path, *, metric: s
     return save(fig, stem)
 
 
-def cumulative_plot(points: Sequence[CumulativePoint], stem: str | Path, *, metric: str = "exploration_trials") -> tuple[Path, ...]:
+def cumulative_plot(
+    points: Sequence[CumulativePoint], stem: str | Path, *, metric: str = "exploration_trials"
+) -> tuple[Path, ...]:
     """Mean cumulative exploration along the scenario sequence, update vs reset, with 95% CI bands.
 
     One panel per model x measure (rows) and pretraining size (columns).

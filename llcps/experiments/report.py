@@ -154,7 +154,12 @@ def analysis_json(analysis: Analysis) -> dict[str, Any]:
     return _clean(
         {
             "metric": analysis.metric,
-            "bootstrap": {"resamples": analysis.resamples, "seed": analysis.seed, "level": 0.95, "method": "percentile"},
+            "bootstrap": {
+                "resamples": analysis.resamples,
+                "seed": analysis.seed,
+                "level": 0.95,
+                "method": "percentile",
+            },
             "alpha": ALPHA,
             "overview": dict(analysis.overview),
             "figure2": [asdict(r) for r in analysis.figure2],
@@ -241,7 +246,12 @@ def _figure2_side_by_side(rows: tuple[Figure2Row, ...]) -> list[str]:
                     cells += ["", "", "", format_pct(PAPER_FIGURE2.get((model, measure, size, s)))]
                     continue
                 paper = "" if r.paper_pct_change is None else format_pct(r.paper_pct_change)
-                cells += [f"{format_pct(r.pct_change)}{_stars(r)}", format_ci(r.ci_low, r.ci_high), format_p(r.p_value), paper]
+                cells += [
+                    f"{format_pct(r.pct_change)}{_stars(r)}",
+                    format_ci(r.ci_low, r.ci_high),
+                    format_p(r.p_value),
+                    paper,
+                ]
             body.append(cells)
         out += [f"### {_pretrain_title(size)}", "", *_table(header, body), ""]
     return out
@@ -254,10 +264,19 @@ def _figure2_long(rows: tuple[Figure2Row, ...]) -> list[str]:
     ]  # fmt: skip
     body = [
         [
-            r.model, r.measure, str(r.pretrain_size), r.scenario, str(r.n_seeds), _num(r.mean_update),
-            _num(r.mean_reset), format_pct(r.pct_change), format_ci(r.ci_low, r.ci_high),
-            format_p(r.p_value, r.p_reason), format_p(r.p_holm) if r.in_figure2 else "-",
-            f"{r.solved_update:.0%}", f"{r.solved_reset:.0%}",
+            r.model,
+            r.measure,
+            str(r.pretrain_size),
+            r.scenario,
+            str(r.n_seeds),
+            _num(r.mean_update),
+            _num(r.mean_reset),
+            format_pct(r.pct_change),
+            format_ci(r.ci_low, r.ci_high),
+            format_p(r.p_value, r.p_reason),
+            format_p(r.p_holm) if r.in_figure2 else "-",
+            f"{r.solved_update:.0%}",
+            f"{r.solved_reset:.0%}",
         ]  # fmt: skip
         for r in rows
     ]
@@ -276,7 +295,9 @@ def _reduction_table(analysis: Analysis) -> list[str]:
         caption = PAPER_CAPTION_FRACTION_REDUCED.get(r.pretrain_size) if r.model is None else None
         body.append(
             [
-                str(r.pretrain_size), r.model or "all", str(r.n_cells),
+                str(r.pretrain_size),
+                r.model or "all",
+                str(r.n_cells),
                 f"{r.n_reduced}/{r.n_cells} ({r.fraction_reduced:.0%})",
                 f"{r.n_reduced + r.n_unchanged}/{r.n_cells} ({r.fraction_not_increased:.0%})",
                 f"{p.n_reduced}/{p.n_cells} ({p.fraction_reduced:.0%})" if p else "",
@@ -294,8 +315,17 @@ def _random_table(comparisons: tuple[RandomComparison, ...]) -> list[str]:
     ]  # fmt: skip
     body = [
         [
-            c.model, c.measure, str(c.pretrain_size), c.condition, c.scenario, str(c.n_model), str(c.n_random),
-            _num(c.median_model), _num(c.median_random), format_pct(c.pct_change_median), c.test,
+            c.model,
+            c.measure,
+            str(c.pretrain_size),
+            c.condition,
+            c.scenario,
+            str(c.n_model),
+            str(c.n_random),
+            _num(c.median_model),
+            _num(c.median_random),
+            format_pct(c.pct_change_median),
+            c.test,
             format_p(c.p_value, c.p_reason),
         ]  # fmt: skip
         for c in comparisons

@@ -87,7 +87,9 @@ def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
     """Build a row from strings (CSV) or JSON values, with one clear error per bad field."""
     missing = [c for c in COLUMNS if c not in data]
     if missing:
-        raise LlcpsError(f"{where}: missing column(s) {', '.join(missing)}", hint=f"expected columns: {', '.join(COLUMNS)}")
+        raise LlcpsError(
+            f"{where}: missing column(s) {', '.join(missing)}", hint=f"expected columns: {', '.join(COLUMNS)}"
+        )
     values: dict[str, Any] = {}
     for name in COLUMNS:
         raw = data[name]
@@ -200,12 +202,16 @@ class ResultsTable:
                 reader = csv.DictReader(fh)
                 return cls(_row_from_mapping(rec, f"{path}:{i + 2}") for i, rec in enumerate(reader))
         except OSError as exc:
-            raise LlcpsError(f"cannot read results file {path}: {exc.strerror}", hint="pass a results.csv written by a run") from None
+            raise LlcpsError(
+                f"cannot read results file {path}: {exc.strerror}", hint="pass a results.csv written by a run"
+            ) from None
 
     def write_json(self, path: str | Path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"columns": list(COLUMNS), "rows": self.to_records()}, indent=1) + "\n", encoding="utf-8")
+        path.write_text(
+            json.dumps({"columns": list(COLUMNS), "rows": self.to_records()}, indent=1) + "\n", encoding="utf-8"
+        )
         return path
 
     @classmethod
@@ -325,4 +331,3 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
                 continue
         chosen[row.key] = (rank, row)
     return EpisodeImport(ResultsTable(row for _, row in chosen.values()), skipped)
-

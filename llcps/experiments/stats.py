@@ -49,7 +49,9 @@ BASELINE_MODEL = "random"
 # --------------------------------------------------------------------------------------
 # The paper's own numbers (Figure 2), for side-by-side comparison.
 # --------------------------------------------------------------------------------------
-def _paper_block(pretrain: int, rows: dict[str, tuple[float, float, float, float]]) -> dict[tuple[str, str, int, str], float]:
+def _paper_block(
+    pretrain: int, rows: dict[str, tuple[float, float, float, float]]
+) -> dict[tuple[str, str, int, str], float]:
     out: dict[tuple[str, str, int, str], float] = {}
     for measure, (nn2, nn3, nb2, nb3) in rows.items():
         out[("nn", measure, pretrain, "scenario2")] = nn2
@@ -367,7 +369,9 @@ def reduction_summary(cells: Iterable[tuple[str, int, float]]) -> tuple[Reductio
         for key in ((size, None), (size, model)):
             counts.setdefault(key, [0, 0, 0])[which] += 1
     order = sorted(counts, key=lambda k: (-k[0], k[1] is not None, model_rank(k[1] or "")))
-    return tuple(Reduction(size, model, sum(c), c[0], c[1], c[2]) for (size, model), c in ((k, counts[k]) for k in order))
+    return tuple(
+        Reduction(size, model, sum(c), c[0], c[1], c[2]) for (size, model), c in ((k, counts[k]) for k in order)
+    )
 
 
 def our_cells(rows: Iterable[Figure2Row]) -> list[tuple[str, int, float]]:
@@ -429,6 +433,7 @@ def random_comparison(
         (r for r in table if r.model != baseline),
         lambda r: (r.model, r.measure, r.pretrain_size, r.condition, r.scenario),
     )
+
     def order(item: tuple[tuple[str, str, int, str, str], list[ResultRow]]) -> tuple:
         model, measure, size, condition, scenario = item[0]
         return (*figure2_order(model, measure, size, scenario), condition_rank(condition))
@@ -516,10 +521,14 @@ def cumulative_exploration(
         values = per_cell.setdefault(key, {}).setdefault(row.seed, np.zeros(len(SCENARIO_SEQUENCE)))
         values[position[row.scenario]] = row.metric(metric)
     out: list[CumulativePoint] = []
-    for key, seeds in sorted(per_cell.items(), key=lambda kv: (*figure2_order(*kv[0][:3], ""), condition_rank(kv[0][3]))):
+    for key, seeds in sorted(
+        per_cell.items(), key=lambda kv: (*figure2_order(*kv[0][:3], ""), condition_rank(kv[0][3]))
+    ):
         matrix = np.cumsum(np.array([seeds[s] for s in sorted(seeds)]), axis=1)
         for j, scenario in enumerate(SCENARIO_SEQUENCE):
             column = matrix[:, j]
-            low, high = bootstrap_mean_ci(column, rng=cell_rng(seed, *key, scenario, metric, "cum"), resamples=resamples)
+            low, high = bootstrap_mean_ci(
+                column, rng=cell_rng(seed, *key, scenario, metric, "cum"), resamples=resamples
+            )
             out.append(CumulativePoint(*key, scenario, int(column.size), float(column.mean()), low, high))
     return tuple(out)
