@@ -1,0 +1,261 @@
+"""The action controllers R: one per action of Table 1, each a trajectory relative
+to its arguments, parameterized by rate (m/s), movement magnitude (m) and
+orientation (approach side). Conventions and units: docs/controllers.md.
+
+Directions (robot base at the origin facing +x; "left" is +y):
+
+=========== ================================ =================================
+orientation push direction                    side used by place / remove
+=========== ================================ =================================
+left        -y (from the entity's +y side)    +y
+right       +y (from the entity's -y side)    -y
+front       +x (from the robot side)          +x (the far side)
+top         +x, contact near the entity's top  straight over / the robot side (-x)
+=========== ================================ =================================
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Callable, Mapping
+
+from llcps.domain import ACTIONS, TrialSpec
+from llcps.errors import LlcpsError
+from llcps.sim import geometry as g
+from llcps.sim.motion import TRANSIT_SPEED, VERTICAL_SPEED, CapReached, Motion
+from llcps.sim.robot import FINGER_OPEN, RAY_MASK, TOOL_ABOVE_TIPS
+
+if TYPE_CHECKING:
+    from llcps.domain import ControllerParams
+    from llcps.sim.world import World
+
+#: Default step budget of one trial (25 s of simulated time at 240 Hz).
+DEFAULT_MAX_STEPS = 6000
+#: Steps allowed after the motion for everything to come to rest.
+SETTLE_STEPS = 720
+
+#: Push direction of each orientation.
+PUSH_DIRECTION: Mapping[str, tuple[float, float]] = {
+    "left": (0.0, -1.0),
+    "right": (0.0, 1.0),
+    "front": (1.0, 0.0),
+    "top": (1.0, 0.0),
+}
+#: Side of an entity each orientation names (place offset, remove destination).
+SIDE: Mapping[str, tuple[float, float]] = {
+    "left": (0.0, 1.0),
+    "right": (0.0, -1.0),
+    "front": (1.0, 0.0),
+    "top": (-1.0, 0.0),
+}
+
+#: Tool travel before the fingers meet the pushed entity (m).
+PRE_CONTACT = 0.03
+#: Half thickness of the closed finger pair along the push (m).
+FINGER_HALF = 0.015
+#: Lowest tool height above a support surface, keeping the fingertips 5 mm clear (m).
+MIN_TOOL_ABOVE = TOOL_ABOVE_TIPS + 0.005
+#: Lowest approach and transit height of the tool above the table (m).
+SAFE_Z = 0.25
+#: Clearance of a carried object above rims and supports (m).
+CARRY_CLEARANCE = 0.04
+#: Fraction of a container's inner half width by which a side release is offset.
+SIDE_RELEASE_OFFSET = 0.6
+#: Gap between a container's footprint and an object set down beside it (m).
+SET_DOWN_GAP = 0.06
+#: Lateral offset of an off-centre push_together contact (fraction of the half width).
+OFF_CENTRE = 0.4
+
+
+def _safe_z(world: "World") -> float:
+    tallest = max((g.top(world, n) for n in world.entities), default=0.0)
+    return max(SAFE_Z, tallest + 0.08)
+
+
+def _approach(m: Motion, point: tuple[float, float, float], yaw: float, safe_z: float) -> None:
+    """Rise, travel above ``point`` at the safe height, then descend onto it."""
+    x, y, z = m.target
+    if z < safe_z - 1e-6:
+        m.move_to((x, y, safe_z), VERTICAL_SPEED, converge=False)
+    m.move_to((point[0], point[1], max(safe_z, point[2])), TRANSIT_SPEED, yaw=yaw)
+    m.move_to(point, VERTICAL_SPEED)
+
+
+def _contact_z(world: "World", name: str, orientation: str) -> float:
+    """Tool height for a push: mid-height, or near the top for ``top``."""
+    lo, hi = world.aabb(name)
+    floor = lo[2] + MIN_TOOL_ABOVE
+    z = hi[2] - 0.005 if orientation == "top" else (lo[2] + hi[2]) / 2.0
+    return max(floor, z)
+
+
+def _stroke(
+    world: "World", m: Motion, name: str, d: tuple[float, float], z: float, lateral: float, safe_z: float
+) -> tuple[float, float, float]:
+    """Approach ``name`` from the side opposite to ``d``; returns the pre-contact tool point."""
+    cx, cy, _ = world.center(name)
+    back = g.extent_along(world, name, d) + FINGER_HALF + PRE_CONTACT
+    n = (-d[1], d[0])
+    start = (cx - d[0] * back + n[0] * lateral, cy - d[1] * back + n[1] * lateral, z)
+    m.set_fingers(0.0)
+    _approach(m, start, g.yaw_of(d), safe_z)
+    return start
+
+
+def push(world: "World", m: Motion, args: tuple[str, ...], params: "ControllerParams") -> None:
+    """Stroke through the entity along the orientation's direction by ``movement_magnitude``."""
+    (obj,) = args
+    d = PUSH_DIRECTION[params.orientation]
+    safe_z = _safe_z(world)
+    start = _stroke(world, m, obj, d, _contact_z(world, obj, params.orientation), 0.0, safe_z)
+    travel = PRE_CONTACT + params.movement_magnitude
+    m.move_to((start[0] + d[0] * travel, start[1] + d[1] * travel, start[2]), params.rate)
+    m.go_home(safe_z)
+
+
+def push_together(world: "World", m: Motion, args: tuple[str, ...], params: "ControllerParams") -> None:
+    """Push ``a`` along the line a->b until it touches ``b``, then on by at most the magnitude."""
+    a, b = args
+    ca, cb = world.center(a), world.center(b)
+    d = g.unit2(cb[0] - ca[0], cb[1] - ca[1])
+    safe_z = _safe_z(world)
+    lateral = {"left": OFF_CENTRE, "right": -OFF_CENTRE}.get(params.orientation, 0.0)
+    lateral *= g.extent_along(world, a, (-d[1], d[0]))
+    start = _stroke(world, m, a, d, _contact_z(world, a, params.orientation), lateral, safe_z)
+    # Contact ends the stroke; b's centre bounds it (b's extent along d is not
+    # known exactly from its bounding box, so it is not subtracted).
+    reach = (cb[0] - ca[0]) * d[0] + (cb[1] - ca[1]) * d[1] - g.extent_along(world, a, d)
+    travel = PRE_CONTACT + max(0.0, reach) + params.movement_magnitude
+    end = (start[0] + d[0] * travel, start[1] + d[1] * travel, start[2])
+    c = world.client
+    robot_id, body_a, body_b = world.robot.body_id, world.body(a), world.body(b)
+
+    def pushed_into_contact() -> bool:
+        return g.in_contact(c, robot_id, body_a) and g.in_contact(c, body_a, body_b)
+
+    if m.move_to(end, params.rate, until=pushed_into_contact):
+        x, y, z = m.target
+        left = math.dist((x, y), end[:2])
+        follow = min(params.movement_magnitude, left)
+        m.move_to((x + d[0] * follow, y + d[1] * follow, z), params.rate, converge=False)
+    m.go_home(safe_z)
+
+
+def _grasp_yaw(world: "World", name: str) -> float:
+    """Close the fingers across the entity's narrower horizontal side."""
+    spec = world.entity(name).spec
+    _, orn = world.pose(name)
+    yaw = world.client.getEulerFromQuaternion(orn)[2]
+    if spec.shape == "box" and spec.size[0] < spec.size[1]:
+        yaw += math.pi / 2  # close along the entity's own x
+    return g.yaw_of((math.cos(yaw), math.sin(yaw)))
+
+
+def _pick(world: "World", m: Motion, obj: str, safe_z: float) -> float:
+    """Open, approach ``obj`` from the top and grasp it.
+
+    Returns:
+        The tool height above the object's bottom while it is held.
+    """
+    lo, hi = world.aabb(obj)
+    cx, cy, _ = world.center(obj)
+    z = max(lo[2] + MIN_TOOL_ABOVE, hi[2] - 0.03)
+    m.set_fingers(FINGER_OPEN)
+    _approach(m, (cx, cy, z), _grasp_yaw(world, obj), safe_z)
+    m.grasp(world.body(obj))
+    return z - lo[2]
+
+
+def _lift(m: Motion, params: "ControllerParams", min_z: float) -> None:
+    x, y, z = m.target
+    m.move_to((x, y, max(z + params.movement_magnitude, min_z)), VERTICAL_SPEED, converge=False)
+
+
+def _support_z(world: "World", x: float, y: float, below: float, ignore: int) -> float:
+    """Height of the first surface under (x, y) beneath ``below`` (robot and ``ignore`` excluded)."""
+    c = world.client
+    start, end = (x, y, below), (x, y, world.scene.table.floor_z - 0.1)
+    for _ in range(4):
+        hit = c.rayTestBatch([start], [end], collisionFilterMask=RAY_MASK)[0]
+        if hit[0] != ignore:
+            return hit[3][2] if hit[0] >= 0 else world.scene.table.floor_z
+        start = (x, y, hit[3][2] - 1e-4)
+    return world.scene.table.floor_z
+
+
+def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params: "ControllerParams") -> None:
+    """Grasp ``o`` from the top, lift, carry over ``c`` at ``rate``, lower in (top) or
+    release offset toward a side from carry height."""
+    obj, container = args
+    safe_z = _safe_z(world)
+    held = _pick(world, m, obj, safe_z)
+    rim = g.top(world, container)
+    carry_z = rim + CARRY_CLEARANCE + held
+    _lift(m, params, carry_z)
+    cx, cy, _ = world.center(container)
+    if params.orientation == "top":
+        tx, ty = cx, cy
+    else:
+        side = SIDE[params.orientation]
+        off = SIDE_RELEASE_OFFSET * g.inner_half(world, container, side)
+        tx, ty = cx + side[0] * off, cy + side[1] * off
+    m.move_to((tx, ty, m.target[2]), params.rate)
+    if params.orientation == "top":
+        m.move_to((tx, ty, g.inner_floor_z(world, container) + 0.015 + held), VERTICAL_SPEED)
+    m.open_hand()
+    m.go_home(safe_z)
+
+
+def remove_from_container(world: "World", m: Motion, args: tuple[str, ...], params: "ControllerParams") -> None:
+    """Grasp ``o`` from the top, lift clear of ``c``'s rim, carry at ``rate`` beyond
+    ``c``'s footprint toward the orientation's side, set it down and release."""
+    obj, container = args
+    safe_z = _safe_z(world)
+    held = _pick(world, m, obj, safe_z)
+    carry_z = g.top(world, container) + CARRY_CLEARANCE + held
+    _lift(m, params, carry_z)
+    side = SIDE[params.orientation]
+    cx, cy, _ = world.center(container)
+    reach = g.extent_along(world, container, side) + g.extent_along(world, obj, side) + SET_DOWN_GAP
+    tx, ty = cx + side[0] * reach, cy + side[1] * reach
+    m.move_to((tx, ty, m.target[2]), params.rate)
+    support = _support_z(world, tx, ty, m.target[2] - held - 0.005, world.body(obj))
+    m.move_to((tx, ty, support + 0.01 + held), VERTICAL_SPEED)
+    m.open_hand()
+    m.go_home(safe_z)
+
+
+Controller = Callable[["World", Motion, tuple[str, ...], "ControllerParams"], None]
+
+#: The action controllers, one per action (keys == llcps.domain.ACTIONS).
+CONTROLLERS: Mapping[str, Controller] = {
+    "push": push,
+    "push_together": push_together,
+    "remove_from_container": remove_from_container,
+    "place_in_container": place_in_container,
+}
+assert tuple(CONTROLLERS) == ACTIONS
+
+
+def execute(world: "World", spec: TrialSpec, *, max_steps: int = DEFAULT_MAX_STEPS) -> int:
+    """Run one controller call to completion in ``world``.
+
+    The trial ends when the motion is done and every entity is at rest, or at
+    ``max_steps``; any grasp is released at the end either way.
+
+    Returns:
+        Simulation steps used.
+    """
+    for name in spec.arguments:
+        world.entity(name)
+    if len(set(spec.arguments)) != len(spec.arguments):
+        raise LlcpsError(f"{spec.action} needs distinct arguments, got {spec.arguments}")
+    m = Motion(world, max_steps=max_steps)
+    try:
+        CONTROLLERS[spec.action](world, m, spec.arguments, spec.params)
+        m.wait_rest(max_steps=min(SETTLE_STEPS, max_steps - m.steps))
+    except CapReached:
+        pass
+    finally:
+        world.robot.release()
+    return m.steps

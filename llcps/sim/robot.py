@@ -1,0 +1,227 @@
+"""The robot: a Franka Emika Panda from ``pybullet_data``, driven by inverse
+kinematics and joint position motors, with a two-finger gripper.
+
+The base stands at the world origin facing +x. The *tool point* is the Panda's
+``panda_grasptarget`` link, between the finger pads, 11 mm above the fingertips.
+Every commanded motion is a tool-point target turned into joint targets by
+PyBullet's IK and tracked by the joint motors within the Panda's torque limits,
+so a target out of reach is approached as far as the arm allows and no body is
+ever teleported.
+
+Grasping is constraint-based (documented in docs/controllers.md): the fingers
+close on the object under force control, and only when *both* fingers are in
+contact with it is the object fixed to the hand by a constraint with a bounded
+force. Opening the hand removes the constraint.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import pybullet as p
+import pybullet_data
+
+from llcps.sim.geometry import in_contact
+
+#: Movable arm joints, finger joints, hand link and tool link of panda.urdf.
+ARM_JOINTS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6)
+FINGER_JOINTS: tuple[int, ...] = (9, 10)
+HAND_LINK = 8
+TOOL_LINK = 11
+
+#: Joint torque limits of the Panda (N m) and finger force limit (N).
+ARM_FORCES: tuple[float, ...] = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
+FINGER_FORCE = 20.0
+
+#: Home posture: the tool 0.36 m above the table at x = 0.42, pointing down, hand open.
+HOME: tuple[float, ...] = (0.0, -0.4, 0.0, -2.4, 0.0, 2.0, math.pi / 4)
+FINGER_OPEN = 0.04  # per finger (m): an 8 cm opening
+
+#: Tool point height above the fingertips (m).
+TOOL_ABOVE_TIPS = 0.011
+
+#: Collision group bit of the robot; perception rays ignore it.
+ROBOT_GROUP = 1 << 5
+RAY_MASK = ~ROBOT_GROUP & 0xFFFF
+
+#: Grasp constraint strength (N): enough for every catalog object, not for a table.
+GRASP_FORCE = 60.0
+
+
+def top_down(yaw: float) -> tuple[float, float, float, float]:
+    """Quaternion of a tool pointing straight down, fingers closing across ``yaw``.
+
+    At yaw 0 the hand's x axis is world +x and the fingers close along world y.
+    """
+    return (math.cos(yaw / 2.0), math.sin(yaw / 2.0), 0.0, 0.0)
+
+
+class Robot:
+    """The Panda arm in one BulletClient.
+
+    Attributes:
+        body_id: PyBullet body id.
+        grasped: body id of the object held by the grasp constraint, if any.
+    """
+
+    def __init__(self, client: Any, *, visuals: bool = True) -> None:
+        self.client = client
+        flags = 0 if visuals else p.URDF_IGNORE_VISUAL_SHAPES
+        self.body_id: int = client.loadURDF(
+            f"{pybullet_data.getDataPath()}/franka_panda/panda.urdf",
+            basePosition=(0.0, 0.0, 0.0),
+            useFixedBase=True,
+            flags=flags,
+        )
+        info = [client.getJointInfo(self.body_id, j) for j in ARM_JOINTS + FINGER_JOINTS]
+        self.lower = [i[8] for i in info]
+        self.upper = [i[9] for i in info]
+        self.ranges = [hi - lo for lo, hi in zip(self.lower, self.upper)]
+        self.rest = list(HOME) + [FINGER_OPEN, FINGER_OPEN]
+        for link in range(-1, client.getNumJoints(self.body_id)):
+            client.setCollisionFilterGroupMask(self.body_id, link, ROBOT_GROUP, 0xFFFF)
+        for link in FINGER_JOINTS:
+            client.changeDynamics(self.body_id, link, lateralFriction=1.0)
+        self.grasped: int | None = None
+        self._constraint: int | None = None
+        self.reset_home()
+        state = client.getLinkState(self.body_id, TOOL_LINK, computeForwardKinematics=1)
+        self.home_tool: tuple[float, float, float] = tuple(state[4])  # type: ignore[assignment]
+
+    # ------------------------------------------------------------------ state
+
+    def reset_home(self) -> None:
+        """Put the arm at HOME with the hand open, at rest (no physics involved)."""
+        self.release()
+        for j, q in zip(ARM_JOINTS, HOME):
+            self.client.resetJointState(self.body_id, j, q, 0.0)
+        for j in FINGER_JOINTS:
+            self.client.resetJointState(self.body_id, j, FINGER_OPEN, 0.0)
+        self.hold()
+
+    def joint_positions(self) -> list[float]:
+        """Positions of the 7 arm joints and 2 finger joints."""
+        states = self.client.getJointStates(self.body_id, ARM_JOINTS + FINGER_JOINTS)
+        return [s[0] for s in states]
+
+    def hold(self) -> None:
+        """Command every motor to keep its current position."""
+        q = self.joint_positions()
+        self.command_arm(q[:7])
+        self.command_fingers(q[7], force=FINGER_FORCE)
+
+    def tool_position(self) -> tuple[float, float, float]:
+        return self.client.getLinkState(self.body_id, TOOL_LINK)[4]
+
+    def finger_width(self) -> float:
+        """Current opening between the fingers (m)."""
+        states = self.client.getJointStates(self.body_id, FINGER_JOINTS)
+        return states[0][0] + states[1][0]
+
+    # ------------------------------------------------------------------ control
+
+    def ik(self, position: Sequence[float], orientation: Sequence[float], *, iterations: int = 5) -> tuple:
+        """Joint targets that bring the tool point to a pose, seeded by the current joints.
+
+        A few iterations suffice per control step (the target moves a millimetre or
+        so); :meth:`reach_error` uses a longer, HOME-seeded solve.
+        """
+        return self.client.calculateInverseKinematics(
+            self.body_id,
+            TOOL_LINK,
+            position,
+            orientation,
+            maxNumIterations=iterations,
+            residualThreshold=1e-3 if iterations < 20 else 1e-5,
+        )
+
+    def command_arm(self, targets: Sequence[float]) -> None:
+        self.client.setJointMotorControlArray(
+            self.body_id, ARM_JOINTS, p.POSITION_CONTROL, targetPositions=targets[:7], forces=ARM_FORCES
+        )
+
+    def command_fingers(self, each: float, *, force: float = FINGER_FORCE) -> None:
+        """Drive both fingers to ``each`` metres from the centre."""
+        self.client.setJointMotorControlArray(
+            self.body_id, FINGER_JOINTS, p.POSITION_CONTROL, targetPositions=(each, each), forces=(force, force)
+        )
+
+    def fingers_touch(self, body: int) -> bool:
+        """Whether both fingers are in contact with ``body`` (from the last step)."""
+        return in_contact(self.client, self.body_id, body, FINGER_JOINTS[0]) and in_contact(
+            self.client, self.body_id, body, FINGER_JOINTS[1]
+        )
+
+    def attach(self, body: int) -> None:
+        """Fix ``body`` to the tool link where it is now (the fingers hold it)."""
+        if self._constraint is not None:
+            self.release()
+        c = self.client
+        tool = c.getLinkState(self.body_id, TOOL_LINK)
+        obj_pos, obj_orn = c.getBasePositionAndOrientation(body)
+        inv_pos, inv_orn = c.invertTransform(tool[0], tool[1])
+        rel_pos, rel_orn = c.multiplyTransforms(inv_pos, inv_orn, obj_pos, obj_orn)
+        self._constraint = c.createConstraint(
+            self.body_id,
+            TOOL_LINK,
+            body,
+            -1,
+            p.JOINT_FIXED,
+            (0, 0, 0),
+            parentFramePosition=rel_pos,
+            childFramePosition=(0, 0, 0),
+            parentFrameOrientation=rel_orn,
+            childFrameOrientation=(0, 0, 0, 1),
+        )
+        c.changeConstraint(self._constraint, maxForce=GRASP_FORCE)
+        self.grasped = body
+
+    def release(self) -> None:
+        """Drop whatever the grasp constraint holds (the fingers are not moved)."""
+        if self._constraint is not None:
+            self.client.removeConstraint(self._constraint)
+        self._constraint = None
+        self.grasped = None
+
+    # ------------------------------------------------------------------ kinematic probe
+
+    def reach_error(self, position: Sequence[float], yaw: float) -> tuple[float, float]:
+        """How closely the arm can put its tool at a top-down pose, by IK then FK.
+
+        The IK starts from HOME whatever the arm is doing, so the answer depends on
+        the target alone. The joints are restored afterwards: no time passes and no
+        body moves.
+
+        Returns:
+            (position error in m, angle between the tool axis and straight down in rad).
+        """
+        c = self.client
+        joints = ARM_JOINTS + FINGER_JOINTS
+        saved = c.getJointStates(self.body_id, joints)
+        for j, q in zip(joints, self.rest):
+            c.resetJointState(self.body_id, j, q, 0.0)
+        q = c.calculateInverseKinematics(
+            self.body_id,
+            TOOL_LINK,
+            position,
+            top_down(yaw),
+            lowerLimits=self.lower,
+            upperLimits=self.upper,
+            jointRanges=self.ranges,
+            restPoses=self.rest,
+            maxNumIterations=100,
+            residualThreshold=1e-5,
+        )
+        for j, qj in zip(ARM_JOINTS, q[:7]):
+            c.resetJointState(self.body_id, j, min(max(qj, self.lower[j]), self.upper[j]), 0.0)
+        state = c.getLinkState(self.body_id, TOOL_LINK, computeForwardKinematics=1)
+        for j, s in zip(joints, saved):
+            c.resetJointState(self.body_id, j, s[0], s[1])
+        pos, orn = state[4], state[5]
+        err = math.dist(pos, position)
+        # tool z axis in world: third column of the rotation matrix
+        x, y, z, w = orn
+        axis_z = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))
+        angle = math.acos(max(-1.0, min(1.0, -axis_z[2])))
+        return err, angle

@@ -1,0 +1,345 @@
+"""The simulated world: one PyBullet client holding the floor, the table, the
+robot, scenario fixtures and the entities, with deterministic engine settings and
+in-memory / serialized snapshots.
+
+A :class:`SceneSpec` is a JSON-able description from which :meth:`World.from_scene`
+rebuilds the same bodies in the same order, so a physics state saved in one
+process can be restored in another (``serialize_state`` / ``restore_serialized``)
+and stepping from it gives bit-identical results.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import pybullet as p
+from pybullet_utils import bullet_client
+
+from llcps.errors import LlcpsError, UnknownNameError
+from llcps.sim.entities import (
+    Entity,
+    EntitySpec,
+    FIXTURE_RGBA,
+    FixtureSpec,
+    TableSpec,
+    build_entity,
+    build_fixture,
+)
+from llcps.sim.robot import Robot
+
+#: Names reserved for the built-in fixtures.
+TABLE = "table"
+FLOOR = "floor"
+
+#: Rest thresholds used by :meth:`World.settle` and the controllers.
+REST_LINEAR = 0.005  # m/s
+REST_ANGULAR = 0.05  # rad/s
+REST_CHECK_EVERY = 8  # steps between rest checks
+REST_CHECKS = 3  # consecutive quiet checks that count as rest
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """Everything needed to rebuild a world: table geometry, fixtures, entities.
+
+    Attributes:
+        entities: manipulable objects and containers, built in this order.
+        fixtures: static boxes beyond the table and floor (lips, walls, shelves).
+        table: the table's geometry.
+        name: a label (scenario and condition, or "pretrain").
+    """
+
+    entities: tuple[EntitySpec, ...] = ()
+    fixtures: tuple[FixtureSpec, ...] = ()
+    table: TableSpec = field(default_factory=TableSpec)
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "entities", tuple(self.entities))
+        object.__setattr__(self, "fixtures", tuple(self.fixtures))
+        names = [e.name for e in self.entities] + [f.name for f in self.fixtures] + [TABLE, FLOOR]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ValueError(f"scene names must be unique (table and floor are reserved): {dupes}")
+
+    def entity(self, name: str) -> EntitySpec:
+        for e in self.entities:
+            if e.name == name:
+                return e
+        raise UnknownNameError("entity", name, [e.name for e in self.entities])
+
+    def replace(self, *specs: EntitySpec) -> "SceneSpec":
+        """The scene with some entities replaced by name (or appended when new)."""
+        by_name = {s.name: s for s in specs}
+        kept = [by_name.pop(e.name, e) for e in self.entities]
+        return SceneSpec(tuple(kept) + tuple(by_name.values()), self.fixtures, self.table, self.name)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "table": self.table.to_dict(),
+            "fixtures": [f.to_dict() for f in self.fixtures],
+            "entities": [e.to_dict() for e in self.entities],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "SceneSpec":
+        try:
+            return cls(
+                entities=tuple(EntitySpec.from_dict(e) for e in data.get("entities", ())),
+                fixtures=tuple(FixtureSpec.from_dict(f) for f in data.get("fixtures", ())),
+                table=TableSpec.from_dict(data.get("table", {})),
+                name=str(data.get("name", "")),
+            )
+        except (TypeError, ValueError) as exc:
+            raise LlcpsError(
+                f"not a valid scene description: {exc}", hint="scenes come from SceneSpec.to_dict()"
+            ) from exc
+
+
+class World:
+    """One PyBullet client and everything in it.
+
+    Attributes:
+        client: the BulletClient (DIRECT unless ``gui``).
+        scene: the description this world was built from.
+        robot: the Panda.
+        entities: entities by name (objects and containers).
+        fixtures: static bodies by name: "table", "floor" and the scene's fixtures.
+        time_step: seconds per simulation step.
+    """
+
+    def __init__(
+        self,
+        *,
+        gui: bool = False,
+        time_step: float = 1.0 / 240.0,
+        scene: SceneSpec | Mapping[str, Any] | None = None,
+        visuals: bool = True,
+    ) -> None:
+        if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+            raise LlcpsError(
+                "cannot open a GUI window: no display", hint="unset --gui, or run under a desktop / xvfb-run"
+            )
+        self.client = bullet_client.BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
+        self.gui = gui
+        self.visuals = visuals or gui
+        self.time_step = float(time_step)
+        self.entities: dict[str, Entity] = {}
+        self.fixtures: dict[str, int] = {}
+        self.names: dict[int, str] = {}
+        self._observers: list[Callable[["World"], None]] = []
+        self._closed = False
+        self.load(scene if scene is not None else SceneSpec())
+
+    @classmethod
+    def from_scene(
+        cls,
+        scene: SceneSpec | Mapping[str, Any],
+        *,
+        gui: bool = False,
+        visuals: bool = True,
+        time_step: float = 1.0 / 240.0,
+    ) -> "World":
+        """Build a world from a scene description (deterministic: same scene, same bodies)."""
+        return cls(gui=gui, scene=scene, visuals=visuals, time_step=time_step)
+
+    # ------------------------------------------------------------------ building
+
+    def load(self, scene: SceneSpec | Mapping[str, Any]) -> None:
+        """Rebuild the whole simulation from ``scene`` (reset, then bodies in a fixed order)."""
+        if not isinstance(scene, SceneSpec):
+            scene = SceneSpec.from_dict(scene)
+        c = self.client
+        c.resetSimulation()
+        c.setPhysicsEngineParameter(
+            fixedTimeStep=self.time_step, numSubSteps=0, deterministicOverlappingPairs=1, numSolverIterations=50
+        )
+        c.setGravity(0.0, 0.0, -9.81)
+        if self.gui:
+            c.configureDebugVisualizer(p.COV_ENABLE_GUI, 0)
+        self.scene = scene
+        self.entities = {}
+        self.fixtures = {}
+        table = scene.table
+        floor_col = c.createCollisionShape(p.GEOM_PLANE)
+        floor_vis = c.createVisualShape(p.GEOM_BOX, halfExtents=(3, 3, 0.001), rgbaColor=FIXTURE_RGBA["floor"])
+        self.fixtures[FLOOR] = c.createMultiBody(0.0, floor_col, floor_vis, basePosition=(0.0, 0.0, table.floor_z))
+        self.fixtures[TABLE] = build_fixture(
+            c,
+            FixtureSpec(
+                TABLE,
+                (table.x_max - table.x_min, 2 * table.y_half, table.height),
+                ((table.x_max + table.x_min) / 2, 0.0, -table.height / 2),
+                color="wood",
+            ),
+        )
+        c.changeDynamics(self.fixtures[FLOOR], -1, lateralFriction=0.6, restitution=0.0)
+        for spec in scene.fixtures:
+            self.fixtures[spec.name] = build_fixture(c, spec)
+        self.robot = Robot(c, visuals=self.visuals)
+        for link in (-1, 0):  # the base and shoulder stand on the table and never leave it
+            c.setCollisionFilterPair(self.robot.body_id, self.fixtures[TABLE], link, -1, 0)
+        for spec in scene.entities:
+            self.entities[spec.name] = build_entity(c, spec)
+        self.names = {body: name for name, body in self.fixtures.items()}
+        self.names.update({e.body_id: name for name, e in self.entities.items()})
+        self.sim_steps = 0
+
+    # ------------------------------------------------------------------ lookup
+
+    def entity(self, name: str) -> Entity:
+        try:
+            return self.entities[name]
+        except KeyError:
+            raise UnknownNameError("entity", name, sorted(self.entities)) from None
+
+    def body(self, name: str) -> int:
+        """Body id of an entity or fixture by name."""
+        if name in self.entities:
+            return self.entities[name].body_id
+        if name in self.fixtures:
+            return self.fixtures[name]
+        raise UnknownNameError("entity", name, sorted(self.entities) + sorted(self.fixtures))
+
+    def center(self, name: str) -> tuple[float, float, float]:
+        """World position of an entity's bounding-box centre."""
+        e = self.entity(name)
+        pos, orn = self.client.getBasePositionAndOrientation(e.body_id)
+        if e.com_offset == (0.0, 0.0, 0.0):
+            return pos
+        off = self.client.multiplyTransforms((0, 0, 0), orn, [-v for v in e.com_offset], (0, 0, 0, 1))[0]
+        return (pos[0] + off[0], pos[1] + off[1], pos[2] + off[2])
+
+    def pose(self, name: str) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """Bounding-box centre and orientation of an entity."""
+        e = self.entity(name)
+        return self.center(name), self.client.getBasePositionAndOrientation(e.body_id)[1]
+
+    def aabb(self, name: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """World axis-aligned bounding box of an entity or fixture."""
+        return self.client.getAABB(self.body(name))
+
+    # ------------------------------------------------------------------ stepping
+
+    def add_observer(self, fn: Callable[["World"], None]) -> None:
+        """Call ``fn(world)`` after every simulation step (frame recorders use this)."""
+        self._observers.append(fn)
+
+    def remove_observer(self, fn: Callable[["World"], None]) -> None:
+        self._observers.remove(fn)
+
+    def step(self, n: int = 1) -> None:
+        """Advance the simulation ``n`` fixed time steps."""
+        step = self.client.stepSimulation
+        observers = self._observers
+        for _ in range(n):
+            step()
+            self.sim_steps += 1
+            if observers:
+                for fn in observers:
+                    fn(self)
+
+    def at_rest(self) -> bool:
+        """Whether every entity is (nearly) still."""
+        get = self.client.getBaseVelocity
+        for e in self.entities.values():
+            lin, ang = get(e.body_id)
+            if (
+                lin[0] * lin[0] + lin[1] * lin[1] + lin[2] * lin[2] > REST_LINEAR * REST_LINEAR
+                or ang[0] * ang[0] + ang[1] * ang[1] + ang[2] * ang[2] > REST_ANGULAR * REST_ANGULAR
+            ):
+                return False
+        return True
+
+    def settle(self, *, max_steps: int) -> int:
+        """Step with the robot holding still until every entity is at rest, or ``max_steps``.
+
+        Returns:
+            The number of steps taken.
+        """
+        taken = 0
+        quiet = 0
+        while taken < max_steps:
+            n = min(REST_CHECK_EVERY, max_steps - taken)
+            self.step(n)
+            taken += n
+            quiet = quiet + 1 if self.at_rest() else 0
+            if quiet >= REST_CHECKS:
+                break
+        return taken
+
+    # ------------------------------------------------------------------ snapshots
+
+    def snapshot(self) -> int:
+        """Save the physics state in memory; returns a handle for :meth:`restore`."""
+        return self.client.saveState()
+
+    def restore(self, snap: int) -> None:
+        """Return to a saved state; any grasp is released and the motors hold the restored pose."""
+        self.robot.release()
+        self.client.restoreState(stateId=snap)
+        self._after_restore()
+
+    def discard(self, snap: int) -> None:
+        """Free an in-memory snapshot."""
+        self.client.removeState(snap)
+
+    def serialize_state(self) -> bytes:
+        """The current physics state as bytes (a .bullet file), for the experience store."""
+        fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
+        os.close(fd)
+        try:
+            self.client.saveBullet(path)
+            with open(path, "rb") as fh:
+                return fh.read()
+        finally:
+            os.unlink(path)
+
+    def restore_serialized(self, state: bytes) -> None:
+        """Restore a state made by :meth:`serialize_state` in a world built from the same scene."""
+        self.robot.release()
+        fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(state)
+            try:
+                self.client.restoreState(fileName=path)
+            except p.error as exc:
+                raise LlcpsError(
+                    "cannot restore the physics state: it does not match this scene",
+                    hint="restore a state into World.from_scene(<the scene it was saved with>)",
+                ) from exc
+        finally:
+            os.unlink(path)
+        self._after_restore()
+
+    def _after_restore(self) -> None:
+        # Motor targets are not part of a saved state: make them a function of it.
+        self.robot.hold()
+
+    # ------------------------------------------------------------------ lifetime
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            try:
+                self.client.disconnect()
+            except p.error:
+                pass
+
+    def __enter__(self) -> "World":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass
