@@ -18,7 +18,7 @@ from typing import Any, Iterable, Mapping
 
 from llcps.errors import LlcpsError
 from llcps.experiments import plots
-from llcps.experiments.grid import SCENARIO_SEQUENCE, condition_rank
+from llcps.experiments.grid import SCENARIO_SEQUENCE, condition_rank, measure_rank, model_rank
 from llcps.experiments.results import METRICS, ResultsTable
 from llcps.experiments.stats import (
     ALPHA,
@@ -42,6 +42,8 @@ from llcps.experiments.stats import (
 
 format_pct = plots.format_pct
 
+#: The summary names at most this many cells in one sentence; the tables have them all.
+SUMMARY_LIST_LIMIT = 8
 #: How the paper names its two pretraining sizes.
 PRETRAIN_NAMES = {200: "Apriori Training", 4: "No Apriori Training"}
 
@@ -91,8 +93,8 @@ def _overview(table: ResultsTable) -> dict[str, Any]:
     return {
         "rows": len(table),
         "presets": list(table.unique("preset")),
-        "models": list(table.unique("model")),
-        "measures": list(table.unique("measure")),
+        "models": sorted(table.unique("model"), key=model_rank),
+        "measures": sorted(table.unique("measure"), key=measure_rank),
         "pretrain_sizes": sorted(table.unique("pretrain_size"), reverse=True),
         "conditions": sorted(table.unique("condition"), key=condition_rank),
         "seeds": len(seeds),
@@ -368,9 +370,9 @@ def summary_lines(analysis: Analysis) -> list[str]:
             f"(paired Wilcoxon over seeds, uncorrected); {len(holm)} remain after Holm's correction"
         )
         if holm:
-            text += ": " + "; ".join(
-                f"{r.model}/{r.measure}/p{r.pretrain_size}/{r.scenario} {format_pct(r.pct_change)}" for r in holm
-            )
+            named = [f"{r.model}/{r.measure}/p{r.pretrain_size}/{r.scenario} {format_pct(r.pct_change)}" for r in holm]
+            more = len(named) - SUMMARY_LIST_LIMIT
+            text += ": " + "; ".join(named[:SUMMARY_LIST_LIMIT]) + (f"; and {more} more" if more > 0 else "")
         lines.append(text + ".")
     compared = [r for r in fig2 if r.paper_pct_change is not None]
     if compared:
@@ -392,7 +394,7 @@ def summary_lines(analysis: Analysis) -> list[str]:
         worst = max(control, key=lambda r: abs(r.pct_change) if not math.isnan(r.pct_change) else -1.0)
         lines.append(
             f"Control: in {SCENARIO_SEQUENCE[0]} both conditions start from the pretraining set, so they should agree. "
-            f"{len(identical)} of {len(control)} cells are identical seed by seed, {len(sig)} differ at p < {ALPHA}, "
+            f"{len(identical)} of {len(control)} cells are identical seed by seed, {len(sig)} show a difference at p < {ALPHA}, "
             f"the largest change is {format_pct(worst.pct_change)} ({worst.model}/{worst.measure}/p{worst.pretrain_size})."
         )
     if analysis.random:
