@@ -16,7 +16,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import db, inspect
+from llcps.cli import db, inspect, solve
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
 
 app = new_app(
@@ -47,6 +47,7 @@ def _global_options(
 # Command registry: one line per module.
 app.add_typer(db.app, name="db")
 app.add_typer(inspect.app, name="inspect")
+app.command("solve")(solve.solve_cli)
 
 
 def main() -> None:

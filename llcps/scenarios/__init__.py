@@ -1,1 +1,110 @@
-"""scenarios."""
+"""The three CPS scenarios of the paper (Figure 1), each in an original and a
+novelty condition. ``SCENARIOS`` is the one list the CLI, the experiments and the
+tests read. See docs/scenarios.md for pictures and the candidate-space figures.
+"""
+
+from __future__ import annotations
+
+from llcps.domain import fluent
+from llcps.scenarios.base import CONDITIONS, Scenario, lookup
+from llcps.sim.entities import TableSpec, bucket, edge_lip, inside, open_box, shelf, solid
+from llcps.sim.world import SceneSpec
+
+# --------------------------------------------------------------------------- scenario 1
+# A light cube near the right (-y) edge of a narrow table, a bucket on the floor
+# beneath that edge. Original: push drops the cube in. Novelty: a lip along the
+# edge stops every push; lifting the cube over it (another action) still works.
+
+_S1_TABLE = TableSpec(y_half=0.45)
+
+
+def _scenario1(condition: str) -> SceneSpec:
+    table = _S1_TABLE
+    entities = (
+        solid("cube", "box", "red", (0.05, 0.05, 0.05), at=(0.4, -0.36)),
+        bucket("bucket", "blue", at=(0.4, -0.59), table=table, diameter=0.26, height=0.24),
+        solid("ball", "sphere", "green", 0.05, at=(0.4, 0.15)),
+    )
+    fixtures = (edge_lip(table, "right", height=0.09),) if condition == "novelty" else ()
+    return SceneSpec(entities=entities, fixtures=fixtures, table=table, name=f"scenario1/{condition}")
+
+
+# --------------------------------------------------------------------------- scenario 2
+# An item and an open bin. Original: the bin stands on the table within reach.
+# Novelty: the bin stands on the floor beyond the far end of the table, out of the
+# arm's reach; placing falls short, but the item can be driven off the far edge.
+
+_S2_TABLE = TableSpec(x_max=0.85)
+
+
+def _scenario2(condition: str) -> SceneSpec:
+    table = _S2_TABLE
+    item = solid("can", "cylinder", "blue", (0.05, 0.07), at=(0.58, -0.05))
+    if condition == "novelty":
+        bin_ = open_box("bin", "green", at=(1.0, -0.05), size=(0.24, 0.3, 0.35), on=table.floor_z, mass=2.0)
+    else:
+        bin_ = open_box("bin", "green", at=(0.45, 0.3), size=(0.2, 0.2, 0.1))
+    other = solid("block", "box", "red", (0.05, 0.05, 0.05), at=(0.35, -0.3))
+    return SceneSpec(entities=(item, bin_, other), table=table, name=f"scenario2/{condition}")
+
+
+# --------------------------------------------------------------------------- scenario 3
+# A tray holding one cube. Original: lift the cube out from the top. Novelty: a
+# shelf over the tray blocks the top approach; sliding the tray out from under the
+# shelf makes the cube reachable again.
+
+
+def _scenario3(condition: str) -> SceneSpec:
+    tray = open_box("tray", "green", at=(0.5, 0.0), size=(0.16, 0.16, 0.05), mass=0.3)
+    cube = inside(solid("cube", "box", "red", (0.04, 0.04, 0.04), at=(0, 0)), tray)
+    other = solid("ball", "sphere", "blue", 0.05, at=(0.35, 0.3))
+    fixtures = shelf("shelf", at=(0.5, 0.0), clearance=0.3, size=(0.3, 0.18, 0.02)) if condition == "novelty" else ()
+    return SceneSpec(entities=(tray, cube, other), fixtures=fixtures, name=f"scenario3/{condition}")
+
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        Scenario(
+            name="scenario1",
+            alias="bucket",
+            title="push an object off the table into a bucket",
+            story=(
+                "Push the cube off the table edge into the bucket on the floor. Novelty: a lip "
+                "along the edge stops every push; another action must get the cube over it."
+            ),
+            build_scene=_scenario1,
+            goal_pos=frozenset({fluent("in", "cube", "bucket")}),
+        ),
+        Scenario(
+            name="scenario2",
+            alias="container",
+            title="place an item into a container",
+            story=(
+                "Place the can into the bin. Novelty: the bin stands beyond the far end of the "
+                "table, out of the arm's reach, so placing falls short."
+            ),
+            build_scene=_scenario2,
+            goal_pos=frozenset({fluent("in", "can", "bin")}),
+        ),
+        Scenario(
+            name="scenario3",
+            alias="empty",
+            title="empty a container holding one object",
+            story=(
+                "Take the cube out of the tray. Novelty: a shelf over the tray blocks the "
+                "approach from the top, so the cube cannot be lifted out."
+            ),
+            build_scene=_scenario3,
+            goal_neg=frozenset({fluent("in", "cube", "tray")}),
+        ),
+    )
+}
+
+
+def get_scenario(name: str) -> Scenario:
+    """A scenario by name or alias (``scenario2`` or ``container``)."""
+    return lookup(SCENARIOS, name)
+
+
+__all__ = ["CONDITIONS", "SCENARIOS", "Scenario", "get_scenario"]

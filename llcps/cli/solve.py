@@ -1,0 +1,108 @@
+"""``llcps solve``: one scenario, one episode, on one branch of the store."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.syntax import Syntax
+
+from llcps.cli._common import JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
+from llcps.cps.agent import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, SolveConfig, SolveResult, solve
+from llcps.models import MEASURES, WORLD_MODELS
+from llcps.scenarios import CONDITIONS, SCENARIOS
+
+ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
+MeasureName = choice_enum("MeasureName", tuple(MEASURES))
+Condition = choice_enum("Condition", CONDITIONS)
+
+#: Exit codes of ``llcps solve``.
+EXIT_SOLVED, EXIT_UNSOLVED, EXIT_INTERRUPTED = 0, 1, 130
+
+_SCENARIO_HELP = "Scenario to solve: " + ", ".join(f"{s.name} ({s.alias})" for s in SCENARIOS.values()) + "."
+
+
+def solve_cli(
+    ctx: typer.Context,
+    scenario: Annotated[str, typer.Argument(metavar="SCENARIO", help=_SCENARIO_HELP, show_default=False)],
+    condition: Annotated[Condition, typer.Option("--condition", help="Original (the plan works) or novelty (it fails).")] = "novelty",  # type: ignore[valid-type, assignment]
+    model: Annotated[ModelName, typer.Option("--model", help="World model that ranks exploration.")] = DEFAULT_MODEL,  # type: ignore[valid-type, assignment]
+    measure: Annotated[MeasureName, typer.Option("--measure", help="Measure that orders candidates by the model's prediction.")] = DEFAULT_MEASURE,  # type: ignore[valid-type, assignment]
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the model and of tie-breaks; recorded with every trial.")] = 0,
+    budget: Annotated[int, typer.Option("--budget", metavar="N", help="Most exploration trials before giving up (exit 1).")] = DEFAULT_BUDGET,
+    refit_every: Annotated[int, typer.Option("--refit-every", metavar="N", help="Refit the world model after every N exploration trials.")] = 1,
+    gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
+    gif: Annotated[Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the plan and the resolving trial to a GIF.", show_default=False)] = None,
+    as_json: JsonFlag = False,
+) -> None:
+    """Plan, execute, explore on failure, learn an operator; every trial goes to the store.
+
+    Exit code 0 when the task is solved, 1 when the budget ran out (every trial is
+    kept), 2 for bad input, 130 when interrupted (Ctrl-C; completed trials are kept).
+    """
+    config = SolveConfig(
+        scenario=scenario,
+        condition=str(condition.value),  # type: ignore[attr-defined]
+        model=str(model.value),  # type: ignore[attr-defined]
+        measure=str(measure.value),  # type: ignore[attr-defined]
+        seed=seed,
+        budget=budget,
+        refit_every=refit_every,
+    )
+    config.validate()
+    with open_store(ctx, create=True) as store, _progress() as progress:
+        task = progress.add_task("exploring", total=None, visible=False)
+
+        def report(phase: str, done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total, visible=True, description=phase)
+
+        result = solve(store, branch=selected_branch(ctx), config=config, gui=gui, gif=gif, progress=report)
+    if as_json:
+        print_json(result.as_json())
+    else:
+        show(result)
+    raise typer.Exit(_exit_code(result))
+
+
+def _progress() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+    )
+
+
+def _exit_code(result: SolveResult) -> int:
+    if result.status == "solved":
+        return EXIT_SOLVED
+    if result.status == "interrupted":
+        return EXIT_INTERRUPTED
+    return EXIT_UNSOLVED
+
+
+def show(result: SolveResult) -> None:
+    """The episode summary for people."""
+    print_table(
+        f"{result.scenario} ({result.condition}) on {result.branch}: {result.status}",
+        ("", ""),
+        [
+            ("plan", " ".join(result.plan) or "-"),
+            ("failed action", result.failed_action or "-"),
+            ("failure", result.missing_effects or "-"),
+            ("world model / measure", f"{result.model} / {result.measure} (seed {result.seed})"),
+            ("exploration trials", f"{result.exploration_trials} of {result.candidates} candidates"),
+            ("plan trials", result.plan_trials),
+            ("sim seconds", f"{result.sim_seconds:.1f}"),
+            ("wall seconds", f"{result.wall_seconds:.1f}"),
+            ("episode", result.episode_id),
+        ],
+        show_header=False,
+    )
+    for pddl in result.learned_operators:
+        message("learned operator:")
+        err_console.print(Syntax(pddl, "lisp", theme="ansi_dark", background_color="default"))

@@ -1,0 +1,498 @@
+"""The lifelong CPS agent: plan, execute with monitoring, explore on failure, learn K'.
+
+One call of :func:`solve` is one *episode*: a scenario in one condition, solved on
+one branch of the experience store. Every trial the robot executes is written to
+the store as it happens; the world model trains on every trial the branch can see
+(the lifelong training set) and is refit during exploration, as the paper's agent
+does within a scenario.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from llcps.cps.candidates import Grid, enumerate_candidates
+from llcps.cps.outcomes import desired_outcome
+from llcps.domain import (
+    ACTIONS,
+    ControllerParams,
+    EntityFeatures,
+    State,
+    TrialRecord,
+    TrialSpec,
+    WorldModelInput,
+)
+from llcps.errors import LlcpsError
+from llcps.models import WORLD_MODELS
+from llcps.models.measures import MEASURES, rank
+from llcps.scenarios import SCENARIOS, get_scenario
+from llcps.scenarios.base import CONDITIONS, Scenario
+from llcps.sim.controllers import PUSH_DIRECTION
+from llcps.sim.perception import entity_features, perceive
+from llcps.sim.render import GifRecorder
+from llcps.sim.trial import TrialResult, run_trial
+from llcps.sim.world import World
+from llcps.store import NewTrial, Store
+from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.monitor import check_step
+from llcps.symbolic.operators import learn_operator, refine_failed_action
+from llcps.symbolic.planner import GroundAction, plan
+
+#: Controller settings of K's own actions: the robot's nominal way of doing each.
+NOMINAL_RATE = 0.4
+NOMINAL_MAGNITUDE = 0.15
+DEFAULT_MODEL = "nb"
+DEFAULT_MEASURE = "goal-directed"
+DEFAULT_BUDGET = 300
+#: Push directions K may use to move an object toward a target ("top" tips it instead).
+PUSH_DIRECTIONS = {k: v for k, v in PUSH_DIRECTION.items() if k != "top"}
+#: Simulation steps between GIF frames (240 Hz / 8 = 30 frames per simulated second).
+GIF_EVERY = 8
+#: Cap on steps of one settle/trial, as a safety net (240 Hz).
+SETTLE_STEPS = 480
+
+
+@dataclass(frozen=True)
+class SolveConfig:
+    """Everything that defines an episode, so a stored run can be repeated."""
+
+    scenario: str
+    condition: str = "novelty"
+    model: str = DEFAULT_MODEL
+    measure: str = DEFAULT_MEASURE
+    seed: int = 0
+    budget: int = DEFAULT_BUDGET
+    refit_every: int = 1
+    grid: Grid = Grid()
+
+    def validate(self) -> Scenario:
+        """Check names and numbers before anything runs; returns the scenario."""
+        scenario = get_scenario(self.scenario)
+        if self.condition not in CONDITIONS:
+            raise LlcpsError(f"unknown condition {self.condition!r}", hint=f"choose one of: {', '.join(CONDITIONS)}")
+        if self.model not in WORLD_MODELS:
+            from llcps.errors import UnknownNameError
+
+            raise UnknownNameError("world model", self.model, list(WORLD_MODELS))
+        if self.measure not in MEASURES:
+            from llcps.errors import UnknownNameError
+
+            raise UnknownNameError("measure", self.measure, list(MEASURES))
+        if self.budget < 0:
+            raise LlcpsError(f"budget must be >= 0, got {self.budget}", hint="pass --budget 0 or more")
+        if self.refit_every < 1:
+            raise LlcpsError(f"refit_every must be >= 1, got {self.refit_every}")
+        return scenario
+
+
+@dataclass
+class SolveResult:
+    """The summary of one episode (``llcps solve --json`` prints :meth:`as_json`)."""
+
+    scenario: str
+    condition: str
+    model: str
+    measure: str
+    seed: int
+    branch: str
+    status: str = "running"
+    plan: list[str] = field(default_factory=list)
+    failed_action: str | None = None
+    missing_effects: str | None = None
+    exploration_trials: int = 0
+    plan_trials: int = 0
+    candidates: int = 0
+    sim_steps: int = 0
+    sim_seconds: float = 0.0
+    wall_seconds: float = 0.0
+    learned_operators: list[str] = field(default_factory=list)
+    resolving_trial_id: int | None = None
+    episode_id: int | None = None
+    run_id: int | None = None
+
+    @property
+    def solved(self) -> bool:
+        return self.status == "solved"
+
+    def as_json(self) -> dict[str, object]:
+        return {
+            "scenario": self.scenario,
+            "condition": self.condition,
+            "model": self.model,
+            "measure": self.measure,
+            "seed": self.seed,
+            "branch": self.branch,
+            "solved": self.solved,
+            "status": self.status,
+            "plan": self.plan,
+            "failed_action": self.failed_action,
+            "missing_effects": self.missing_effects,
+            "exploration_trials": self.exploration_trials,
+            "plan_trials": self.plan_trials,
+            "candidates": self.candidates,
+            "sim_steps": self.sim_steps,
+            "sim_seconds": round(self.sim_seconds, 4),
+            "wall_seconds": round(self.wall_seconds, 4),
+            "learned_operators": self.learned_operators,
+            "resolving_trial_id": self.resolving_trial_id,
+            "episode_id": self.episode_id,
+            "run_id": self.run_id,
+        }
+
+
+ProgressCallback = Callable[[str, int, int], None]
+"""Called as ``progress(phase, done, total)``; phase is "plan" or "explore"."""
+
+
+def load_knowledge(store: Store, branch: str) -> KnowledgeBase:
+    """K' of a branch: the default K plus every learned operator (and refinement) it sees."""
+    kb = KnowledgeBase.default()
+    for record in store.visible_operators(branch):
+        kb = KnowledgeBase.apply_learned(kb, record.definition)
+    return kb
+
+
+class Agent:
+    """Executes trials in one world and records each one in the store."""
+
+    def __init__(
+        self,
+        *,
+        store: Store,
+        branch: str,
+        world: World,
+        scenario: Scenario,
+        config: SolveConfig,
+        result: SolveResult,
+        records: list[TrialRecord],
+    ) -> None:
+        self.store = store
+        self.branch = branch
+        self.world = world
+        self.scenario = scenario
+        self.config = config
+        self.result = result
+        self.records = records
+        self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
+        self.recorder: GifRecorder | None = None
+
+    def filmed(self):
+        """A context that records frames into the episode's GIF, if one was asked for."""
+        return self.recorder if self.recorder is not None else contextlib.nullcontext()
+
+    # -- symbolic glue -------------------------------------------------------
+    def task(self, state: State) -> Task:
+        objects = {name: ("item" if kind == "object" else "container") for name, kind in self.kinds.items()}
+        objects.update({name: "surface" for name in self.world.fixtures if name != "table"})
+        return Task(objects=objects, init=state, goal_pos=self.scenario.goal_pos, goal_neg=self.scenario.goal_neg)
+
+    def controller_call(self, step: GroundAction) -> TrialSpec:
+        """Map a plan step to its controller call: learned settings, or K's nominal ones."""
+        call = step.controller
+        if call is None:
+            raise LlcpsError(f"plan step {step.label} has no controller")
+        orientation = "top"
+        if call.action == "push" and call.toward is not None:
+            orientation = self.orientation_toward(call.arguments[0], call.toward)
+        return call.spec(ControllerParams(NOMINAL_RATE, NOMINAL_MAGNITUDE, orientation))
+
+    def orientation_toward(self, obj: str, target: str) -> str:
+        """K's push moves ``obj`` toward ``target``: the approach side whose push does."""
+        a = np.asarray(self.world.center(obj)[:2])
+        b = np.asarray(self.world.center(target)[:2])
+        d = b - a
+        return max(PUSH_DIRECTIONS, key=lambda k: float(np.dot(PUSH_DIRECTIONS[k], d)))
+
+    # -- trials ----------------------------------------------------------------
+    def execute(self, spec: TrialSpec, *, source: str, snapshot_id: int | None) -> tuple[TrialResult, TrialRecord | None]:
+        """Run one trial from the current physics state and store it durably.
+
+        With ``snapshot_id=None`` the trial is a re-enactment for a GIF: it is not stored.
+        """
+        trial = run_trial(self.world, spec)
+        if snapshot_id is None:
+            return trial, None
+        state_after = trial.after
+        solved = self.scenario.goal_reached(state_after)
+        new = NewTrial(
+            branch=self.branch,
+            source=source,
+            spec=spec,
+            features=trial.features,
+            outcome=trial.outcome,
+            solved=solved,
+            sim_steps=trial.sim_steps,
+            wall_seconds=trial.wall_seconds,
+            seed=self.config.seed,
+            run_id=self.result.run_id,
+            episode_id=self.result.episode_id,
+            snapshot_id=snapshot_id,
+            scenario=self.scenario.name,
+        )
+        trial_id = self.store.add_trial(new)
+        record = TrialRecord(
+            id=trial_id,
+            branch=self.branch,
+            source=source,
+            spec=spec,
+            features=trial.features,
+            outcome=trial.outcome,
+            solved=solved,
+            sim_steps=trial.sim_steps,
+            wall_seconds=trial.wall_seconds,
+            seed=self.config.seed,
+            run_id=self.result.run_id,
+            episode_id=self.result.episode_id,
+            snapshot_id=snapshot_id,
+            scenario=self.scenario.name,
+        )
+        self.records.append(record)
+        self.result.sim_steps += trial.sim_steps
+        if source == "plan":
+            self.result.plan_trials += 1
+        elif source == "exploration":
+            self.result.exploration_trials += 1
+        return trial, record
+
+    def snapshot(self) -> tuple[int, int]:
+        """Snapshot the world in memory and in the store; returns (memory id, store id)."""
+        memory = self.world.snapshot()
+        stored = self.store.put_snapshot(scene=self.world.scene.to_dict(), state=self.world.serialize_state())
+        return memory, stored
+
+    def run_plan(
+        self, kb: KnowledgeBase, steps: Sequence[GroundAction], *, store: bool = True
+    ) -> tuple[State, GroundAction | None, object]:
+        """Execute a plan step by step with the monitor; stop at the first failing step."""
+        state = perceive(self.world)
+        for step in steps:
+            spec = self.controller_call(step)
+            stored = self.snapshot()[1] if store else None
+            trial, _ = self.execute(spec, source="plan", snapshot_id=stored)
+            state = trial.after
+            failure = check_step(step, state)
+            if failure is not None:
+                return state, step, failure
+        return state, None, None
+
+
+def solve(
+    store: Store,
+    *,
+    branch: str | None,
+    config: SolveConfig,
+    command: str = "solve",
+    gui: bool = False,
+    gif: str | Path | None = None,
+    progress: ProgressCallback | None = None,
+) -> SolveResult:
+    """Solve one scenario on one branch; see the module docstring.
+
+    Args:
+        store: the experience store (trials, operators and models are read and written there).
+        branch: branch name, ``None`` for the store's current branch.
+        config: scenario, condition, world model, measure, seed, budget.
+        command: the command line recorded with the run.
+        gui: open a PyBullet GUI window (needs a display).
+        gif: write the plan's execution and the resolving trial to this GIF.
+        progress: optional callback for progress bars.
+
+    Returns:
+        The episode summary; ``status`` is ``solved``, ``budget_exhausted``,
+        ``no_plan`` or ``interrupted``.
+    """
+    scenario = config.validate()
+    branch_name = store.resolve_branch(branch).name
+    started = time.perf_counter()
+    result = SolveResult(
+        scenario=scenario.name,
+        condition=config.condition,
+        model=config.model,
+        measure=config.measure,
+        seed=config.seed,
+        branch=branch_name,
+    )
+    result.run_id = store.start_run(
+        command=command, seed=config.seed, config=_config_json(config), branch=branch_name
+    )
+    result.episode_id = store.start_episode(
+        run_id=result.run_id,
+        branch=branch_name,
+        scenario=scenario.name,
+        condition=config.condition,
+        model=config.model,
+        measure=config.measure,
+        seed=config.seed,
+    )
+    world: World | None = None
+    try:
+        records = list(store.visible_trials(branch_name))
+        model = WORLD_MODELS[config.model](config.seed).fit(records)
+        kb = load_knowledge(store, branch_name)
+        world = World.from_scene(scenario.scene(config.condition), gui=gui)
+        world.settle(max_steps=SETTLE_STEPS)
+        agent = Agent(
+            store=store,
+            branch=branch_name,
+            world=world,
+            scenario=scenario,
+            config=config,
+            result=result,
+            records=records,
+        )
+        if gif is not None:
+            agent.recorder = GifRecorder(world, every=GIF_EVERY)
+        _episode(agent, kb, model, result, progress)
+        if agent.recorder is not None and agent.recorder.frames:
+            agent.recorder.save(gif, speedup=2.0)
+    except KeyboardInterrupt:
+        result.status = "interrupted"
+    finally:
+        result.wall_seconds = time.perf_counter() - started
+        result.sim_seconds = result.sim_steps * (world.time_step if world is not None else 1 / 240)
+        if world is not None:
+            world.close()
+        if result.status == "running":
+            result.status = "error"
+        store.finish_episode(result.episode_id, status=result.status, summary=result.as_json())
+        store.finish_run(result.run_id, status=result.status)
+    return result
+
+
+def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progress) -> None:
+    """Plan with K, execute with the monitor; at the first failure, explore (as the paper does)."""
+    state = perceive(agent.world)
+    if agent.scenario.goal_reached(state):
+        result.status = "solved"
+        return
+    steps = plan(kb, agent.task(state))
+    if steps is None:
+        result.status = "no_plan"
+        return
+    result.plan = [step.label for step in steps]
+    with agent.filmed():
+        state, failed_step, failure = agent.run_plan(kb, steps)
+    if failed_step is None:
+        result.status = "solved" if agent.scenario.goal_reached(state) else "no_plan"
+        return
+    result.failed_action = failed_step.label
+    result.missing_effects = failure.describe()
+    _explore(agent, kb, model, failed_step, failure, state, result, progress)
+
+
+def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failure_state: State, result, progress):
+    """Try ranked candidates from the failure snapshot until one resolves the novelty."""
+    world, config = agent.world, agent.config
+    failed_spec = agent.controller_call(failed_step)
+    memory_snap, stored_snap = agent.snapshot()
+    candidates = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
+    result.candidates = len(candidates)
+    features = {name: entity_features(world, name) for name in agent.kinds}
+    inputs = [WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in candidates]
+    desired = desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del)
+    remaining = list(range(len(candidates)))
+    order = _rank(model, inputs, remaining, config, desired)
+    tried = 0
+    while order and result.exploration_trials < config.budget:
+        index = order.pop(0)
+        remaining.remove(index)
+        spec = candidates[index]
+        world.restore(memory_snap)
+        trial, record = agent.execute(spec, source="exploration", snapshot_id=stored_snap)
+        tried += 1
+        if progress is not None:
+            progress("explore", result.exploration_trials, min(config.budget, len(candidates)))
+        resolved, needed_plan = _resolves(agent, kb, trial, failed_step, failure_state)
+        if resolved:
+            learned = learn_operator(
+                spec=spec,
+                before=failure_state,
+                after=trial.after,
+                objects=agent.task(failure_state).objects,
+                focus=failed_step.args,
+            )
+            definition = {"operator": learned.to_json(), "refinement": None}
+            new_kb = kb.with_operator(learned)
+            if needed_plan:
+                new_kb = refine_failed_action(new_kb, failed_step, learned, failure_state)
+                definition["refinement"] = new_kb.refinement_of(failed_step.name)
+            agent.store.add_operator(
+                branch=agent.branch,
+                name=learned.name,
+                pddl=learned.to_pddl(),
+                definition=definition,
+                scenario=agent.scenario.name,
+                episode_id=result.episode_id,
+            )
+            result.learned_operators.append(learned.to_pddl())
+            result.resolving_trial_id = record.id
+            result.status = "solved"
+            if agent.recorder is not None:
+                _film_resolution(agent, kb, spec, memory_snap)
+            return new_kb
+        if tried % config.refit_every == 0 and remaining:
+            model.fit(agent.records)
+            order = _rank(model, inputs, remaining, config, desired)
+    result.status = "budget_exhausted"
+    return kb
+
+
+def _film_resolution(agent: Agent, kb: KnowledgeBase, spec: TrialSpec, snapshot: int) -> None:
+    """Re-enact the resolving trial (and the plan it enabled) for the GIF; nothing is stored.
+
+    Physics is deterministic from the snapshot, so the film shows what was recorded.
+    """
+    agent.world.restore(snapshot)
+    with agent.filmed():
+        trial, _ = agent.execute(spec, source="exploration", snapshot_id=None)
+        if not agent.scenario.goal_reached(trial.after):
+            steps = plan(kb, agent.task(trial.after)) or ()
+            agent.run_plan(kb, steps, store=False)
+
+
+def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> list[int]:
+    proba = model.predict_proba([inputs[i] for i in remaining])
+    order = rank(proba, config.measure, seed=config.seed, desired=desired)
+    return [remaining[i] for i in order]
+
+
+def _resolves(
+    agent: Agent, kb: KnowledgeBase, trial: TrialResult, failed_step: GroundAction, failure_state: State
+) -> tuple[bool, bool]:
+    """Did this trial resolve the novelty? Returns (resolved, through a re-plan).
+
+    The novelty is that a_f fails. A trial resolves it if the goal now holds, or if
+    it made a_f work: K plans from the new state through a_f, and that plan, executed,
+    reaches the goal. (A plan around a_f with K's other actions is not a resolution:
+    it would not need the trial.) A trial that changed no fluent is not re-planned.
+    """
+    if agent.scenario.goal_reached(trial.after):
+        return True, False
+    if trial.after == failure_state:
+        return False, False
+    steps = plan(kb, agent.task(trial.after))
+    if not steps or not any(s.name == failed_step.name and s.args == failed_step.args for s in steps):
+        return False, False
+    state, failed, _ = agent.run_plan(kb, steps)
+    return failed is None and agent.scenario.goal_reached(state), True
+
+
+def _config_json(config: SolveConfig) -> dict[str, object]:
+    return {
+        "scenario": config.scenario,
+        "condition": config.condition,
+        "model": config.model,
+        "measure": config.measure,
+        "seed": config.seed,
+        "budget": config.budget,
+        "refit_every": config.refit_every,
+    }
+
+
+__all__ = ["SolveConfig", "SolveResult", "solve", "load_knowledge", "SCENARIOS", "EntityFeatures"]
