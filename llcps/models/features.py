@@ -19,6 +19,7 @@ import warnings
 from typing import Mapping, Protocol, Sequence
 
 import numpy as np
+from sklearn import config_context
 from sklearn.compose import ColumnTransformer
 from sklearn.preprocessing import OneHotEncoder, StandardScaler
 
@@ -76,6 +77,11 @@ _COLOR_CODE = {v: i for i, v in enumerate(COLORS)}
 _NONE_SHAPE, _NONE_COLOR = len(SHAPES), len(COLORS)
 _MISSING_SLOT = (float(_NONE_SHAPE), float(_NONE_COLOR)) + (float("nan"),) * len(_ENTITY_CONTINUOUS)
 _entity_continuous = operator.attrgetter(*_ENTITY_CONTINUOUS)
+_outcome_bits = operator.attrgetter(*OUTCOME_NAMES)
+
+#: scikit-learn settings for the encoder's calls: the raw table is built and checked
+#: here, so per-call input validation (most of a call's cost) is skipped.
+_SKLEARN_CONFIG = {"assume_finite": True, "skip_parameter_validation": True}
 
 
 class ModelInput(Protocol):
@@ -151,7 +157,7 @@ def outcome_matrix(records: Sequence[object]) -> np.ndarray:
     """
     if not records:
         return np.empty((0, len(OUTCOME_NAMES)), dtype=np.uint8)
-    return np.array([r.outcome.bits() for r in records], dtype=np.uint8)  # type: ignore[attr-defined]
+    return np.array([_outcome_bits(r.outcome) for r in records], dtype=np.uint8)  # type: ignore[attr-defined]
 
 
 class TrialTable:
@@ -230,7 +236,7 @@ class FeatureEncoder:
         if len(table) == 0:
             self._set_scaler(np.zeros(len(CONTINUOUS_COLUMNS)), np.ones(len(CONTINUOUS_COLUMNS)))
             return self.transform(table)
-        with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
+        with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"), config_context(**_SKLEARN_CONFIG):
             warnings.simplefilter("ignore", RuntimeWarning)
             encoded = self._transformer.fit_transform(table)
         scaler = self._scaler
@@ -247,7 +253,8 @@ class FeatureEncoder:
         table = _check_table(table)
         if len(table) == 0:
             return np.empty((0, self.n_features), dtype=np.float32)
-        return _finish(self._transformer.transform(table))
+        with config_context(**_SKLEARN_CONFIG):
+            return _finish(self._transformer.transform(table))
 
     def params(self) -> dict[str, np.ndarray]:
         """The fitted state as plain float64 arrays (for safe persistence)."""

@@ -1,0 +1,119 @@
+"""Fit, refit, predict and ranking times of the world models on toy trials.
+
+``python -m llcps.models.benchmark`` prints the table docs/world_models.md reports.
+Times are the minimum over repeats (the least disturbed run) of wall-clock seconds
+on this machine; they are figures to report, never assertions in tests.
+
+- *fit*: a fresh model fitted on n trials (every trial encoded).
+- *refit*: the same model fitted again on those n trials plus one new one, as the
+  agent does after each exploration trial (known trials' rows are reused).
+- *predict*: predicted Omega for 1,000 candidates.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import asdict, dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from llcps.models.measures import MEASURES, rank
+from llcps.models.registry import PAPER_MODELS, make_world_model
+from llcps.models.synthetic import synthetic_trials
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Seconds for one model at one training-set size."""
+
+    model: str
+    n_trials: int
+    fit: float
+    refit: float
+    predict: float
+
+
+def _best(action: Callable[[], object], repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        action()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def time_world_models(
+    names: Sequence[str] = PAPER_MODELS,
+    sizes: Sequence[int] = (200, 2000, 10000),
+    *,
+    seed: int = 0,
+    candidates: int = 1000,
+    repeats: int = 3,
+) -> list[Timing]:
+    """Time fit / refit / predict of each model at each training-set size."""
+    pool = synthetic_trials(max(sizes) + 1, seed=seed)
+    queries = [r.model_input for r in synthetic_trials(candidates, seed=seed + 1)]
+    rows = []
+    for name in names:
+        for n in sizes:
+            fit = _best(lambda: make_world_model(name, seed).fit(pool[:n]), repeats)
+            model = make_world_model(name, seed)
+            growing = list(pool[:n])
+
+            def refit() -> None:
+                model.fit(growing[:n])
+                growing.append(pool[n])
+                start = time.perf_counter()
+                model.fit(growing)
+                refit_times.append(time.perf_counter() - start)
+                growing.pop()
+
+            refit_times: list[float] = []
+            for _ in range(repeats):
+                refit()
+            predict = _best(lambda: model.predict_proba(queries), repeats)
+            rows.append(Timing(name, n, fit, min(refit_times), predict))
+    return rows
+
+
+def time_ranking(n: int = 1000, *, seed: int = 0, repeats: int = 5) -> float:
+    """Seconds to rank ``n`` candidates under every measure (given predictions)."""
+    proba = np.random.default_rng(seed).random((n, 6))
+    desired = np.eye(6)[2]
+    return _best(lambda: [rank(proba, name, seed=seed, desired=desired) for name in MEASURES], repeats)
+
+
+def markdown(rows: Sequence[Timing], ranking: float) -> str:
+    """The timing table as Markdown (milliseconds)."""
+    lines = [
+        "| model | trials | fit (ms) | refit +1 trial (ms) | predict 1,000 (ms) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(f"| {r.model} | {r.n_trials:,} | {r.fit * 1e3:.1f} | {r.refit * 1e3:.1f} | {r.predict * 1e3:.1f} |")
+    lines.append("")
+    lines.append(f"Ranking 1,000 candidates under all {len(MEASURES)} measures: {ranking * 1e3:.2f} ms.")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--models", nargs="+", default=list(PAPER_MODELS))
+    parser.add_argument("--sizes", nargs="+", type=int, default=[200, 2000, 10000])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+    rows = time_world_models(args.models, args.sizes, repeats=args.repeats)
+    ranking = time_ranking()
+    if args.json:
+        import json
+
+        print(json.dumps({"timings": [asdict(r) for r in rows], "ranking_seconds": ranking}, indent=2))
+    else:
+        print(markdown(rows, ranking))
+
+
+if __name__ == "__main__":
+    main()
