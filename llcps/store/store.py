@@ -447,10 +447,14 @@ class Store:
         keep = 0
         if to == PRETRAIN:
             keep = self._max_visible(conn, chain, Trial.source == PRETRAIN)
-        trial_clause = and_(Trial.branch_id == bid, Trial.id > keep)
-        op_clause = and_(Operator.branch_id == bid, Operator.watermark > keep)
-        model_clause = and_(WorldModel.branch_id == bid, WorldModel.watermark > keep)
-        if action == "delete":
+            trial_clause = and_(Trial.branch_id == bid, Trial.id > keep)
+            op_clause = and_(Operator.branch_id == bid, Operator.watermark > keep)
+            model_clause = and_(WorldModel.branch_id == bid, WorldModel.watermark > keep)
+        else:  # everything the branch owns, whatever its watermark
+            trial_clause = Trial.branch_id == bid
+            op_clause = Operator.branch_id == bid
+            model_clause = WorldModel.branch_id == bid
+        if to != PRETRAIN:
             episode_clause = Episode.branch_id == bid
         else:
             kept_episodes = select(Trial.episode_id).where(Trial.branch_id == bid, Trial.id <= keep, Trial.episode_id.is_not(None))
