@@ -147,8 +147,6 @@ class Motion:
             self.wait(CHECK_EVERY)
             if robot.fingers_touch(body):
                 robot.attach(body)
-                each = robot.finger_width() / 2.0
-                robot.command_fingers(max(0.0, each - 0.002), force=FINGER_FORCE)
                 return True
         return False
 

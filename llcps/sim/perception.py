@@ -30,6 +30,7 @@ from llcps.domain import EntityFeatures, State, fluent
 from llcps.sim import geometry as g
 from llcps.sim.geometry import TOUCH_DISTANCE
 from llcps.sim.robot import RAY_MASK
+from llcps.sim.world import FLOOR
 
 if TYPE_CHECKING:
     from llcps.sim.world import World
@@ -161,12 +162,14 @@ def perceive(world: "World") -> State:
             if cont.is_container and g.in_interior(world, centre, c):
                 inside.add((o, c))
                 facts.add(fluent("in", o, c))
+    tops = {n: box[1][2] for n, box in boxes.items()}
+    tops[FLOOR] = world.scene.table.floor_z  # a plane's bounding box is unbounded
     for a, b in touching:
         facts.add(fluent("touching", a, b))
-        for top, base in ((a, b), (b, a)):
-            if top in world.entities and (top, base) not in inside:
-                if boxes[top][0][2] >= boxes[base][1][2] - 0.01 and boxes[top][1][2] > boxes[base][1][2]:
-                    facts.add(fluent("on", top, base))
+        for upper, base in ((a, b), (b, a)):
+            if upper in world.entities and (upper, base) not in inside:
+                if boxes[upper][0][2] >= tops[base] - 0.01 and boxes[upper][1][2] > tops[base]:
+                    facts.add(fluent("on", upper, base))
     for name in visible_entities(world):
         facts.add(fluent("visible", name))
     for name in world.entities:

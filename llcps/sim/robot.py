@@ -16,6 +16,7 @@ force. Opening the hand removes the constraint.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, Sequence
 
@@ -29,6 +30,8 @@ ARM_JOINTS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6)
 FINGER_JOINTS: tuple[int, ...] = (9, 10)
 HAND_LINK = 8
 TOOL_LINK = 11
+#: Links that hold a grasped object (no contacts with it while the grasp constraint carries it).
+HOLD_LINKS: tuple[int, ...] = (HAND_LINK, 9, 10, TOOL_LINK)
 
 #: Joint torque limits of the Panda (N m) and finger force limit (N).
 ARM_FORCES: tuple[float, ...] = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
@@ -67,6 +70,11 @@ class Robot:
 
     def __init__(self, client: Any, *, visuals: bool = True) -> None:
         self.client = client
+        cid = client._client
+        # hot-path calls bound to the client once (BulletClient re-binds on every call)
+        self._ik = functools.partial(p.calculateInverseKinematics, physicsClientId=cid)
+        self._motors = functools.partial(p.setJointMotorControlArray, physicsClientId=cid)
+        self._link_state = functools.partial(p.getLinkState, physicsClientId=cid)
         flags = 0 if visuals else p.URDF_IGNORE_VISUAL_SHAPES
         self.body_id: int = client.loadURDF(
             f"{pybullet_data.getDataPath()}/franka_panda/panda.urdf",
@@ -112,7 +120,7 @@ class Robot:
         self.command_fingers(q[7], force=FINGER_FORCE)
 
     def tool_position(self) -> tuple[float, float, float]:
-        return self.client.getLinkState(self.body_id, TOOL_LINK)[4]
+        return self._link_state(self.body_id, TOOL_LINK)[4]
 
     def finger_width(self) -> float:
         """Current opening between the fingers (m)."""
@@ -127,7 +135,7 @@ class Robot:
         A few iterations suffice per control step (the target moves a millimetre or
         so); :meth:`reach_error` uses a longer, HOME-seeded solve.
         """
-        return self.client.calculateInverseKinematics(
+        return self._ik(
             self.body_id,
             TOOL_LINK,
             position,
@@ -137,13 +145,11 @@ class Robot:
         )
 
     def command_arm(self, targets: Sequence[float]) -> None:
-        self.client.setJointMotorControlArray(
-            self.body_id, ARM_JOINTS, p.POSITION_CONTROL, targetPositions=targets[:7], forces=ARM_FORCES
-        )
+        self._motors(self.body_id, ARM_JOINTS, p.POSITION_CONTROL, targetPositions=targets[:7], forces=ARM_FORCES)
 
     def command_fingers(self, each: float, *, force: float = FINGER_FORCE) -> None:
         """Drive both fingers to ``each`` metres from the centre."""
-        self.client.setJointMotorControlArray(
+        self._motors(
             self.body_id, FINGER_JOINTS, p.POSITION_CONTROL, targetPositions=(each, each), forces=(force, force)
         )
 
@@ -175,12 +181,20 @@ class Robot:
             childFrameOrientation=(0, 0, 0, 1),
         )
         c.changeConstraint(self._constraint, maxForce=GRASP_FORCE)
+        # The constraint now carries the object: the fingers stop pressing on it
+        # (their contacts would only fight the constraint) until it is released.
+        for link in HOLD_LINKS:
+            c.setCollisionFilterPair(self.body_id, body, link, -1, 0)
+        each = self.finger_width() / 2.0
+        self.command_fingers(each)
         self.grasped = body
 
     def release(self) -> None:
         """Drop whatever the grasp constraint holds (the fingers are not moved)."""
         if self._constraint is not None:
             self.client.removeConstraint(self._constraint)
+            for link in HOLD_LINKS:
+                self.client.setCollisionFilterPair(self.body_id, self.grasped, link, -1, 1)
         self._constraint = None
         self.grasped = None
 

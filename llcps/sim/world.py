@@ -10,6 +10,7 @@ and stepping from it gives bit-identical results.
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import tempfile
@@ -126,6 +127,9 @@ class World:
                 "cannot open a GUI window: no display", hint="unset --gui, or run under a desktop / xvfb-run"
             )
         self.client = bullet_client.BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
+        cid = self.client._client
+        self._step = functools.partial(p.stepSimulation, physicsClientId=cid)
+        self._velocity = functools.partial(p.getBaseVelocity, physicsClientId=cid)
         self.gui = gui
         self.visuals = visuals or gui
         self.time_step = float(time_step)
@@ -235,7 +239,7 @@ class World:
 
     def step(self, n: int = 1) -> None:
         """Advance the simulation ``n`` fixed time steps."""
-        step = self.client.stepSimulation
+        step = self._step
         observers = self._observers
         for _ in range(n):
             step()
@@ -246,7 +250,7 @@ class World:
 
     def at_rest(self) -> bool:
         """Whether every entity is (nearly) still."""
-        get = self.client.getBaseVelocity
+        get = self._velocity
         for e in self.entities.values():
             lin, ang = get(e.body_id)
             if (
@@ -256,13 +260,18 @@ class World:
                 return False
         return True
 
-    def settle(self, *, max_steps: int) -> int:
+    def settle(self, *, max_steps: int, min_steps: int = 0) -> int:
         """Step with the robot holding still until every entity is at rest, or ``max_steps``.
+
+        Args:
+            max_steps: the cap.
+            min_steps: steps always taken first (slow topples start at rest).
 
         Returns:
             The number of steps taken.
         """
-        taken = 0
+        taken = min(min_steps, max_steps)
+        self.step(taken)
         quiet = 0
         while taken < max_steps:
             n = min(REST_CHECK_EVERY, max_steps - taken)
