@@ -16,7 +16,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import db, inspect, solve
+from llcps.cli import db, inspect, inspect_model, solve  # noqa: F401 - inspect_model adds `inspect model`
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
 
 app = new_app(

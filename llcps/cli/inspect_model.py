@@ -1,0 +1,85 @@
+"""``llcps inspect model``: held-out metrics of the world models, label frequencies,
+and a scenario's top candidates under each measure."""
+
+from __future__ import annotations
+
+from typing import Annotated, Optional
+
+import typer
+
+from llcps.cli._common import JsonFlag, choice_enum, message, open_store, print_json, print_table, selected_branch
+from llcps.cli.inspect import app
+from llcps.domain import OUTCOME_NAMES
+from llcps.models import PAPER_MODELS, WORLD_MODELS
+from llcps.models.inspection import ModelInspection, inspect_models
+
+ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
+
+_SHORT = {name: ("+" if name.startswith("positive") else "-") + name.split("_", 1)[1][:5] for name in OUTCOME_NAMES}
+
+
+@app.command("model")
+def model_cli(
+    ctx: typer.Context,
+    model: Annotated[
+        Optional[list[ModelName]],  # type: ignore[valid-type]
+        typer.Option("--model", metavar="NAME", help="World model to inspect (repeatable; default: the paper's nb and nn).", show_default=False),
+    ] = None,
+    scenario: Annotated[
+        Optional[str],
+        typer.Option("--scenario", metavar="NAME", help="Also rank this scenario's failure-state candidates under every measure.", show_default=False),
+    ] = None,
+    top: Annotated[int, typer.Option("--top", min=1, metavar="K", help="Candidates shown per measure.")] = 5,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the held-out split, the models and tie-breaks.")] = 0,
+    test_fraction: Annotated[float, typer.Option("--test-fraction", min=0.01, max=0.99, help="Share of trials held out.")] = 0.25,
+    as_json: JsonFlag = False,
+) -> None:
+    """Evaluate world models on the branch's trials (held-out split) next to the majority baseline."""
+    names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
+    with open_store(ctx) as store:
+        branch = store.resolve_branch(selected_branch(ctx)).name
+        report = inspect_models(
+            store, branch=branch, models=names, seed=seed, test_fraction=test_fraction, scenario=scenario, top=top
+        )
+    if as_json:
+        print_json(report.as_json())
+    else:
+        show(report)
+
+
+def show(report: ModelInspection) -> None:
+    """The inspection as tables."""
+    print_table(
+        f"label frequencies in the {report.n_trials} trials {report.branch} sees",
+        OUTCOME_NAMES,
+        [[f"{report.label_frequencies[name]:.3f}" for name in OUTCOME_NAMES]],
+    )
+    if report.evaluation_note:
+        message(f"no held-out metrics: {report.evaluation_note}")
+    for evaluation in report.evaluations:
+        print_table(
+            f"{evaluation.model}: {evaluation.n_train} training / {evaluation.n_test} held-out trials "
+            "(model | majority baseline)",
+            ("label", "train freq", "accuracy", "F1", "Brier"),
+            [
+                (
+                    m.label,
+                    f"{m.train_frequency:.3f}",
+                    f"{m.accuracy:.3f} | {m.baseline_accuracy:.3f}",
+                    f"{m.f1:.3f} | {m.baseline_f1:.3f}" + ("" if m.both_classes else " (one class)"),
+                    f"{m.brier:.3f} | {m.baseline_brier:.3f}",
+                )
+                for m in evaluation.labels
+            ],
+        )
+    if report.failure is None:
+        return
+    failure = report.failure
+    message(f"{failure.scenario}: {failure.missing_effects}; {len(failure.candidates)} candidates")
+    for model, by_measure in report.rankings.items():
+        for measure, ranked in by_measure.items():
+            print_table(
+                f"{model} / {measure}",
+                ("#", "trial", "score", *(_SHORT[name] for name in OUTCOME_NAMES)),
+                [(c.position, c.trial, f"{c.score:.3f}", *(f"{c.outcome[n]:.2f}" for n in OUTCOME_NAMES)) for c in ranked],
+            )

@@ -1,0 +1,87 @@
+"""``llcps inspect model`` on a real store: metrics beside the baseline, JSON shape,
+errors for people, and a scenario's failure-state candidates ranked per measure."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from llcps.cli.main import app
+from llcps.models import MEASURES, PAPER_MODELS
+from llcps.models.synthetic import synthetic_trials
+from llcps.scenarios import SCENARIOS
+from llcps.store import NewTrial, Store
+
+
+@pytest.fixture
+def db(tmp_path):
+    path = str(tmp_path / "llcps.db")
+    with Store.open(path, create=True) as store:
+        store.add_trials(
+            [
+                NewTrial(
+                    branch="main",
+                    source="pretrain",
+                    spec=r.spec,
+                    features=r.features,
+                    outcome=r.outcome,
+                    solved=False,
+                    sim_steps=0,
+                    wall_seconds=0.0,
+                    seed=1,
+                )
+                for r in synthetic_trials(160, seed=1)
+            ]
+        )
+    return path
+
+
+def run(db, *args):
+    return CliRunner().invoke(app, ["--db", db, "inspect", "model", *args])
+
+
+def test_json_reports_the_paper_models_beside_the_baseline(db):
+    result = run(db, "--json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["n_trials"] == 160
+    assert [e["model"] for e in data["evaluations"]] == list(PAPER_MODELS)
+    for evaluation in data["evaluations"]:
+        assert (evaluation["n_train"], evaluation["n_test"]) == (120, 40)
+        assert {"f1", "baseline_f1", "brier", "baseline_brier", "accuracy"} <= set(evaluation["labels"][0])
+    assert "scenario" not in data
+
+
+def test_table_output_names_every_model(db):
+    result = run(db, "--model", "logreg", "--model", "random")
+    assert result.exit_code == 0, result.output
+    assert "logreg:" in result.stdout and "random:" in result.stdout and "nb:" not in result.stdout
+
+
+def test_too_few_trials_is_a_note_not_a_crash(tmp_path):
+    path = str(tmp_path / "empty.db")
+    Store.open(path, create=True).close()
+    result = run(path, "--json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["evaluations"] == [] and "at least 2 trials" in data["evaluation_note"]
+
+
+def test_unknown_scenario_is_one_line_and_exit_2(db):
+    result = run(db, "--scenario", "scenario9")
+    assert result.exit_code == 2
+    assert "unknown scenario" in result.output and "Traceback" not in result.output
+
+
+@pytest.mark.parametrize("scenario", list(SCENARIOS))
+def test_scenario_candidates_are_ranked_under_every_measure(db, scenario):
+    result = run(db, "--scenario", scenario, "--top", "4", "--model", "nb", "--json")
+    assert result.exit_code == 0, result.output
+    ranked = json.loads(result.stdout)["scenario"]
+    assert ranked["name"] == scenario and ranked["candidates"] > 4
+    orders = {measure: [c["trial"] for c in ranked["rankings"]["nb"][measure]] for measure in MEASURES}
+    assert set(orders) == set(MEASURES) and all(len(o) == 4 for o in orders.values())
+    # a model trained on trials with structure orders candidates differently per measure
+    assert len({tuple(order) for order in orders.values()}) > 1
