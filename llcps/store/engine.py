@@ -45,7 +45,7 @@ def resolve_url(url_or_path: str) -> URL:
     if "://" in text:
         try:
             return make_url(text)
-        except ArgumentError as exc:
+        except (ArgumentError, ValueError) as exc:
             raise StoreError(f"cannot parse database URL {text!r}", hint="e.g. sqlite:///llcps.db or postgresql+psycopg://user@host/db") from exc
     path = Path(text).expanduser().absolute()
     return URL.create("sqlite", database=str(path))
@@ -115,17 +115,21 @@ def _on_sqlite_begin(conn: Any) -> None:
     conn.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
 
 
-def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True) -> Engine:
+def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, plain: bool = False) -> Engine:
     """Create the engine for an already checked URL.
 
     Args:
         foreign_keys: SQLite only; migrations turn them off while batch operations
             rebuild tables, as SQLite requires.
         pooled: keep connections open between calls (False for one-off use).
+        plain: SQLite files only: no pragmas at all, for looking at a file that may
+            not be ours without changing a byte of it.
     """
     kwargs: dict[str, Any] = {}
     is_sqlite = url.get_backend_name() == "sqlite"
     file_backed = is_sqlite and sqlite_path(url) is not None
+    if plain and file_backed:
+        return create_engine(url, poolclass=NullPool)
     if is_sqlite and not file_backed:
         # One shared connection, or every checkout would see a fresh empty DB.
         kwargs["poolclass"] = StaticPool

@@ -187,12 +187,19 @@ class Store:
         return store
 
     def _check_schema(self, *, create: bool, allow_outdated: bool) -> None:
+        # Look with a plain connection first: the SQLite engine's connect hook switches
+        # the file to WAL, which would rewrite a foreign file's header.
+        file_backed = engines.sqlite_path(self._url) is not None
+        probe = engines.make_engine(self._url, pooled=False, plain=True) if file_backed else self._engine
         try:
-            with self._engine.connect() as conn:
+            with probe.connect() as conn:
                 revision = migrations.current_revision(conn)
                 tables = inspect(conn).get_table_names() if revision is None else []
         except SQLAlchemyError as exc:
             raise _db_error(exc) from exc
+        finally:
+            if probe is not self._engine:
+                probe.dispose()
         if revision is None:
             if tables:
                 raise StoreError(
@@ -272,7 +279,8 @@ class Store:
         finally:
             if engine is not self._engine:
                 engine.dispose()
-        self._engine.dispose()
+        if file_backed:  # pooled connections may cache the old schema
+            self._engine.dispose()
         return before, head
 
     def init(self) -> str:
