@@ -9,6 +9,7 @@ import sqlite3
 import subprocess
 import sys
 import zipfile
+from contextlib import closing
 from pathlib import Path
 
 import pytest
@@ -65,7 +66,7 @@ def test_old_store_upgrades_to_head_and_reads_and_writes(tmp_path: Path, revisio
         store.add_operator(branch="main", name="op", pddl="(:action op)", definition={}, scenario=None, episode_id=None)
         assert store.count_visible_trials("after-upgrade") == 1
         assert [o.name for o in store.visible_operators("main")] == ["op"]
-    with sqlite3.connect(db) as conn:
+    with closing(sqlite3.connect(db)) as conn:
         assert conn.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
         assert conn.execute("PRAGMA foreign_key_check").fetchall() == []
 
@@ -81,7 +82,7 @@ def test_head_schema_matches_the_typed_models(store: Store) -> None:
 def test_newer_store_is_refused_untouched(tmp_path: Path) -> None:
     db = tmp_path / "newer.db"
     Store.open(str(db), create=True).close()
-    with sqlite3.connect(db) as conn:
+    with closing(sqlite3.connect(db)) as conn, conn:
         conn.execute(f"UPDATE {VERSION_TABLE} SET version_num = '9999'")
     before = _digest(db)
     for kwargs in ({}, {"allow_outdated": True}, {"create": True}):
@@ -92,7 +93,7 @@ def test_newer_store_is_refused_untouched(tmp_path: Path) -> None:
 
 
 def _foreign_sqlite(path: Path) -> None:
-    with sqlite3.connect(path) as conn:
+    with closing(sqlite3.connect(path)) as conn, conn:
         conn.execute("CREATE TABLE notes (body TEXT)")
         conn.execute("INSERT INTO notes VALUES ('mine')")
 
@@ -121,7 +122,7 @@ def test_files_that_are_not_llcps_stores_are_left_untouched(tmp_path: Path, make
 def test_sqlite_with_llcps_id_but_foreign_tables_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "odd.db"
     _foreign_sqlite(path)
-    with sqlite3.connect(path) as conn:
+    with closing(sqlite3.connect(path)) as conn, conn:
         conn.execute("PRAGMA application_id = 1280066384")
     before = _digest(path)
     with pytest.raises(StoreError, match="not an llcps store"):

@@ -7,6 +7,7 @@ import signal
 import sqlite3
 import subprocess
 import sys
+from contextlib import closing
 from pathlib import Path
 
 import pytest
@@ -28,7 +29,7 @@ def _writer(db: Path, branch: str, count: int, *extra: str) -> subprocess.Popen[
 
 
 def _stored_ids(db: Path) -> set[int]:
-    with sqlite3.connect(db) as conn:
+    with closing(sqlite3.connect(db)) as conn:
         assert conn.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
         return {row[0] for row in conn.execute("SELECT id FROM trials")}
 

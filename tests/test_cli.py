@@ -1,0 +1,222 @@
+"""The `llcps db` and `llcps inspect trials` commands, as a user runs them."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import os
+import shutil
+import sqlite3
+import subprocess
+import sys
+from contextlib import closing
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+from store_writer import sample_trial
+from typer.testing import CliRunner
+
+from llcps.cli.main import app
+from llcps.domain import OUTCOME_NAMES
+from llcps.store import Store
+from llcps.store.schema import VERSION_TABLE
+
+FIXTURES = Path(__file__).parent / "fixtures"
+runner = CliRunner()
+
+
+def llcps(db: Path | str, *args: str, env: dict[str, str] | None = None):  # noqa: ANN201 - click Result
+    return runner.invoke(app, ["--db", str(db), *args], env=env)
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture
+def db(tmp_path: Path) -> Iterator[Path]:
+    """A store with pretraining and exploration trials on main."""
+    path = tmp_path / "llcps.db"
+    with Store.open(str(path), create=True) as store:
+        store.add_trials([sample_trial(i, scenario="scenario1" if i % 2 else None) for i in range(4)])
+        store.add_trials([sample_trial(10 + i, source="exploration", scenario="scenario2", solved=i == 2) for i in range(3)])
+    yield path
+
+
+def test_acceptance_flow(tmp_path: Path) -> None:
+    """Acceptance 2: init, branch, list --json, checkout, status."""
+    db = tmp_path / "new.db"
+    result = llcps(db, "db", "init")
+    assert result.exit_code == 0, result.output
+    assert "schema 0002" in result.stderr and result.stdout == ""
+    assert llcps(db, "db", "init").exit_code == 0  # idempotent
+    result = llcps(db, "db", "branch", "exp", "--from", "main")
+    assert result.exit_code == 0 and "created branch exp from main" in result.stderr
+    listed = json.loads(llcps(db, "db", "list", "--json").stdout)
+    assert [(b["name"], b["parent"], b["fork_point"], b["own_trials"], b["visible_trials"], b["is_current"]) for b in listed] == [
+        ("main", None, 0, 0, 0, True),
+        ("exp", "main", 0, 0, 0, False),
+    ]
+    assert llcps(db, "db", "checkout", "exp").exit_code == 0
+    status = json.loads(llcps(db, "db", "status", "--json").stdout)
+    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", "0002", True)
+    text = llcps(db, "db", "status")
+    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and "0002" in text.stdout
+
+
+def test_inspect_trials_json_and_filters(db: Path) -> None:
+    trials = json.loads(llcps(db, "inspect", "trials", "--json", "--limit", "0").stdout)
+    assert [t["id"] for t in trials] == list(range(1, 8))
+    for key in ("id", "branch", "source", "action", "rate", "movement_magnitude", "orientation", "arguments", "features", "outcome", "solved", "sim_steps", "wall_seconds", "seed"):
+        assert key in trials[0]
+    assert set(trials[0]["outcome"]) == set(OUTCOME_NAMES)
+    assert len(trials[0]["features"]) == len(trials[0]["arguments"])
+
+    def ids(*args: str) -> list[int]:
+        result = llcps(db, "inspect", "trials", "--json", *args)
+        assert result.exit_code == 0, result.output
+        return [t["id"] for t in json.loads(result.stdout)]
+
+    assert ids("--source", "exploration") == [5, 6, 7]
+    assert ids("--solved") == [7]
+    assert ids("--unsolved", "--scenario", "scenario2") == [5, 6]
+    assert ids("--limit", "2") == [6, 7]
+    assert ids("--scenario", "nowhere") == []
+    table = llcps(db, "inspect", "trials")
+    assert table.exit_code == 0 and "trials visible on main (7 shown)" in table.stdout
+
+
+def test_branch_visibility_through_the_cli(db: Path) -> None:
+    assert llcps(db, "db", "branch", "fresh", "--at", "pretrain").exit_code == 0
+    assert llcps(db, "db", "branch", "early", "--at", "2", "--json").exit_code == 0
+    with Store.open(str(db)) as store:
+        store.add_trial(sample_trial(99, branch="fresh", source="exploration"))
+    fresh = json.loads(llcps(db, "--branch", "fresh", "inspect", "trials", "--json", "--limit", "0").stdout)
+    assert [(t["id"], t["branch"]) for t in fresh] == [(1, "main"), (2, "main"), (3, "main"), (4, "main"), (8, "fresh")]
+    early = json.loads(llcps(db, "inspect", "trials", "--json", env={"LLCPS_BRANCH": "early"}).stdout)
+    assert [t["id"] for t in early] == [1, 2]
+    listed = {b["name"]: b for b in json.loads(llcps(db, "db", "list", "--json").stdout)}
+    assert (listed["fresh"]["fork_point"], listed["fresh"]["own_trials"], listed["fresh"]["visible_trials"]) == (4, 1, 5)
+
+
+def test_reset_and_delete_need_yes(db: Path) -> None:
+    assert llcps(db, "db", "branch", "exp").exit_code == 0
+    with Store.open(str(db)) as store:
+        store.add_trial(sample_trial(50, branch="exp", source="exploration"))
+    before = _digest(db)
+    dry = llcps(db, "--branch", "exp", "db", "reset", "--to", "empty", "--json")
+    assert dry.exit_code != 0 and json.loads(dry.stdout)["trials"] == 1
+    assert "would remove 1 trial(s)" in dry.stderr and "--yes" in dry.stderr
+    assert _digest(db) == before
+    done = llcps(db, "--branch", "exp", "db", "reset", "--to", "empty", "--yes", "--json")
+    assert done.exit_code == 0 and json.loads(done.stdout)["dry_run"] is False
+    refused = llcps(db, "db", "reset", "--yes")  # exp forked after main's exploration trials
+    assert refused.exit_code == 2 and "exp" in refused.stderr
+    assert llcps(db, "db", "delete", "exp").exit_code == 2
+    assert llcps(db, "db", "delete", "exp", "--yes").exit_code == 0
+    reset_main = llcps(db, "db", "reset", "--yes")
+    assert reset_main.exit_code == 0 and "removed 3 trial(s)" in reset_main.stderr  # back to the 4 pretraining trials
+    assert [b["name"] for b in json.loads(llcps(db, "db", "list", "--json").stdout)] == ["main"]
+    assert [t["source"] for t in json.loads(llcps(db, "inspect", "trials", "--json").stdout)] == ["pretrain"] * 4
+
+
+def test_export_csv_and_jsonl(db: Path, tmp_path: Path) -> None:
+    result = llcps(db, "db", "export")
+    assert result.exit_code == 0 and "exported 7 trial(s)" in result.stderr
+    rows = list(csv.DictReader(io.StringIO(result.stdout)))
+    assert [int(r["id"]) for r in rows] == list(range(1, 8))
+    first = json.loads(llcps(db, "inspect", "trials", "--json", "--limit", "0").stdout)
+    for row, trial in zip(rows, first):
+        assert row["arg0"] == trial["arguments"][0]
+        assert float(row["arg0_vector_magnitude"]) == trial["features"][0]["vector_magnitude"]
+        assert [int(row[name]) for name in OUTCOME_NAMES] == [trial["outcome"][name] for name in OUTCOME_NAMES]
+    out = tmp_path / "trials.jsonl"
+    assert llcps(db, "db", "export", "--format", "jsonl", "--out", str(out)).exit_code == 0
+    assert [json.loads(line) for line in out.read_text().splitlines()] == first
+
+
+def test_upgrade_command_on_an_old_store(tmp_path: Path) -> None:
+    db = tmp_path / "old.db"
+    shutil.copy(FIXTURES / "store_0001.db", db)
+    refused = llcps(db, "inspect", "trials")
+    assert refused.exit_code == 2 and "llcps db upgrade" in refused.stderr
+    status = json.loads(llcps(db, "db", "status", "--json").stdout)
+    assert (status["revision"], status["up_to_date"], status["visible_trials"]) == ("0001", False, 2)
+    upgraded = llcps(db, "db", "upgrade", "--json")
+    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": "0002", "changed": True}
+    assert len(json.loads(llcps(db, "inspect", "trials", "--json").stdout)) == 2
+
+
+def _newer(path: Path) -> None:
+    Store.open(str(path), create=True).close()
+    with closing(sqlite3.connect(path)) as conn, conn:
+        conn.execute(f"UPDATE {VERSION_TABLE} SET version_num = 'ffff'")
+
+
+def _foreign(path: Path) -> None:
+    with closing(sqlite3.connect(path)) as conn:
+        conn.execute("CREATE TABLE t (x)")
+
+
+BAD_INPUT = {
+    "missing directory": ("{tmp}/missing/llcps.db", ["db", "init"], None),
+    "database path is a directory": ("{tmp}", ["db", "status"], None),
+    "not a database": ("{tmp}/notes.db", ["db", "init"], lambda p: p.write_text("just text\n")),
+    "foreign sqlite": ("{tmp}/other.db", ["db", "init"], _foreign),
+    "newer schema": ("{tmp}/newer.db", ["db", "upgrade"], _newer),
+    "unknown branch checkout": ("{db}", ["db", "checkout", "nope"], None),
+    "unknown --branch": ("{db}", ["--branch", "nope", "inspect", "trials"], None),
+    "unknown --from": ("{db}", ["db", "branch", "x", "--from", "nope"], None),
+    "empty branch name": ("{db}", ["db", "branch", ""], None),
+    "whitespace branch name": ("{db}", ["db", "branch", "   "], None),
+    "slash in branch name": ("{db}", ["db", "branch", "a/b"], None),
+    "dotdot in branch name": ("{db}", ["db", "branch", "a..b"], None),
+    "long branch name": ("{db}", ["db", "branch", "b" * 101], None),
+    "bad fork point": ("{db}", ["db", "branch", "x", "--at", "nine"], None),
+    "invisible fork point": ("{db}", ["db", "branch", "x", "--at", "999"], None),
+    "reset without --yes": ("{db}", ["db", "reset"], None),
+    "reset to empty without --yes": ("{db}", ["db", "reset", "--to", "empty"], None),
+    "delete without --yes": ("{db}", ["db", "delete", "exp"], None),
+    "delete main": ("{db}", ["db", "delete", "main", "--yes"], None),
+    "missing export directory": ("{db}", ["db", "export", "--out", "{tmp}/nowhere/x.csv"], None),
+    "missing store": ("{tmp}/absent.db", ["inspect", "trials"], None),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUT))
+def test_bad_input_is_one_error_line_and_changes_nothing(db: Path, tmp_path: Path, case: str) -> None:
+    location, args, make = BAD_INPUT[case]
+    assert llcps(db, "db", "branch", "exp").exit_code == 0
+    target = Path(location.format(tmp=tmp_path, db=db))
+    if make is not None:
+        make(target)
+    files = sorted(p for p in tmp_path.rglob("*") if p.is_file())
+    digests = {p: _digest(p) for p in files}
+    result = llcps(target, *[a.format(tmp=tmp_path) for a in args])
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.splitlines()
+    assert lines[0].startswith("error: ") and len([ln for ln in lines if ln.startswith("error:")]) == 1, result.stderr
+    assert all(ln.startswith(("error: ", "hint: ")) for ln in lines), result.stderr
+    assert "Traceback" not in result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+    assert result.stdout == ""
+    assert sorted(p for p in tmp_path.rglob("*") if p.is_file()) == files  # nothing created
+    assert {p: _digest(p) for p in files} == digests  # nothing changed
+
+
+def test_console_script_errors_without_traceback(tmp_path: Path) -> None:
+    script = Path(sys.executable).with_name("llcps")
+    env = {**os.environ, "LLCPS_DB": str(tmp_path / "missing" / "x.db")}
+    result = subprocess.run([str(script), "db", "status"], capture_output=True, text=True, env=env)
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr
+    assert result.stderr.splitlines()[-2:] == [
+        f"error: directory {tmp_path / 'missing'} does not exist",
+        "hint: create it first or choose another --db path",
+    ]
+    assert result.stdout == ""
+    made = subprocess.run([str(script), "--db", str(tmp_path / "ok.db"), "db", "init", "--json"], capture_output=True, text=True)
+    assert made.returncode == 0 and json.loads(made.stdout)["current_branch"] == "main"
