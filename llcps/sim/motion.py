@@ -43,7 +43,8 @@ class Motion:
         self.robot = world.robot
         self.max_steps = max_steps
         self.steps = 0
-        self.target: list[float] = list(self.robot.tool_position())
+        # from the joints themselves: link poses cached by the engine may predate a restore
+        self.target: list[float] = list(self.robot.tool_position(fresh=True))
         self.yaw = 0.0
         self._ik = self.robot.ik
         self._command = self.robot.command_arm
@@ -175,12 +176,12 @@ def control_loop_rate(world: "World", *, steps: int = 1200) -> float:
     Returns:
         Steps per second of wall time.
     """
-    snap = world.snapshot()
+    state = world.serialize_state()
     try:
         robot = world.robot
         hx, hy, hz = robot.home_tool
         orn = top_down(0.0)
-        ik, command, step = robot.ik, robot.command_arm, world.client.stepSimulation
+        ik, command, step = robot.ik, robot.command_arm, world._step
         t0 = time.perf_counter()
         for k in range(steps):
             a = k * world.time_step
@@ -188,6 +189,5 @@ def control_loop_rate(world: "World", *, steps: int = 1200) -> float:
             step()
         elapsed = time.perf_counter() - t0
     finally:
-        world.restore(snap)
-        world.discard(snap)
+        world.restore_serialized(state)
     return steps / elapsed

@@ -31,6 +31,7 @@ VIEW = Camera(eye=(1.3, -1.0, 0.75), target=(0.5, 0.0, -0.08), fov=50.0)
 
 def capture(world: "World", *, width: int = 320, height: int = 240, camera: Camera = VIEW) -> np.ndarray:
     """One RGB frame (height x width x 3, uint8)."""
+    world.ensure_visuals()
     c = world.client
     view = c.computeViewMatrix(camera.eye, camera.target, (0.0, 0.0, 1.0))
     proj = c.computeProjectionMatrixFOV(camera.fov, width / height, camera.near, camera.far)
@@ -78,6 +79,7 @@ class GifRecorder:
             self.frames.append(capture(world, width=self.width, height=self.height, camera=self.camera))
 
     def __enter__(self) -> "GifRecorder":
+        self.world.ensure_visuals()
         self.frames.append(capture(self.world, width=self.width, height=self.height, camera=self.camera))
         self.world.add_observer(self._observe)
         return self

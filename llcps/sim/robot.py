@@ -23,7 +23,7 @@ from typing import Any, Sequence
 import pybullet as p
 import pybullet_data
 
-from llcps.sim.geometry import in_contact
+from llcps.sim.geometry import TOUCH_DISTANCE
 
 #: Movable arm joints, finger joints, hand link and tool link of panda.urdf.
 ARM_JOINTS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6)
@@ -119,7 +119,10 @@ class Robot:
         self.command_arm(q[:7])
         self.command_fingers(q[7], force=FINGER_FORCE)
 
-    def tool_position(self) -> tuple[float, float, float]:
+    def tool_position(self, *, fresh: bool = False) -> tuple[float, float, float]:
+        """Tool point in the world: as of the last step, or (``fresh``) computed from the joints now."""
+        if fresh:
+            return self._link_state(self.body_id, TOOL_LINK, computeForwardKinematics=1)[4]
         return self._link_state(self.body_id, TOOL_LINK)[4]
 
     def finger_width(self) -> float:
@@ -154,10 +157,21 @@ class Robot:
         )
 
     def fingers_touch(self, body: int) -> bool:
-        """Whether both fingers are in contact with ``body`` (from the last step)."""
-        return in_contact(self.client, self.body_id, body, FINGER_JOINTS[0]) and in_contact(
-            self.client, self.body_id, body, FINGER_JOINTS[1]
-        )
+        """Whether both fingers press on ``body`` from the sides (from the last step).
+
+        A contact counts only when its normal runs along the closing axis, so fingers
+        resting on top of something too wide to grip do not make a grasp.
+        """
+        c = self.client
+        x, y, z, w = self._link_state(self.body_id, HAND_LINK)[5]
+        axis = (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x))  # hand y in world
+        for finger in FINGER_JOINTS:
+            if not any(
+                cp[8] <= TOUCH_DISTANCE and abs(cp[7][0] * axis[0] + cp[7][1] * axis[1] + cp[7][2] * axis[2]) > 0.7
+                for cp in c.getContactPoints(self.body_id, body, finger)
+            ):
+                return False
+        return True
 
     def attach(self, body: int) -> None:
         """Fix ``body`` to the tool link where it is now (the fingers hold it)."""

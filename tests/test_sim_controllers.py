@@ -1,0 +1,113 @@
+"""Each action controller does what its name says, for every orientation."""
+
+from __future__ import annotations
+
+import pytest
+
+from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, TrialSpec, fluent
+from llcps.errors import LlcpsError, UnknownNameError
+from llcps.sim.controllers import CONTROLLERS, PUSH_DIRECTION, SIDE, execute
+from llcps.sim.entities import inside, open_box, solid
+from llcps.sim.perception import perceive
+from llcps.sim.world import SceneSpec, World
+
+BIN = open_box("bin", "green", at=(0.45, -0.3), size=(0.2, 0.2, 0.08))
+SCENE = SceneSpec(
+    entities=(
+        solid("a", "box", "red", (0.045, 0.045, 0.045), at=(0.5, 0.05)),
+        solid("b", "box", "blue", (0.05, 0.05, 0.05), at=(0.5, 0.25)),
+        BIN,
+        inside(solid("c", "box", "blue", (0.04, 0.04, 0.04), at=(0, 0)), BIN),
+        solid("wide", "box", "green", (0.12, 0.12, 0.04), at=(0.3, 0.3)),
+    )
+)
+
+
+@pytest.fixture(scope="module")
+def world():
+    w = World.from_scene(SCENE, visuals=False)
+    w.settle(max_steps=240)
+    w.start = w.snapshot()
+    yield w
+    w.close()
+
+
+def run(world: World, action: str, args: tuple[str, ...], rate: float, magnitude: float, orientation: str) -> int:
+    world.restore(world.start)
+    return execute(world, TrialSpec(action, args, ControllerParams(rate, magnitude, orientation)))
+
+
+def test_one_controller_per_action() -> None:
+    assert tuple(CONTROLLERS) == ACTIONS
+    assert set(PUSH_DIRECTION) == set(SIDE) == set(ORIENTATIONS)
+
+
+@pytest.mark.parametrize("orientation", ORIENTATIONS)
+@pytest.mark.parametrize("magnitude", [0.1, 0.2])
+def test_push_moves_the_object_by_the_magnitude_along_the_direction(world, orientation, magnitude) -> None:
+    world.restore(world.start)
+    x0, y0, _ = world.center("a")
+    run(world, "push", ("a",), 0.1, magnitude, orientation)
+    x1, y1, _ = world.center("a")
+    dx, dy = PUSH_DIRECTION[orientation]
+    along = (x1 - x0) * dx + (y1 - y0) * dy
+    across = abs((x1 - x0) * dy - (y1 - y0) * dx)
+    assert along == pytest.approx(magnitude, abs=0.03)
+    assert across < 0.02
+
+
+@pytest.mark.parametrize("orientation", ORIENTATIONS)
+def test_push_together_leaves_the_two_touching(world, orientation) -> None:
+    world.restore(world.start)
+    assert fluent("touching", "a", "b") not in perceive(world)
+    run(world, "push_together", ("a", "b"), 0.1, 0.0, orientation)
+    assert fluent("touching", "a", "b") in perceive(world)
+
+
+@pytest.mark.parametrize("orientation", ORIENTATIONS)
+def test_place_in_container_ends_in_the_container(world, orientation) -> None:
+    run(world, "place_in_container", ("a", "bin"), 0.3, 0.1, orientation)
+    state = perceive(world)
+    assert fluent("in", "a", "bin") in state
+    assert not any(f[0] == "holding" for f in state)
+
+
+@pytest.mark.parametrize("orientation", ORIENTATIONS)
+def test_remove_from_container_ends_outside_beside_it(world, orientation) -> None:
+    world.restore(world.start)
+    assert fluent("in", "c", "bin") in perceive(world)
+    run(world, "remove_from_container", ("c", "bin"), 0.3, 0.1, orientation)
+    state = perceive(world)
+    assert fluent("in", "c", "bin") not in state
+    assert fluent("on", "c", "table") in state
+    cx, cy, _ = world.center("c")
+    bx, by, _ = world.center("bin")
+    sx, sy = SIDE[orientation]
+    assert (cx - bx) * sx + (cy - by) * sy > 0.1  # set down on the orientation's side
+
+
+def test_an_object_wider_than_the_hand_is_never_held(world) -> None:
+    world.restore(world.start)
+    before = world.center("wide")
+    run(world, "place_in_container", ("wide", "bin"), 0.3, 0.1, "top")
+    assert fluent("in", "wide", "bin") not in perceive(world)
+    assert abs(world.center("wide")[2] - before[2]) < 0.02  # it never left the table
+
+
+def test_the_step_cap_ends_a_trial_and_releases_the_grasp(world) -> None:
+    steps = 0
+    world.restore(world.start)
+    spec = TrialSpec("place_in_container", ("a", "bin"), ControllerParams(0.05, 0.3, "top"))
+    for cap in (40, 700):  # before and after the grasp closes
+        world.restore(world.start)
+        steps = execute(world, spec, max_steps=cap)
+        assert steps == cap
+        assert world.robot.grasped is None
+
+
+def test_bad_arguments_are_refused(world) -> None:
+    world.restore(world.start)
+    with pytest.raises(UnknownNameError):
+        execute(world, TrialSpec("push", ("nothing",), ControllerParams(0.1, 0.1, "left")))
+    with pytest.raises(LlcpsError):
+        execute(world, TrialSpec("push_together", ("a", "a"), ControllerParams(0.1, 0.1, "left")))
