@@ -21,11 +21,11 @@ _S1_TABLE = TableSpec(y_half=0.45)
 def _scenario1(condition: str) -> SceneSpec:
     table = _S1_TABLE
     entities = (
-        solid("cube", "box", "red", (0.05, 0.05, 0.05), at=(0.4, -0.36)),
+        solid("cube", "box", "red", (0.05, 0.05, 0.05), at=(0.4, -0.32)),
         bucket("bucket", "blue", at=(0.4, -0.59), table=table, diameter=0.26, height=0.24),
         solid("ball", "sphere", "green", 0.05, at=(0.4, 0.15)),
     )
-    fixtures = (edge_lip(table, "right", height=0.09),) if condition == "novelty" else ()
+    fixtures = (edge_lip(table, "right", height=0.07),) if condition == "novelty" else ()
     return SceneSpec(entities=entities, fixtures=fixtures, table=table, name=f"scenario1/{condition}")
 
 
@@ -58,7 +58,7 @@ def _scenario3(condition: str) -> SceneSpec:
     tray = open_box("tray", "green", at=(0.5, 0.0), size=(0.16, 0.16, 0.05), mass=0.3)
     cube = inside(solid("cube", "box", "red", (0.04, 0.04, 0.04), at=(0, 0)), tray)
     other = solid("ball", "sphere", "blue", 0.05, at=(0.35, 0.3))
-    fixtures = shelf("shelf", at=(0.5, 0.0), clearance=0.3, size=(0.3, 0.18, 0.02)) if condition == "novelty" else ()
+    fixtures = shelf("shelf", at=(0.5, 0.0), clearance=0.3, size=(0.3, 0.12, 0.02)) if condition == "novelty" else ()
     return SceneSpec(entities=(tray, cube, other), fixtures=fixtures, name=f"scenario3/{condition}")
 
 
