@@ -57,12 +57,16 @@ class BranchMachine(RuleBasedStateMachine):
 
     def __init__(self) -> None:
         super().__init__()
-        self.dir = Path(tempfile.mkdtemp())
-        shutil.copy(self.template, self.dir / "s.db")
-        self.store = Store.open(str(self.dir / "s.db"))
+        self.store = self.make_store()
         self.model = Model()
         self.counter = 0
         self.names = 0
+
+    def make_store(self) -> Store:
+        """A fresh store (a copy of a template file; other backends override this)."""
+        self.dir = Path(tempfile.mkdtemp())
+        shutil.copy(self.template, self.dir / "s.db")
+        return Store.open(str(self.dir / "s.db"))
 
     def teardown(self) -> None:
         self.store.close()
@@ -167,15 +171,19 @@ class BranchMachine(RuleBasedStateMachine):
             assert [o.id for o in self.store.visible_operators(branch)] == sorted(self.model.visible(branch, self.model.operators))
 
 
-def test_branch_visibility_matches_reference_model(template: Path) -> None:
-    BranchMachine.template = template
+def run_machine(machine: type[BranchMachine], max_examples: int = 25) -> None:
     run_state_machine_as_test(
-        BranchMachine,
+        machine,
         settings=settings(
-            max_examples=25,
+            max_examples=max_examples,
             stateful_step_count=20,
             deadline=None,
             suppress_health_check=[HealthCheck.too_slow],
             phases=[Phase.explicit, Phase.reuse, Phase.generate],  # shrinking store runs takes minutes
         ),
     )
+
+
+def test_branch_visibility_matches_reference_model(template: Path) -> None:
+    BranchMachine.template = template
+    run_machine(BranchMachine)

@@ -125,7 +125,7 @@ def upgrade() -> None:
 
     # Every store starts with a root branch `main`, checked out.
     now = datetime.now(timezone.utc).replace(tzinfo=None)
-    op.bulk_insert(branches, [{"id": 1, "name": "main", "parent_id": None, "fork_point": 0, "created_at": now}])
+    op.bulk_insert(branches, [{"name": "main", "parent_id": None, "fork_point": 0, "created_at": now}])  # id from the sequence
     op.bulk_insert(settings, [{"key": "current_branch", "value": "main"}])
 
 
