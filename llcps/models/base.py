@@ -107,13 +107,13 @@ class WorldModel(ABC):
         try:
             arrays = unpack_arrays(artifact)
             model = cls._import(arrays, meta, seed)
+            model.n_trials = int(meta.get("n_trials", 0))
         except LlcpsError as exc:
             raise LlcpsError(f"{cls.name!r} world-model artifact rejected: {exc.message}", hint=hint) from None
         except Exception as exc:  # noqa: BLE001 - any failure to parse means a bad artifact
             raise LlcpsError(
                 f"{cls.name!r} world-model artifact rejected: {type(exc).__name__}: {exc}", hint=hint
             ) from None
-        model.n_trials = int(meta.get("n_trials", 0))
         return model
 
 

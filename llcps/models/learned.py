@@ -92,10 +92,8 @@ class EncodedWorldModel(WorldModel):
             "prior": self.prior,
             "learned": self.learned,
         }
-        meta = {**meta, "feature_names": list(ENCODED_FEATURE_NAMES), "learned": [
-            name for name, ok in zip(OUTCOME_NAMES, self.learned) if ok
-        ]}
-        return arrays, meta
+        learned = [name for name, ok in zip(OUTCOME_NAMES, self.learned) if ok]
+        return arrays, {**meta, "feature_names": list(ENCODED_FEATURE_NAMES), "learned": learned}
 
     @classmethod
     def _import(cls, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], seed: int) -> EncodedWorldModel:
