@@ -27,6 +27,8 @@ app = new_app("Create, inspect, migrate, branch and export the experience store.
 
 ResetTarget = choice_enum("ResetTarget", RESET_TARGETS)
 ExportFormat = choice_enum("ExportFormat", EXPORT_FORMATS)
+DEFAULT_RESET_TARGET = ResetTarget(PRETRAIN)
+DEFAULT_EXPORT_FORMAT = ExportFormat("csv")
 
 BranchName = Annotated[str, typer.Argument(metavar="NAME", help="Branch name (no whitespace, '/', '..'; at most 100 characters).", show_default=False)]
 
@@ -156,7 +158,7 @@ def reset_cli(
     to: Annotated[
         ResetTarget,  # type: ignore[valid-type]
         typer.Option("--to", help="'pretrain' keeps the branch's trials up to its last pretraining trial; 'empty' removes all it owns."),
-    ] = ResetTarget(PRETRAIN),  # type: ignore[assignment]
+    ] = DEFAULT_RESET_TARGET,  # type: ignore[assignment]
     yes: YesFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
@@ -198,7 +200,7 @@ def export_cli(
     fmt: Annotated[
         ExportFormat,  # type: ignore[valid-type]
         typer.Option("--format", help="csv: one flat row per trial; jsonl: one JSON trial per line."),
-    ] = ExportFormat("csv"),  # type: ignore[assignment]
+    ] = DEFAULT_EXPORT_FORMAT,  # type: ignore[assignment]
     out: Annotated[
         Optional[Path], typer.Option("--out", metavar="FILE", help="File to write (default: stdout).", show_default=False, dir_okay=False)
     ] = None,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+from dataclasses import fields
 from typing import Any, TextIO
 
 from llcps.domain import ACTION_ARITY, OUTCOME_NAMES, EntityFeatures, TrialRecord
@@ -18,7 +19,7 @@ from llcps.store.store import Store
 EXPORT_FORMATS: tuple[str, ...] = ("csv", "jsonl")
 
 _SLOTS = max(ACTION_ARITY.values())
-_ENTITY_FIELDS = tuple(EntityFeatures.__dataclass_fields__)
+_ENTITY_FIELDS = tuple(f.name for f in fields(EntityFeatures))
 
 #: Columns of the CSV export, in order.
 CSV_COLUMNS: tuple[str, ...] = (
@@ -35,7 +36,7 @@ def csv_row(record: TrialRecord) -> dict[str, Any]:
     """One trial as a flat CSV row (missing argument slots stay empty)."""
     data = record.as_json()
     row = {key: data[key] for key in CSV_COLUMNS if key in data}
-    for slot, (name, features) in enumerate(zip(record.spec.arguments, record.features)):
+    for slot, (name, features) in enumerate(zip(record.spec.arguments, record.features, strict=True)):
         row[f"arg{slot}"] = name
         for field_name, value in features.as_dict().items():
             row[f"arg{slot}_{field_name}"] = value
