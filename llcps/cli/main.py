@@ -16,7 +16,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import db, inspect, inspect_model, solve  # noqa: F401 - inspect_model adds `inspect model`
+from llcps.cli import db, inspect, inspect_model, pretrain, solve  # noqa: F401 - inspect_model adds `inspect model`
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
 
 app = new_app(
@@ -48,6 +48,7 @@ def _global_options(
 app.add_typer(db.app, name="db")
 app.add_typer(inspect.app, name="inspect")
 app.command("solve")(solve.solve_cli)
+app.command("pretrain")(pretrain.pretrain_cli)
 
 
 def main() -> None:

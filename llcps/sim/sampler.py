@@ -43,7 +43,7 @@ RATE_RANGE: tuple[float, float] = (0.05, 1.0)
 MAGNITUDE_RANGE: tuple[float, float] = (0.02, 0.4)
 #: Steps a layout gets to settle, and how far anything may move meanwhile (m).
 SETTLE_STEPS = 480
-SETTLE_MIN_STEPS = 120
+SETTLE_MIN_STEPS = 48
 MOVE_TOLERANCE = 0.01
 #: Layouts drawn before giving up (a bug, not bad luck, if ever reached).
 MAX_ATTEMPTS = 200
