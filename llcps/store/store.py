@@ -61,7 +61,7 @@ from llcps.store.schema import (
     Trial,
     WorldModel,
 )
-from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, iso_timestamp, trial_row
+from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, iso_timestamp, trial_row
 
 #: The root branch every store starts with.
 MAIN_BRANCH = "main"
@@ -800,7 +800,8 @@ class Store:
                 .limit(limit)
             )
             decoder = TrialDecoder({link.branch_id: link.name for link in chain})
-            return decoder.decode(conn.execute(stmt).all())  # fetchall: far cheaper than row iteration
+            with gc_paused():
+                return decoder.decode(conn.execute(stmt).all())  # fetchall: far cheaper than row iteration
 
     def count_visible_trials(self, branch: str | None, source: str | None = None) -> int:
         """How many trials ``branch`` sees (optionally of one source)."""

