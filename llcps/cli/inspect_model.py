@@ -3,7 +3,7 @@ and a scenario's top candidates under each measure."""
 
 from __future__ import annotations
 
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
@@ -11,7 +11,9 @@ from llcps.cli._common import JsonFlag, choice_enum, message, open_store, print_
 from llcps.cli.inspect import app
 from llcps.domain import OUTCOME_NAMES
 from llcps.models import PAPER_MODELS, WORLD_MODELS
-from llcps.models.inspection import ModelInspection, inspect_models
+
+if TYPE_CHECKING:
+    from llcps.models.inspection import ModelInspection
 
 ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
 
@@ -38,6 +40,8 @@ def model_cli(
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name
+        from llcps.models.inspection import inspect_models  # sklearn loads only when used
+
         report = inspect_models(
             store, branch=branch, models=names, seed=seed, test_fraction=test_fraction, scenario=scenario, top=top
         )
@@ -47,7 +51,7 @@ def model_cli(
         show(report)
 
 
-def show(report: ModelInspection) -> None:
+def show(report: "ModelInspection") -> None:
     """The inspection as tables."""
     print_table(
         f"label frequencies in the {report.n_trials} trials {report.branch} sees",

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.syntax import Syntax
 
 from llcps.cli._common import JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
-from llcps.cps.agent import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, SolveConfig, SolveResult, solve
+from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, SolveConfig
 from llcps.models import MEASURES, WORLD_MODELS
 from llcps.scenarios import CONDITIONS, SCENARIOS
+
+if TYPE_CHECKING:
+    from llcps.cps.agent import SolveResult
 
 ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
 MeasureName = choice_enum("MeasureName", tuple(MEASURES))
@@ -52,6 +55,8 @@ def solve_cli(
         refit_every=refit_every,
     )
     config.validate()
+    from llcps.cps.agent import solve  # the simulator loads only when a command needs it
+
     with open_store(ctx, create=True) as store, _progress() as progress:
         task = progress.add_task("exploring", total=None, visible=False)
 
@@ -77,7 +82,7 @@ def _progress() -> Progress:
     )
 
 
-def _exit_code(result: SolveResult) -> int:
+def _exit_code(result: "SolveResult") -> int:
     if result.status == "solved":
         return EXIT_SOLVED
     if result.status == "interrupted":
@@ -85,7 +90,7 @@ def _exit_code(result: SolveResult) -> int:
     return EXIT_UNSOLVED
 
 
-def show(result: SolveResult) -> None:
+def show(result: "SolveResult") -> None:
     """The episode summary for people."""
     print_table(
         f"{result.scenario} ({result.condition}) on {result.branch}: {result.status}",

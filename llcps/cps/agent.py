@@ -11,28 +11,19 @@ from __future__ import annotations
 
 import contextlib
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
-from llcps.cps.candidates import Grid, enumerate_candidates
+from llcps.cps.candidates import enumerate_candidates
+from llcps.cps.episode import SolveConfig, SolveResult
 from llcps.cps.outcomes import desired_outcome
-from llcps.domain import (
-    ACTIONS,
-    ControllerParams,
-    EntityFeatures,
-    State,
-    TrialRecord,
-    TrialSpec,
-    WorldModelInput,
-)
+from llcps.domain import ControllerParams, State, TrialRecord, TrialSpec, WorldModelInput
 from llcps.errors import LlcpsError
-from llcps.models import WORLD_MODELS
-from llcps.models.measures import MEASURES, rank
-from llcps.scenarios import SCENARIOS, get_scenario
-from llcps.scenarios.base import CONDITIONS, Scenario
+from llcps.models.measures import rank
+from llcps.models.persistence import fit_or_load
+from llcps.scenarios.base import Scenario
 from llcps.sim.controllers import PUSH_DIRECTION
 from llcps.sim.perception import entity_features, perceive
 from llcps.sim.render import GifRecorder
@@ -47,103 +38,12 @@ from llcps.symbolic.planner import GroundAction, plan
 #: Controller settings of K's own actions: the robot's nominal way of doing each.
 NOMINAL_RATE = 0.4
 NOMINAL_MAGNITUDE = 0.15
-DEFAULT_MODEL = "nb"
-DEFAULT_MEASURE = "goal-directed"
-DEFAULT_BUDGET = 300
 #: Push directions K may use to move an object toward a target ("top" tips it instead).
 PUSH_DIRECTIONS = {k: v for k, v in PUSH_DIRECTION.items() if k != "top"}
 #: Simulation steps between GIF frames (240 Hz / 8 = 30 frames per simulated second).
 GIF_EVERY = 8
 #: Cap on steps of one settle/trial, as a safety net (240 Hz).
 SETTLE_STEPS = 480
-
-
-@dataclass(frozen=True)
-class SolveConfig:
-    """Everything that defines an episode, so a stored run can be repeated."""
-
-    scenario: str
-    condition: str = "novelty"
-    model: str = DEFAULT_MODEL
-    measure: str = DEFAULT_MEASURE
-    seed: int = 0
-    budget: int = DEFAULT_BUDGET
-    refit_every: int = 1
-    grid: Grid = Grid()
-
-    def validate(self) -> Scenario:
-        """Check names and numbers before anything runs; returns the scenario."""
-        scenario = get_scenario(self.scenario)
-        if self.condition not in CONDITIONS:
-            raise LlcpsError(f"unknown condition {self.condition!r}", hint=f"choose one of: {', '.join(CONDITIONS)}")
-        if self.model not in WORLD_MODELS:
-            from llcps.errors import UnknownNameError
-
-            raise UnknownNameError("world model", self.model, list(WORLD_MODELS))
-        if self.measure not in MEASURES:
-            from llcps.errors import UnknownNameError
-
-            raise UnknownNameError("measure", self.measure, list(MEASURES))
-        if self.budget < 0:
-            raise LlcpsError(f"budget must be >= 0, got {self.budget}", hint="pass --budget 0 or more")
-        if self.refit_every < 1:
-            raise LlcpsError(f"refit_every must be >= 1, got {self.refit_every}")
-        return scenario
-
-
-@dataclass
-class SolveResult:
-    """The summary of one episode (``llcps solve --json`` prints :meth:`as_json`)."""
-
-    scenario: str
-    condition: str
-    model: str
-    measure: str
-    seed: int
-    branch: str
-    status: str = "running"
-    plan: list[str] = field(default_factory=list)
-    failed_action: str | None = None
-    missing_effects: str | None = None
-    exploration_trials: int = 0
-    plan_trials: int = 0
-    candidates: int = 0
-    sim_steps: int = 0
-    sim_seconds: float = 0.0
-    wall_seconds: float = 0.0
-    learned_operators: list[str] = field(default_factory=list)
-    resolving_trial_id: int | None = None
-    episode_id: int | None = None
-    run_id: int | None = None
-
-    @property
-    def solved(self) -> bool:
-        return self.status == "solved"
-
-    def as_json(self) -> dict[str, object]:
-        return {
-            "scenario": self.scenario,
-            "condition": self.condition,
-            "model": self.model,
-            "measure": self.measure,
-            "seed": self.seed,
-            "branch": self.branch,
-            "solved": self.solved,
-            "status": self.status,
-            "plan": self.plan,
-            "failed_action": self.failed_action,
-            "missing_effects": self.missing_effects,
-            "exploration_trials": self.exploration_trials,
-            "plan_trials": self.plan_trials,
-            "candidates": self.candidates,
-            "sim_steps": self.sim_steps,
-            "sim_seconds": round(self.sim_seconds, 4),
-            "wall_seconds": round(self.wall_seconds, 4),
-            "learned_operators": self.learned_operators,
-            "resolving_trial_id": self.resolving_trial_id,
-            "episode_id": self.episode_id,
-            "run_id": self.run_id,
-        }
 
 
 ProgressCallback = Callable[[str, int, int], None]
@@ -333,7 +233,7 @@ def solve(
     world: World | None = None
     try:
         records = list(store.visible_trials(branch_name))
-        model = WORLD_MODELS[config.model](config.seed).fit(records)
+        model = fit_or_load(store, branch_name, config.model, config.seed, records=records)
         kb = load_knowledge(store, branch_name)
         world = World.from_scene(scenario.scene(config.condition), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
@@ -495,4 +395,4 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
     }
 
 
-__all__ = ["SolveConfig", "SolveResult", "solve", "load_knowledge", "SCENARIOS", "EntityFeatures"]
+__all__ = ["SolveConfig", "SolveResult", "solve", "load_knowledge"]

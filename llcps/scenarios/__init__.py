@@ -5,21 +5,27 @@ tests read. See docs/scenarios.md for pictures and the candidate-space figures.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from llcps.domain import fluent
 from llcps.scenarios.base import CONDITIONS, Scenario, lookup
-from llcps.sim.entities import TableSpec, bucket, edge_lip, inside, open_box, shelf, solid
-from llcps.sim.world import SceneSpec
+
+if TYPE_CHECKING:
+    from llcps.sim.world import SceneSpec
+
+# The scene builders import the simulator when called, so listing scenarios (CLI
+# help, registries) stays cheap.
 
 # --------------------------------------------------------------------------- scenario 1
 # A light cube near the right (-y) edge of a narrow table, a bucket on the floor
 # beneath that edge. Original: push drops the cube in. Novelty: a lip along the
 # edge stops every push; lifting the cube over it (another action) still works.
 
-_S1_TABLE = TableSpec(y_half=0.45)
+def _scenario1(condition: str) -> "SceneSpec":
+    from llcps.sim.entities import TableSpec, bucket, edge_lip, solid
+    from llcps.sim.world import SceneSpec
 
-
-def _scenario1(condition: str) -> SceneSpec:
-    table = _S1_TABLE
+    table = TableSpec(y_half=0.45)
     entities = (
         solid("cube", "box", "red", (0.05, 0.05, 0.05), at=(0.4, -0.32)),
         bucket("bucket", "blue", at=(0.4, -0.59), table=table, diameter=0.26, height=0.24),
@@ -34,14 +40,14 @@ def _scenario1(condition: str) -> SceneSpec:
 # Novelty: the bin stands on the floor beyond the far end of the table, out of the
 # arm's reach; placing falls short, but the item can be driven off the far edge.
 
-_S2_TABLE = TableSpec(x_max=0.85)
+def _scenario2(condition: str) -> "SceneSpec":
+    from llcps.sim.entities import TableSpec, open_box, solid
+    from llcps.sim.world import SceneSpec
 
-
-def _scenario2(condition: str) -> SceneSpec:
-    table = _S2_TABLE
+    table = TableSpec(x_max=0.92)
     item = solid("can", "cylinder", "blue", (0.05, 0.07), at=(0.58, -0.05))
     if condition == "novelty":
-        bin_ = open_box("bin", "green", at=(1.0, -0.05), size=(0.24, 0.3, 0.35), on=table.floor_z, mass=2.0)
+        bin_ = open_box("bin", "green", at=(1.07, -0.05), size=(0.24, 0.3, 0.35), on=table.floor_z, mass=2.0)
     else:
         bin_ = open_box("bin", "green", at=(0.45, 0.3), size=(0.2, 0.2, 0.1))
     other = solid("block", "box", "red", (0.05, 0.05, 0.05), at=(0.35, -0.3))
@@ -54,7 +60,10 @@ def _scenario2(condition: str) -> SceneSpec:
 # shelf makes the cube reachable again.
 
 
-def _scenario3(condition: str) -> SceneSpec:
+def _scenario3(condition: str) -> "SceneSpec":
+    from llcps.sim.entities import inside, open_box, shelf, solid
+    from llcps.sim.world import SceneSpec
+
     tray = open_box("tray", "green", at=(0.5, 0.0), size=(0.16, 0.16, 0.05), mass=0.3)
     cube = inside(solid("cube", "box", "red", (0.04, 0.04, 0.04), at=(0, 0)), tray)
     other = solid("ball", "sphere", "blue", 0.05, at=(0.35, 0.3))
