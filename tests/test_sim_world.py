@@ -158,6 +158,8 @@ def test_a_state_from_another_scene_is_refused(world) -> None:
         world.restore_serialized(state)
     with pytest.raises(LlcpsError):
         world.restore(12345)
+    with pytest.raises(LlcpsError):
+        world.restore_serialized(b"not a state")
 
 
 def test_gui_without_a_display_is_a_clear_error(monkeypatch) -> None:

@@ -63,6 +63,9 @@ CARRY_CLEARANCE = 0.04
 SIDE_RELEASE_OFFSET = 0.6
 #: Gap between a container's footprint and an object set down beside it (m).
 SET_DOWN_GAP = 0.06
+#: push_together ends with a slow press of this length (m) at this speed (m/s).
+PRESS = 0.01
+PRESS_SPEED = 0.05
 #: Lateral offset of an off-centre push_together contact (fraction of the half width).
 OFF_CENTRE = 0.4
 
@@ -82,11 +85,11 @@ def _approach(m: Motion, point: tuple[float, float, float], yaw: float, safe_z: 
 
 
 def _contact_z(world: "World", name: str, orientation: str) -> float:
-    """Tool height for a push: mid-height, or near the top for ``top``."""
+    """Tool height for a push: low (fingertips 5 mm above the entity's bottom, the
+    finger faces covering its lower 5 cm), or for ``top`` near its top (it tips)."""
     lo, hi = world.aabb(name)
-    floor = lo[2] + MIN_TOOL_ABOVE
-    z = hi[2] - 0.005 if orientation == "top" else (lo[2] + hi[2]) / 2.0
-    return max(floor, z)
+    low = lo[2] + MIN_TOOL_ABOVE
+    return max(low, hi[2] - 0.005) if orientation == "top" else low
 
 
 def _stroke(
@@ -138,6 +141,9 @@ def push_together(world: "World", m: Motion, args: tuple[str, ...], params: "Con
         left = math.dist((x, y), end[:2])
         follow = min(params.movement_magnitude, left)
         m.move_to((x + d[0] * follow, y + d[1] * follow, z), params.rate, converge=False)
+        # a last slow press, so that the pair comes to rest together
+        x, y, z = m.target
+        m.move_to((x + d[0] * PRESS, y + d[1] * PRESS, z), PRESS_SPEED, converge=False)
     m.go_home(safe_z)
 
 

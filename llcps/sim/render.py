@@ -26,7 +26,9 @@ class Camera:
 
 
 #: A three-quarter view of the robot, the table and the floor beyond its far edge.
-VIEW = Camera(eye=(1.3, -1.0, 0.75), target=(0.5, 0.0, -0.08), fov=50.0)
+VIEW = Camera(eye=(1.55, -0.95, 1.05), target=(0.45, 0.0, 0.12), fov=55.0)
+#: Closer on the arm's workspace on the table (the floor beyond the edge is out of frame).
+CLOSE = Camera(eye=(1.25, -0.75, 0.8), target=(0.42, 0.0, 0.15), fov=55.0)
 
 
 def capture(world: "World", *, width: int = 320, height: int = 240, camera: Camera = VIEW) -> np.ndarray:

@@ -15,6 +15,7 @@ import functools
 import os
 import sys
 import tempfile
+import zlib
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterator, Mapping
 
@@ -36,6 +37,9 @@ from llcps.sim.robot import Robot
 #: Names reserved for the built-in fixtures.
 TABLE = "table"
 FLOOR = "floor"
+
+#: zlib level of serialized states (a scene's state shrinks from ~90 kB to ~40 kB in ~1 ms).
+STATE_COMPRESSION = 3
 
 #: Rest thresholds used by :meth:`World.settle` and the controllers.
 REST_LINEAR = 0.005  # m/s
@@ -340,7 +344,7 @@ class World:
         self._snapshots.pop(snap, None)
 
     def serialize_state(self) -> bytes:
-        """The current physics state as bytes (a .bullet file), for the experience store.
+        """The current physics state as bytes (a zlib-compressed .bullet file), for the experience store.
 
         The world then continues from exactly these bytes (it is restored from
         them), so whatever runs next replays bit for bit from the stored state in
@@ -351,9 +355,10 @@ class World:
         try:
             self.client.saveBullet(path)
             with open(path, "rb") as fh:
-                state = fh.read()
+                raw = fh.read()
         finally:
             os.unlink(path)
+        state = zlib.compress(raw, STATE_COMPRESSION)
         self.restore_serialized(state)
         return state
 
@@ -364,6 +369,11 @@ class World:
         Afterwards the world is exactly a fresh ``World.from_scene(scene)`` with the
         state restored; the motors hold the restored pose and nothing is grasped.
         """
+        if not state.startswith(b"BULLET"):  # compressed (raw .bullet files are accepted too)
+            try:
+                state = zlib.decompress(state)
+            except zlib.error as exc:
+                raise LlcpsError("not a physics state", hint="states come from World.serialize_state()") from exc
         self.load(self.scene)
         fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
         try:
