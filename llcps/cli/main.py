@@ -16,7 +16,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import db, inspect, inspect_model, pretrain, solve  # noqa: F401 - inspect_model adds `inspect model`
+from llcps.cli import db, inspect, inspect_model, inspect_runs, pretrain, replay, solve  # noqa: F401 - inspect_* add `inspect` subcommands
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
 
 app = new_app(
@@ -49,6 +49,7 @@ app.add_typer(db.app, name="db")
 app.add_typer(inspect.app, name="inspect")
 app.command("solve")(solve.solve_cli)
 app.command("pretrain")(pretrain.pretrain_cli)
+app.command("replay")(replay.replay_cli)
 
 
 def main() -> None:

@@ -18,6 +18,7 @@ import numpy as np
 
 from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.episode import SolveConfig, SolveResult
+from llcps.cps.knowledge import load_knowledge
 from llcps.cps.outcomes import desired_outcome
 from llcps.domain import ControllerParams, State, TrialRecord, TrialSpec, WorldModelInput
 from llcps.errors import LlcpsError
@@ -48,14 +49,6 @@ SETTLE_STEPS = 480
 
 ProgressCallback = Callable[[str, int, int], None]
 """Called as ``progress(phase, done, total)``; phase is "plan" or "explore"."""
-
-
-def load_knowledge(store: Store, branch: str) -> KnowledgeBase:
-    """K' of a branch: the default K plus every learned operator (and refinement) it sees."""
-    kb = KnowledgeBase.default()
-    for record in store.visible_operators(branch):
-        kb = KnowledgeBase.apply_learned(kb, record.definition)
-    return kb
 
 
 class Agent:
@@ -363,7 +356,13 @@ def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> 
 
 
 def _resolves(
-    agent: Agent, kb: KnowledgeBase, trial: TrialResult, failed_step: GroundAction, failure_state: State
+    agent: Agent,
+    kb: KnowledgeBase,
+    trial: TrialResult,
+    failed_step: GroundAction,
+    failure_state: State,
+    *,
+    store: bool = True,
 ) -> tuple[bool, bool]:
     """Did this trial resolve the novelty? Returns (resolved, through a re-plan).
 
@@ -379,7 +378,7 @@ def _resolves(
     steps = plan(kb, agent.task(trial.after))
     if not steps or not any(s.name == failed_step.name and s.args == failed_step.args for s in steps):
         return False, False
-    state, failed, _ = agent.run_plan(kb, steps)
+    state, failed, _ = agent.run_plan(kb, steps, store=store)
     return failed is None and agent.scenario.goal_reached(state), True
 
 

@@ -1,0 +1,44 @@
+"""``llcps replay``: re-execute a stored trial and check it reproduces."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from llcps.cli._common import JsonFlag, message, open_store, print_json, print_table
+
+
+def replay_cli(
+    ctx: typer.Context,
+    trial_id: Annotated[int, typer.Argument(metavar="TRIAL_ID", help="Id of a stored trial (see `llcps inspect trials`).", show_default=False)],
+    gif: Annotated[Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the replay to a GIF.", show_default=False)] = None,
+    gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
+    as_json: JsonFlag = False,
+) -> None:
+    """Restore a trial's start state, run it again, compare Omega, solved and sim steps.
+
+    Exit code 0 when everything matches what was recorded, 1 when it does not.
+    """
+    from llcps.cps.replay import replay  # the simulator loads only when needed
+
+    with open_store(ctx) as store:
+        report = replay(store, trial_id, gif=gif, gui=gui)
+    if as_json:
+        print_json(report.as_json())
+    else:
+        rec, rep = report.trial, report
+        print_table(
+            f"trial {rec.id} ({rec.source}) {rec.spec.label}",
+            ("", "recorded", "replayed"),
+            [
+                ("outcome", " ".join(map(str, rec.outcome.bits())), " ".join(map(str, rep.outcome.bits()))),
+                ("solved", rec.solved, rep.solved),
+                ("sim steps", rec.sim_steps, rep.sim_steps),
+            ],
+        )
+        message("match" if report.matches else "MISMATCH: the replay differs from the recorded trial")
+        if gif is not None:
+            message(f"wrote {gif}")
+    raise typer.Exit(0 if report.matches else 1)

@@ -1,0 +1,97 @@
+"""Replay a stored trial: rebuild its scene, restore its start state, execute it
+again with its stored settings, and check that the physics gives what was recorded.
+
+Physics is deterministic from a stored snapshot, so a replay must match bit for bit:
+the same Omega, the same ``solved`` (the scenario's goal held after the trial) and
+the same number of simulation steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from llcps.domain import Outcome, TrialRecord
+from llcps.errors import LlcpsError
+from llcps.store import Store
+
+
+@dataclass(frozen=True)
+class ReplayReport:
+    """What a replay found, next to what the store recorded."""
+
+    trial: TrialRecord
+    outcome: Outcome
+    solved: bool
+    sim_steps: int
+    wall_seconds: float
+
+    @property
+    def matches(self) -> bool:
+        return (
+            self.outcome == self.trial.outcome
+            and self.solved == self.trial.solved
+            and self.sim_steps == self.trial.sim_steps
+        )
+
+    def as_json(self) -> dict[str, object]:
+        return {
+            "trial_id": self.trial.id,
+            "source": self.trial.source,
+            "action": self.trial.spec.label,
+            "matches": self.matches,
+            "recorded": {
+                "outcome": self.trial.outcome.as_dict(),
+                "solved": self.trial.solved,
+                "sim_steps": self.trial.sim_steps,
+            },
+            "replayed": {
+                "outcome": self.outcome.as_dict(),
+                "solved": self.solved,
+                "sim_steps": self.sim_steps,
+            },
+            "wall_seconds": round(self.wall_seconds, 4),
+        }
+
+
+def replay(store: Store, trial_id: int, *, gif: str | Path | None = None, gui: bool = False) -> ReplayReport:
+    """Re-execute stored trial ``trial_id`` from its start snapshot.
+
+    Args:
+        store: the experience store holding the trial and its snapshot.
+        trial_id: the trial to replay.
+        gif: also render the replay to this GIF.
+        gui: watch it in a PyBullet window (needs a display).
+
+    Raises:
+        LlcpsError: the trial does not exist or has no stored start state.
+    """
+    from llcps.scenarios import get_scenario
+    from llcps.sim.render import GifRecorder
+    from llcps.sim.trial import run_trial
+    from llcps.sim.world import World
+
+    trial = store.get_trial(trial_id)
+    if trial.snapshot_id is None:
+        raise LlcpsError(f"trial {trial_id} has no stored start state, so it cannot be replayed")
+    snapshot = store.get_snapshot(trial.snapshot_id)
+    world = World.from_scene(snapshot.scene, gui=gui)
+    try:
+        world.restore_serialized(snapshot.state)
+        recorder = GifRecorder(world) if gif is not None else None
+        if recorder is not None:
+            with recorder:
+                result = run_trial(world, trial.spec)
+            recorder.save(gif, speedup=2.0)
+        else:
+            result = run_trial(world, trial.spec)
+        solved = get_scenario(trial.scenario).goal_reached(result.after) if trial.scenario else False
+    finally:
+        world.close()
+    return ReplayReport(
+        trial=trial,
+        outcome=result.outcome,
+        solved=solved,
+        sim_steps=result.sim_steps,
+        wall_seconds=result.wall_seconds,
+    )
