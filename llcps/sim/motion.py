@@ -52,7 +52,7 @@ class Motion:
     def _tick(self) -> None:
         if self.steps >= self.max_steps:
             raise CapReached
-        self.world.step(1)
+        self.world.step()
         self.steps += 1
 
     def wait(self, n: int) -> None:
@@ -100,10 +100,12 @@ class Motion:
         n = max(1, math.ceil(dist / (max(speed, 1e-6) * self.world.time_step)))
         ik, command, tick = self._ik, self._command, self._tick
         sx, sy, sz = start
+        turning = yaw1 != yaw0
+        orn = top_down(yaw1)
         for i in range(1, n + 1):
             f = i / n
             pos = (sx + f * dx, sy + f * dy, sz + f * dz)
-            command(ik(pos, top_down(yaw0 + f * (yaw1 - yaw0))))
+            command(ik(pos, top_down(yaw0 + f * (yaw1 - yaw0)) if turning else orn))
             tick()
             if until is not None and i % CHECK_EVERY == 0 and until():
                 # stop where the tool is, not where the (leading) target was

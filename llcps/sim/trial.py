@@ -38,10 +38,6 @@ class TrialResult:
     def model_input(self) -> WorldModelInput:
         return WorldModelInput(spec=self.spec, features=self.features)
 
-    @property
-    def sim_seconds(self) -> float:
-        return self.sim_steps / 240.0
-
 
 def run_trial(world: World, spec: TrialSpec, *, max_steps: int = DEFAULT_MAX_STEPS) -> TrialResult:
     """Execute ``spec`` from the world's current state and observe what changed.
