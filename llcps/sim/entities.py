@@ -16,7 +16,7 @@ which are rotated by ``yaw`` about +z.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any, Mapping, Sequence
 
 import pybullet as p
@@ -409,7 +409,6 @@ class Entity:
     body_id: int
     spec: EntitySpec
     com_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    parts: tuple[str, ...] = field(default=())
 
     @property
     def kind(self) -> str:

@@ -35,6 +35,7 @@ from llcps.sim.entities import (
     solid,
     stacked,
 )
+from llcps.sim.geometry import in_interior
 from llcps.sim.perception import CAMERA
 from llcps.sim.world import SceneSpec, World
 
@@ -306,8 +307,6 @@ def sample_spec(
 
 
 def _is_in(world: World, obj: str, container: str) -> bool:
-    from llcps.sim.geometry import in_interior
-
     return in_interior(world, world.center(obj), container)
 
 
