@@ -204,6 +204,21 @@ class Preset:
     pretrain_sizes: tuple[int, ...]
     conditions: tuple[str, ...] = EXPERIMENT_CONDITIONS
     default_seeds: int = 20
+    #: Most exploration trials per episode (an unsolved episode records this many).
+    budget: int = 150
+    #: Random interactions drawn per seed; every pretraining set of the seed is this pool
+    #: or a subset of it (the paper's 4 points are one per action from its 200).
+    pretrain_pool: int = 200
+
+    def __post_init__(self) -> None:
+        if isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 0:
+            raise LlcpsError(f"preset {self.name!r}: the budget must be a non-negative integer, not {self.budget!r}")
+        if self.pretrain_sizes and self.pretrain_pool < max(self.pretrain_sizes):
+            raise LlcpsError(
+                f"preset {self.name!r}: a pool of {self.pretrain_pool} random interactions cannot give "
+                f"a pretraining set of {max(self.pretrain_sizes)}",
+                hint="make pretrain_pool at least the largest pretraining size",
+            )
 
     def cells(self) -> tuple[Cell, ...]:
         """Every cell, in a fixed order (model, measure, pretraining size, condition)."""
@@ -249,7 +264,8 @@ PRESETS: dict[str, Preset] = {
         PAPER_PRETRAIN_SIZES,
         default_seeds=20,
     ),
-    "smoke": Preset("smoke", ("nb",), ("most-changes",), (4,), default_seeds=2),
+    # Small enough for the test suite: 8 random interactions per seed, 5 exploration trials per episode.
+    "smoke": Preset("smoke", ("nb",), ("most-changes",), (4,), default_seeds=2, budget=5, pretrain_pool=8),
 }
 
 
