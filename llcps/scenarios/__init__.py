@@ -45,9 +45,9 @@ def _scenario2(condition: str) -> "SceneSpec":
     from llcps.sim.world import SceneSpec
 
     table = TableSpec(x_max=0.92)
-    item = solid("can", "cylinder", "blue", (0.05, 0.07), at=(0.58, -0.05))
+    item = solid("can", "cylinder", "blue", (0.05, 0.07), at=(0.62, -0.05))
     if condition == "novelty":
-        bin_ = open_box("bin", "green", at=(1.07, -0.05), size=(0.24, 0.3, 0.35), on=table.floor_z, mass=2.0)
+        bin_ = open_box("bin", "green", at=(1.06, -0.05), size=(0.24, 0.3, 0.35), on=table.floor_z, mass=2.0)
     else:
         bin_ = open_box("bin", "green", at=(0.45, 0.3), size=(0.2, 0.2, 0.1))
     other = solid("block", "box", "red", (0.05, 0.05, 0.05), at=(0.35, -0.3))
@@ -55,20 +55,23 @@ def _scenario2(condition: str) -> "SceneSpec":
 
 
 # --------------------------------------------------------------------------- scenario 3
-# A tray holding one cube. Original: lift the cube out from the top. Novelty: a
-# shelf over the tray blocks the top approach; sliding the tray out from under the
-# shelf makes the cube reachable again.
+# A container holding one ball. Original: a shallow tray; the ball is lifted out
+# from the top. Novelty: the ball sits at the bottom of a deep, narrow cup: the
+# hand cannot get down to it (its palm meets the rim), so it cannot be taken out
+# from the top; tipping the cup over spills the ball.
 
 
 def _scenario3(condition: str) -> "SceneSpec":
-    from llcps.sim.entities import inside, open_box, shelf, solid
+    from llcps.sim.entities import inside, open_box, solid
     from llcps.sim.world import SceneSpec
 
-    tray = open_box("tray", "green", at=(0.5, 0.0), size=(0.16, 0.16, 0.05), mass=0.3)
-    cube = inside(solid("cube", "box", "red", (0.04, 0.04, 0.04), at=(0, 0)), tray)
-    other = solid("ball", "sphere", "blue", 0.05, at=(0.35, 0.3))
-    fixtures = shelf("shelf", at=(0.5, 0.0), clearance=0.3, size=(0.3, 0.12, 0.02)) if condition == "novelty" else ()
-    return SceneSpec(entities=(tray, cube, other), fixtures=fixtures, name=f"scenario3/{condition}")
+    if condition == "novelty":
+        cup = open_box("cup", "green", at=(0.5, 0.0), size=(0.09, 0.09, 0.16), mass=0.15)
+    else:
+        cup = open_box("cup", "green", at=(0.5, 0.0), size=(0.16, 0.16, 0.05), mass=0.3)
+    ball = inside(solid("ball", "sphere", "red", 0.045, at=(0, 0)), cup)
+    other = solid("block", "box", "blue", (0.05, 0.05, 0.05), at=(0.35, 0.3))
+    return SceneSpec(entities=(cup, ball, other), name=f"scenario3/{condition}")
 
 
 SCENARIOS: dict[str, Scenario] = {
@@ -101,11 +104,11 @@ SCENARIOS: dict[str, Scenario] = {
             alias="empty",
             title="empty a container holding one object",
             story=(
-                "Take the cube out of the tray. Novelty: a shelf over the tray blocks the "
-                "approach from the top, so the cube cannot be lifted out."
+                "Take the ball out of its container. Novelty: the ball sits at the bottom of a "
+                "deep, narrow cup the hand cannot reach into, so it cannot be lifted out."
             ),
             build_scene=_scenario3,
-            goal_neg=frozenset({fluent("in", "cube", "tray")}),
+            goal_neg=frozenset({fluent("in", "ball", "cup")}),
         ),
     )
 }

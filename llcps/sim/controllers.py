@@ -55,6 +55,13 @@ PRE_CONTACT = 0.03
 FINGER_HALF = 0.015
 #: Lowest tool height above a support surface, keeping the fingertips 5 mm clear (m).
 MIN_TOOL_ABOVE = TOOL_ABOVE_TIPS + 0.005
+#: The Panda hand's footprint: length along the finger axis, depth across it, and the
+#: height of its underside above the tool point (m); used to pick a grasp side it fits.
+HAND_SPAN = 0.21
+HAND_DEPTH = 0.07
+HAND_ABOVE_TOOL = 0.05
+#: Largest tool position error (m) at which a pick-and-place waypoint counts as reachable.
+PLAN_TOLERANCE = 0.03
 #: Lowest approach and transit height of the tool above the table (m).
 SAFE_Z = 0.25
 #: Clearance of a carried object above rims and supports (m).
@@ -71,7 +78,10 @@ OFF_CENTRE = 0.4
 
 
 def _safe_z(world: "World") -> float:
-    tallest = max((g.top(world, n) for n in world.entities), default=0.0)
+    """Transit height: above every entity and every scenario fixture (a shelf, a lip)."""
+    c = world.client
+    fixture_tops = (c.getAABB(body)[1][2] for name, body in world.fixtures.items() if name not in ("table", "floor"))
+    tallest = max((*(g.top(world, n) for n in world.entities), *fixture_tops), default=0.0)
     return max(SAFE_Z, tallest + 0.08)
 
 
@@ -147,14 +157,67 @@ def push_together(world: "World", m: Motion, args: tuple[str, ...], params: "Con
     m.go_home(safe_z)
 
 
-def _grasp_yaw(world: "World", name: str) -> float:
-    """Close the fingers across the entity's narrower horizontal side."""
+def _grasp_yaw(world: "World", name: str, point: tuple[float, float, float], safe_z: float) -> float:
+    """Close the fingers across the entity's narrower horizontal side, or across the
+    other side when only there the hand's descent column is free of other bodies
+    (a shelf edge, a container wall) and the entity still fits between the fingers."""
     spec = world.entity(name).spec
     _, orn = world.pose(name)
     yaw = world.client.getEulerFromQuaternion(orn)[2]
-    if spec.shape == "box" and spec.size[0] < spec.size[1]:
+    across_x = spec.shape == "box" and spec.size[0] < spec.size[1]
+    if across_x:
         yaw += math.pi / 2  # close along the entity's own x
-    return g.yaw_of((math.cos(yaw), math.sin(yaw)))
+    options = [yaw]
+    other_width = spec.size[0] if not across_x else spec.size[1]
+    if spec.shape != "box" or other_width <= 2 * FINGER_OPEN - 0.01:
+        options.append(yaw + math.pi / 2)
+    best = min(options, key=lambda y: _hand_obstacles(world, name, point, y, safe_z))
+    return g.yaw_of((math.cos(best), math.sin(best)))
+
+
+def _hand_obstacles(world: "World", name: str, point: tuple[float, float, float], yaw: float, safe_z: float) -> int:
+    """How many vertical rays down the open hand's descent column hit something else
+    before the hand gets there: rays across the palm stop at its underside (a shelf),
+    rays down each finger's path at the grasp height (a container wall)."""
+    fx, fy = -math.sin(yaw), math.cos(yaw)  # the finger axis: the hand is long along it
+    hx, hy = math.cos(yaw), math.sin(yaw)
+    top = max(safe_z, point[2]) + HAND_ABOVE_TOOL + 0.1
+    starts, ends = [], []
+
+    def column(a: float, b: float, bottom: float) -> None:
+        x, y = point[0] + fx * a + hx * b, point[1] + fy * a + hy * b
+        starts.append((x, y, top))
+        ends.append((x, y, bottom))
+
+    for a in (-HAND_SPAN / 2, -HAND_SPAN / 4, 0.0, HAND_SPAN / 4, HAND_SPAN / 2):
+        for b in (-HAND_DEPTH / 2, 0.0, HAND_DEPTH / 2):
+            column(a, b, point[2] + HAND_ABOVE_TOOL)
+    for side in (-1.0, 1.0):
+        for a in (FINGER_OPEN - 0.004, FINGER_OPEN + 0.006, FINGER_OPEN + 0.016):
+            for b in (-0.01, 0.0, 0.01):
+                column(side * a, b, point[2] - 0.01)
+    ignore = {world.robot.body_id, world.body(name)}
+    rays = world.client.rayTestBatch(starts, ends, collisionFilterMask=RAY_MASK)
+    return sum(1 for hit in rays if hit[0] >= 0 and hit[0] not in ignore)
+
+
+def _grasp_point(world: "World", obj: str) -> tuple[tuple[float, float, float], float]:
+    """Where the tool grasps ``obj`` from the top, and its height above ``obj``'s bottom then."""
+    lo, hi = world.aabb(obj)
+    cx, cy, _ = world.center(obj)
+    z = max(lo[2] + MIN_TOOL_ABOVE, hi[2] - 0.03)
+    return (cx, cy, z), z - lo[2]
+
+
+def _reachable(world: "World", *points: tuple[float, float, float]) -> bool:
+    """Whether the arm can put its tool at every waypoint, top-down (IK then FK).
+
+    Pick-and-place controllers check their waypoints before moving, as a motion
+    planner would: an action whose grasp or release point is out of reach is
+    refused and nothing moves, rather than dropping the object wherever the
+    stretched arm happens to be.
+    """
+    return all(world.robot.reach_error(point, 0.0)[0] <= PLAN_TOLERANCE for point in points)
 
 
 def _pick(world: "World", m: Motion, obj: str, safe_z: float) -> float:
@@ -163,13 +226,11 @@ def _pick(world: "World", m: Motion, obj: str, safe_z: float) -> float:
     Returns:
         The tool height above the object's bottom while it is held.
     """
-    lo, hi = world.aabb(obj)
-    cx, cy, _ = world.center(obj)
-    z = max(lo[2] + MIN_TOOL_ABOVE, hi[2] - 0.03)
+    point, held = _grasp_point(world, obj)
     m.set_fingers(FINGER_OPEN)
-    _approach(m, (cx, cy, z), _grasp_yaw(world, obj), safe_z)
+    _approach(m, point, _grasp_yaw(world, obj, point, safe_z), safe_z)
     m.grasp(world.body(obj))
-    return z - lo[2]
+    return held
 
 
 def _lift(m: Motion, params: "ControllerParams", min_z: float) -> None:
@@ -194,10 +255,8 @@ def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params:
     release offset toward a side from carry height."""
     obj, container = args
     safe_z = _safe_z(world)
-    held = _pick(world, m, obj, safe_z)
-    rim = g.top(world, container)
-    carry_z = rim + CARRY_CLEARANCE + held
-    _lift(m, params, carry_z)
+    grasp, held = _grasp_point(world, obj)
+    carry_z = g.top(world, container) + CARRY_CLEARANCE + held
     cx, cy, _ = world.center(container)
     if params.orientation == "top":
         tx, ty = cx, cy
@@ -205,6 +264,10 @@ def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params:
         side = SIDE[params.orientation]
         off = SIDE_RELEASE_OFFSET * g.inner_half(world, container, side)
         tx, ty = cx + side[0] * off, cy + side[1] * off
+    if not _reachable(world, grasp, (tx, ty, max(carry_z, grasp[2] + params.movement_magnitude))):
+        return
+    _pick(world, m, obj, safe_z)
+    _lift(m, params, carry_z)
     m.move_to((tx, ty, m.target[2]), params.rate)
     if params.orientation == "top":
         m.move_to((tx, ty, g.inner_floor_z(world, container) + 0.015 + held), VERTICAL_SPEED)
@@ -217,13 +280,16 @@ def remove_from_container(world: "World", m: Motion, args: tuple[str, ...], para
     ``c``'s footprint toward the orientation's side, set it down and release."""
     obj, container = args
     safe_z = _safe_z(world)
-    held = _pick(world, m, obj, safe_z)
+    grasp, held = _grasp_point(world, obj)
     carry_z = g.top(world, container) + CARRY_CLEARANCE + held
-    _lift(m, params, carry_z)
     side = SIDE[params.orientation]
     cx, cy, _ = world.center(container)
     reach = g.extent_along(world, container, side) + g.extent_along(world, obj, side) + SET_DOWN_GAP
     tx, ty = cx + side[0] * reach, cy + side[1] * reach
+    if not _reachable(world, grasp, (tx, ty, max(carry_z, grasp[2] + params.movement_magnitude))):
+        return
+    _pick(world, m, obj, safe_z)
+    _lift(m, params, carry_z)
     m.move_to((tx, ty, m.target[2]), params.rate)
     support = _support_z(world, tx, ty, m.target[2] - held - 0.005, world.body(obj))
     m.move_to((tx, ty, support + 0.01 + held), VERTICAL_SPEED)

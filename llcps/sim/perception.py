@@ -43,7 +43,7 @@ REACH_TILT = 0.3
 #: The tool pose tested for reachability is this far above the entity's top (m).
 REACH_ABOVE = 0.02
 #: Start height of the vertical approach ray above the entity's top (m).
-APPROACH_HEIGHT = 0.3
+APPROACH_HEIGHT = 0.5
 #: Fraction of an entity's extent by which visibility sample points spread from its centre.
 SAMPLE_SPREAD = 0.35
 
