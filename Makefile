@@ -14,9 +14,17 @@ $(BIN)/llcps: pyproject.toml
 
 setup: $(BIN)/llcps
 
+# The paper's sequence on the default store: pretrain the world model on 200 random
+# interactions, then solve the three scenarios' novelties in order (each solve trains
+# on everything before it), and end with the exploration table. A scenario the budget
+# cannot solve exits 1; the sequence goes on and the table shows it.
 run: setup
 	$(BIN)/llcps --db $(DB) db init
-	$(BIN)/llcps --db $(DB) db status
+	$(BIN)/llcps --db $(DB) pretrain --n 200 --seed 1
+	-$(BIN)/llcps --db $(DB) solve scenario1
+	-$(BIN)/llcps --db $(DB) solve scenario2
+	-$(BIN)/llcps --db $(DB) solve scenario3
+	$(BIN)/llcps --db $(DB) inspect runs
 
 test: setup
 	$(BIN)/python -m pytest
