@@ -4,26 +4,37 @@ and random pretraining interactions. See docs/world.md and docs/controllers.md."
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
+from typing import Iterator
 
 
-def _import_pybullet_quietly() -> None:
-    """Import pybullet with its build-time banner (written to the C stderr) suppressed,
-    so every command's stderr carries only llcps's own messages."""
+@contextlib.contextmanager
+def native_output_silenced() -> Iterator[None]:
+    """Discard what native code writes to file descriptors 1 and 2 meanwhile.
+
+    The physics engine prints a banner when imported and a line when a client
+    connects; stdout carries ``--json`` data and stderr llcps's own messages.
+    """
     try:
+        sys.stdout.flush()
         sys.stderr.flush()
-        saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
-    except OSError:  # no real stderr (embedded interpreters): import as is
-        import pybullet  # noqa: F401
+        saved = (os.dup(1), os.dup(2))
+    except (OSError, ValueError):  # no real file descriptors (captured): nothing to protect
+        yield
         return
-    os.dup2(devnull, 2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
     try:
-        import pybullet  # noqa: F401
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        yield
     finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, devnull):
+            os.close(fd)
 
 
-_import_pybullet_quietly()
+with native_output_silenced():
+    import pybullet  # noqa: F401  (imported once here, quietly; the modules below reuse it)

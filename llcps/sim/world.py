@@ -10,19 +10,19 @@ and stepping from it gives bit-identical results.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import os
 import sys
 import tempfile
 import zlib
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterator, Mapping
+from typing import Any, Callable, Mapping
 
 import pybullet as p
 from pybullet_utils import bullet_client
 
 from llcps.errors import LlcpsError, UnknownNameError
+from llcps.sim import native_output_silenced
 from llcps.sim.entities import (
     Entity,
     EntitySpec,
@@ -107,21 +107,6 @@ class SceneSpec:
             ) from exc
 
 
-@contextlib.contextmanager
-def _stdout_to_stderr() -> Iterator[None]:
-    """Send what native code writes to file descriptor 1 to stderr meanwhile."""
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError):  # no real stdout (e.g. captured): nothing to protect
-        yield
-        return
-    try:
-        os.dup2(2, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
 
 
 class World:
@@ -149,7 +134,7 @@ class World:
             raise LlcpsError(
                 "cannot open a GUI window: no display", hint="unset --gui, or run under a desktop / xvfb-run"
             )
-        with _stdout_to_stderr():  # the engine prints to stdout on connect; keep stdout for data
+        with native_output_silenced():  # the engine prints a line on connect
             self.client = bullet_client.BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
         cid = self.client._client
         self._step = functools.partial(p.stepSimulation, physicsClientId=cid)
