@@ -371,3 +371,20 @@ def test_refinement_ignores_effects_the_failed_action_achieves_itself():
     kb = refine_failed_action(KB, failed, op, FAILURE_STATE)
     assert kb.operator("remove_from_container") == KB.operator("remove_from_container")
     assert planned(kb, task) == [f"({op.name} tray cube)"]
+
+
+def test_same_knowledge_compares_operators_with_different_parameters_without_error() -> None:
+    """Two operators learned with the same settings but over different entities are different
+    knowledge (regression: comparing them used to build an invalid operator and crash)."""
+    from llcps.domain import ControllerParams, TrialSpec, fluent
+    from llcps.symbolic.operators import learn_operator
+
+    spec = TrialSpec("place_in_container", ("cube", "bucket"), ControllerParams(1.0, 0.15, "right"))
+    before = frozenset({fluent("visible", "cube"), fluent("near", "cube", "ball")})
+    first = learn_operator(spec=spec, before=before, after=before | {fluent("in", "cube", "bucket")},
+                           objects={"cube": "item", "bucket": "container", "ball": "item"})
+    second = learn_operator(spec=spec, before=before, after=(before - {fluent("near", "cube", "ball")}) | {fluent("in", "cube", "bucket")},
+                            objects={"cube": "item", "bucket": "container", "ball": "item"})
+    assert first.parameters != second.parameters
+    assert not first.same_knowledge(second) and not second.same_knowledge(first)
+    assert first.same_knowledge(first)

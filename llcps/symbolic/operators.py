@@ -14,7 +14,7 @@ learned operator that a_f needed but lacked become preconditions of a_f.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, replace
+from dataclasses import fields, dataclass, replace
 from typing import TYPE_CHECKING, Collection, Mapping, Sequence
 
 from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, TrialSpec, fluent
@@ -201,7 +201,10 @@ class LearnedOperator:
 
     def same_knowledge(self, other: LearnedOperator) -> bool:
         """Equal up to its name and where it was learned: adding it again teaches nothing."""
-        return replace(self, name=other.name, source_arguments=other.source_arguments) == other
+        ignored = {"name", "source_arguments"}
+        return all(
+            getattr(self, f.name) == getattr(other, f.name) for f in fields(self) if f.name not in ignored
+        )
 
     def to_pddl(self, constant_types: Mapping[str, str] | None = None) -> str:
         """The operator as a PDDL ``:action`` (rendered by the `pddl` library)."""
