@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+import time
+from typing import Annotated, Optional
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from llcps.cli._common import JsonFlag, err_console, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import JsonFlag, choice_enum, err_console, open_store, print_json, print_table, selected_branch
 from llcps.domain import OUTCOME_NAMES
+from llcps.models import PAPER_MODELS, WORLD_MODELS
 from llcps.pretrain import PretrainSummary, pretrain
+
+ModelName = choice_enum("PretrainModel", tuple(WORLD_MODELS))
 
 
 def pretrain_cli(
@@ -18,12 +22,24 @@ def pretrain_cli(
         int, typer.Option("--n", metavar="N", min=0, help="Number of random interactions (trials) to run.")
     ] = 200,
     seed: Annotated[int, typer.Option("--seed", help="Run seed; trial i gets its own seed derived from it.")] = 0,
+    model: Annotated[
+        Optional[list[ModelName]],  # type: ignore[valid-type]
+        typer.Option(
+            "--model",
+            metavar="NAME",
+            help="World model to fit on the branch's trials afterwards (repeatable; default: the paper's nb and nn).",
+            show_default=False,
+        ),
+    ] = None,
+    model_seed: Annotated[int, typer.Option("--model-seed", help="Seed of the fitted models (`llcps solve --seed` reuses a model fitted with its seed).")] = 0,
     as_json: JsonFlag = False,
 ) -> None:
-    """Run N random interactions in settled random scenes and store each as a trial.
+    """Run N random interactions in settled random scenes, store each as a trial, then
+    fit the world models on every trial the branch sees (stored for `llcps solve`).
 
     The same seed writes the same trials (features, outcome, sim steps) bit for bit.
     """
+    names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
     with open_store(ctx, create=True) as store:
         with Progress(
             TextColumn("pretraining"),
@@ -42,10 +58,25 @@ def pretrain_cli(
                 seed=seed,
                 progress=lambda done, total: progress.update(task, completed=done),
             )
+        fitted = _fit_models(store, summary.branch, names, model_seed)
     if as_json:
-        print_json(summary.as_json())
+        print_json({**summary.as_json(), "models": fitted})
     else:
         show(summary)
+        print_table("world models fitted", ("model", "seed", "trials", "fit seconds"), [(f["name"], f["seed"], f["trials"], f"{f['fit_seconds']:.2f}") for f in fitted])
+
+
+def _fit_models(store, branch: str, names: list[str], seed: int) -> list[dict[str, object]]:
+    """Fit (and store) each world model on the branch's visible trials."""
+    from llcps.models.persistence import fit_or_load  # torch / sklearn load only here
+
+    records = store.visible_trials(branch)
+    fitted = []
+    for name in names:
+        started = time.perf_counter()
+        fit_or_load(store, branch, name, seed, records=records)
+        fitted.append({"name": name, "seed": seed, "trials": len(records), "fit_seconds": time.perf_counter() - started})
+    return fitted
 
 
 def show(summary: PretrainSummary) -> None:
