@@ -56,9 +56,9 @@ def _scenario2(condition: str) -> "SceneSpec":
 
 # --------------------------------------------------------------------------- scenario 3
 # A container holding one ball. Original: a shallow tray; the ball is lifted out
-# from the top. Novelty: the ball sits at the bottom of a deep, narrow cup: the
-# hand cannot get down to it (its palm meets the rim), so it cannot be taken out
-# from the top; tipping the cup over spills the ball.
+# from the top. Novelty: the ball lies at the bottom of a deep, narrow, heavy cup: the hand
+# cannot get down to it (its palm meets the rim), so it cannot be taken out from the
+# top; tipping the cup over spills it.
 
 
 def _scenario3(condition: str) -> "SceneSpec":
@@ -66,10 +66,11 @@ def _scenario3(condition: str) -> "SceneSpec":
     from llcps.sim.world import SceneSpec
 
     if condition == "novelty":
-        cup = open_box("cup", "green", at=(0.5, 0.0), size=(0.09, 0.09, 0.16), mass=0.15)
+        cup = open_box("cup", "green", at=(0.5, 0.0), size=(0.09, 0.09, 0.16), mass=3.0)
+        ball = inside(solid("ball", "sphere", "red", 0.045, at=(0, 0)), cup)
     else:
         cup = open_box("cup", "green", at=(0.5, 0.0), size=(0.16, 0.16, 0.05), mass=0.3)
-    ball = inside(solid("ball", "sphere", "red", 0.045, at=(0, 0)), cup)
+        ball = inside(solid("ball", "sphere", "red", 0.045, at=(0, 0)), cup)
     other = solid("block", "box", "blue", (0.05, 0.05, 0.05), at=(0.35, 0.3))
     return SceneSpec(entities=(cup, ball, other), name=f"scenario3/{condition}")
 
@@ -104,7 +105,7 @@ SCENARIOS: dict[str, Scenario] = {
             alias="empty",
             title="empty a container holding one object",
             story=(
-                "Take the ball out of its container. Novelty: the ball sits at the bottom of a "
+                "Take the ball out of its container. Novelty: the ball lies at the bottom of a "
                 "deep, narrow cup the hand cannot reach into, so it cannot be lifted out."
             ),
             build_scene=_scenario3,

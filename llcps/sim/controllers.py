@@ -85,13 +85,38 @@ def _safe_z(world: "World") -> float:
     return max(SAFE_Z, tallest + 0.08)
 
 
-def _approach(m: Motion, point: tuple[float, float, float], yaw: float, safe_z: float) -> None:
-    """Rise, travel above ``point`` at the safe height, then descend onto it."""
+def _approach(
+    m: Motion,
+    point: tuple[float, float, float],
+    yaw: float,
+    safe_z: float,
+    *,
+    until: Callable[[], bool] | None = None,
+) -> bool:
+    """Rise, travel above ``point`` at the safe height, then descend onto it.
+
+    Returns:
+        True when ``until`` stopped the descent early (a guarded move).
+    """
     x, y, z = m.target
     if z < safe_z - 1e-6:
         m.move_to((x, y, safe_z), VERTICAL_SPEED, converge=False)
     m.move_to((point[0], point[1], max(safe_z, point[2])), TRANSIT_SPEED, yaw=yaw)
-    m.move_to(point, VERTICAL_SPEED)
+    return m.move_to(point, VERTICAL_SPEED, until=until)
+
+
+def _blocked(world: "World", target: str) -> Callable[[], bool]:
+    """A guard for a descent onto ``target``: the hand touches any other body.
+
+    A grasping descent stops there, as a guarded move on a real arm does, instead
+    of pressing on whatever is in the way (a rim, a neighbour) until it gives.
+    """
+    c, robot, body = world.client, world.robot.body_id, world.body(target)
+
+    def touching_other() -> bool:
+        return any(cp[2] != body and cp[8] <= g.TOUCH_DISTANCE for cp in c.getContactPoints(bodyA=robot))
+
+    return touching_other
 
 
 def _contact_z(world: "World", name: str, orientation: str) -> float:
@@ -220,17 +245,17 @@ def _reachable(world: "World", *points: tuple[float, float, float]) -> bool:
     return all(world.robot.reach_error(point, 0.0)[0] <= PLAN_TOLERANCE for point in points)
 
 
-def _pick(world: "World", m: Motion, obj: str, safe_z: float) -> float:
-    """Open, approach ``obj`` from the top and grasp it.
+def _pick(world: "World", m: Motion, obj: str, safe_z: float) -> bool:
+    """Open, approach ``obj`` from the top with a guarded descent and grasp it.
 
     Returns:
-        The tool height above the object's bottom while it is held.
+        Whether ``obj`` is held. A controller whose grasp failed stops there and
+        returns the arm home, as a robot that checks its grasp does.
     """
-    point, held = _grasp_point(world, obj)
+    point, _ = _grasp_point(world, obj)
     m.set_fingers(FINGER_OPEN)
-    _approach(m, point, _grasp_yaw(world, obj, point, safe_z), safe_z)
-    m.grasp(world.body(obj))
-    return held
+    _approach(m, point, _grasp_yaw(world, obj, point, safe_z), safe_z, until=_blocked(world, obj))
+    return m.grasp(world.body(obj))
 
 
 def _lift(m: Motion, params: "ControllerParams", min_z: float) -> None:
@@ -266,7 +291,10 @@ def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params:
         tx, ty = cx + side[0] * off, cy + side[1] * off
     if not _reachable(world, grasp, (tx, ty, max(carry_z, grasp[2] + params.movement_magnitude))):
         return
-    _pick(world, m, obj, safe_z)
+    if not _pick(world, m, obj, safe_z):
+        m.open_hand()
+        m.go_home(safe_z)
+        return
     _lift(m, params, carry_z)
     m.move_to((tx, ty, m.target[2]), params.rate)
     if params.orientation == "top":
@@ -288,7 +316,10 @@ def remove_from_container(world: "World", m: Motion, args: tuple[str, ...], para
     tx, ty = cx + side[0] * reach, cy + side[1] * reach
     if not _reachable(world, grasp, (tx, ty, max(carry_z, grasp[2] + params.movement_magnitude))):
         return
-    _pick(world, m, obj, safe_z)
+    if not _pick(world, m, obj, safe_z):
+        m.open_hand()
+        m.go_home(safe_z)
+        return
     _lift(m, params, carry_z)
     m.move_to((tx, ty, m.target[2]), params.rate)
     support = _support_z(world, tx, ty, m.target[2] - held - 0.005, world.body(obj))
