@@ -1,0 +1,417 @@
+"""How close each layer comes to the physics bound: the figures ``llcps bench`` prints.
+
+llcps exists to run many exploration trials, and physics bounds how fast it can.
+Each group below measures one layer with the code the agent itself runs and
+returns :class:`Figure` rows; a figure with a ``target`` says whether it was met.
+Figures are measurements to report (docs/performance.md), never test assertions.
+
+Rates are given per second of *CPU time* of this process (``time.process_time``)
+as well as of wall-clock time: other jobs on a shared machine slow the wall clock
+but not the CPU time, so the CPU figures are the stable ones to compare.
+
+Groups (``GROUPS``): ``physics`` (raw step and control-loop rates of every
+scenario's scene), ``exploration`` (a real ``solve`` against the control-loop rate
+of its scene), ``models`` (fit / refit / predict of every registered world model),
+``ranking`` (1,000 candidates under every measure), ``store`` (durable commits,
+batched inserts, the visible set of a deep branch) and ``scaling`` (the smoke
+experiment grid on 1 and 2 worker processes).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterator, Sequence
+
+#: Exploration episode of the bench: scenario 1's novelty needs several trials to resolve.
+EXPLORE_SCENARIO = "scenario1"
+EXPLORE_BUDGET = 20
+EXPLORE_BUDGET_QUICK = 5
+#: Trials the deepest branch of the store bench sees.
+VISIBLE_TRIALS = 100_000
+VISIBLE_TRIALS_QUICK = 10_000
+#: Training-set sizes of the world-model timings.
+MODEL_SIZES = (200, 2_000, 10_000)
+MODEL_SIZES_QUICK = (200, 2_000)
+#: The experiment preset whose grid the scaling group runs.
+SCALING_PRESET = "smoke"
+
+Progress = Callable[[str], None]
+"""Called with a short description before each measurement."""
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One measured figure.
+
+    Attributes:
+        name: dotted name, group first (``store.commits_per_s``).
+        value: the measurement (finite).
+        unit: unit of ``value``.
+        target: the goal, as text (``">= 1000"``), or None.
+        met: whether ``value`` meets ``target`` (None without a target).
+        note: what was measured, briefly.
+    """
+
+    name: str
+    value: float
+    unit: str
+    target: str | None = None
+    met: bool | None = None
+    note: str = ""
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "value": self.value,
+            "unit": self.unit,
+            "target": self.target,
+            "met": self.met,
+            "note": self.note,
+        }
+
+
+def figure(name: str, value: float, unit: str, *, at_least: float | None = None, at_most: float | None = None, note: str = "") -> Figure:
+    """A figure, with its target check when it has one."""
+    value = float(value)
+    if at_least is not None:
+        return Figure(name, value, unit, f">= {at_least:g}", value >= at_least, note)
+    if at_most is not None:
+        return Figure(name, value, unit, f"<= {at_most:g}", value <= at_most, note)
+    return Figure(name, value, unit, note=note)
+
+
+class _Clock:
+    """Wall and CPU seconds of a block."""
+
+    def __enter__(self) -> "_Clock":
+        self._wall, self._cpu = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.wall = time.perf_counter() - self._wall
+        self.cpu = time.process_time() - self._cpu
+
+
+def _say(progress: Progress | None, text: str) -> None:
+    if progress is not None:
+        progress(text)
+
+
+# --------------------------------------------------------------------------- physics
+def _settled_world(scenario: str, condition: str = "novelty") -> Any:
+    from llcps.cps.agent import SETTLE_STEPS
+    from llcps.scenarios import SCENARIOS
+    from llcps.sim.world import World
+
+    world = World.from_scene(SCENARIOS[scenario].scene(condition))
+    world.settle(max_steps=SETTLE_STEPS)
+    return world
+
+
+def _raw_step_rate(world: Any, steps: int, clock: Callable[[], float]) -> float:
+    """``world.step()`` per second of ``clock``, motors holding; the state is restored."""
+    state = world.serialize_state()
+    try:
+        step = world.step
+        start = clock()
+        for _ in range(steps):
+            step()
+        elapsed = clock() - start
+    finally:
+        world.restore_serialized(state)
+    return steps / elapsed
+
+
+def bench_physics(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
+    """Raw physics steps/s and control-loop (IK + motors + step) rate of each scenario's novelty scene."""
+    from llcps.scenarios import SCENARIOS
+    from llcps.sim.motion import control_loop_rate
+
+    steps = 600 if quick else 2400
+    figures = []
+    for name in SCENARIOS:
+        _say(progress, f"physics: {name}")
+        world = _settled_world(name)
+        try:
+            figures += [
+                figure(f"physics.{name}.step_rate", _raw_step_rate(world, steps, time.process_time), "steps/s cpu", note="world.step(), motors holding"),
+                figure(f"physics.{name}.step_rate_wall", _raw_step_rate(world, steps, time.perf_counter), "steps/s wall"),
+                figure(
+                    f"physics.{name}.control_loop",
+                    control_loop_rate(world, steps=steps, clock=time.process_time),
+                    "steps/s cpu",
+                    note="IK + motor command + step: the bound of a moving arm",
+                ),
+                figure(f"physics.{name}.control_loop_wall", control_loop_rate(world, steps=steps), "steps/s wall"),
+            ]
+        finally:
+            world.close()
+    return figures
+
+
+# --------------------------------------------------------------------------- exploration
+@dataclass(frozen=True)
+class ExplorationRun:
+    """One measured ``solve`` episode."""
+
+    status: str
+    sim_steps: int
+    trials: int
+    exploration_trials: int
+    cpu_seconds: float
+    wall_seconds: float
+
+
+def run_exploration(budget: int, *, scenario: str = EXPLORE_SCENARIO, seed: int = 0) -> ExplorationRun:
+    """Solve ``scenario``'s novelty on a fresh temporary store; CPU and wall time of the whole episode.
+
+    The world model's module is imported first, so a one-time import is not charged
+    to the episode.
+    """
+    from llcps.cps.agent import solve
+    from llcps.cps.episode import SolveConfig
+    from llcps.models.registry import make_world_model
+    from llcps.store import Store
+
+    config = SolveConfig(scenario=scenario, budget=budget, seed=seed)
+    make_world_model(config.model, seed)
+    with tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp:
+        with Store.open(str(Path(tmp) / "bench.db"), create=True) as store:
+            with _Clock() as clock:
+                result = solve(store, branch=None, config=config, command="bench")
+    return ExplorationRun(
+        status=result.status,
+        sim_steps=result.sim_steps,
+        trials=result.exploration_trials + result.plan_trials,
+        exploration_trials=result.exploration_trials,
+        cpu_seconds=clock.cpu,
+        wall_seconds=clock.wall,
+    )
+
+
+def bench_exploration(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
+    """Sim steps/s and trials/s achieved in ``solve``, and efficiency against the control-loop rate."""
+    from llcps.sim.motion import control_loop_rate
+
+    _say(progress, f"exploration: control-loop rate of {EXPLORE_SCENARIO}")
+    world = _settled_world(EXPLORE_SCENARIO)
+    try:
+        bound_cpu = control_loop_rate(world, steps=2400, clock=time.process_time)
+        bound_wall = control_loop_rate(world, steps=2400)
+    finally:
+        world.close()
+    budget = EXPLORE_BUDGET_QUICK if quick else EXPLORE_BUDGET
+    _say(progress, f"exploration: solve {EXPLORE_SCENARIO} novelty, budget {budget}")
+    run = run_exploration(budget)
+    rate_cpu = run.sim_steps / run.cpu_seconds
+    rate_wall = run.sim_steps / run.wall_seconds
+    p = "exploration"
+    return [
+        figure(f"{p}.sim_steps", run.sim_steps, "steps", note=f"{run.status}: {run.exploration_trials} exploration + {run.trials - run.exploration_trials} plan trials"),
+        figure(f"{p}.sim_step_rate", rate_cpu, "steps/s cpu"),
+        figure(f"{p}.sim_step_rate_wall", rate_wall, "steps/s wall"),
+        figure(f"{p}.trial_rate", run.trials / run.cpu_seconds, "trials/s cpu"),
+        figure(f"{p}.trial_rate_wall", run.trials / run.wall_seconds, "trials/s wall"),
+        figure(f"{p}.control_loop", bound_cpu, "steps/s cpu", note="the bound: control-loop rate of the same scene"),
+        figure(f"{p}.efficiency", rate_cpu / bound_cpu, "ratio", at_least=0.8, note="achieved steps/s / control-loop rate (CPU time)"),
+        figure(f"{p}.efficiency_wall", rate_wall / bound_wall, "ratio", note="the same on the wall clock (disturbed by other jobs)"),
+    ]
+
+
+# --------------------------------------------------------------------------- world models
+#: Refit targets at 10,000 trials (seconds) by model name.
+REFIT_TARGETS = {"nb": 0.020, "nn": 2.0}
+#: Models timed once per size in the full run: a fit takes seconds, so the minimum of three adds little.
+SLOW_MODELS = ("nn", "forest")
+
+
+def bench_models(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
+    """Fit, refit (+1 trial) and predict (1,000 candidates) of every registered model at each size.
+
+    Quick mode times the paper's models only, at 10,000 trials only where a target
+    is set, with one repeat.
+    """
+    from llcps.models.benchmark import time_world_models
+    from llcps.models.registry import PAPER_MODELS, WORLD_MODELS
+
+    figures = []
+    names = PAPER_MODELS if quick else tuple(WORLD_MODELS)
+    for name in names:
+        sizes = MODEL_SIZES_QUICK + ((10_000,) if name in REFIT_TARGETS else ()) if quick else MODEL_SIZES
+        _say(progress, f"models: {name} at {', '.join(map(str, sizes))} trials")
+        WORLD_MODELS[name].model_class()  # import scikit-learn / torch before the clock starts
+        repeats = 1 if quick or name in SLOW_MODELS else 3
+        for row in time_world_models([name], sizes, repeats=repeats):
+            p = f"models.{name}.{row.n_trials}"
+            target = REFIT_TARGETS.get(name) if row.n_trials == 10_000 else None
+            figures += [
+                figure(f"{p}.fit", row.fit * 1e3, "ms"),
+                figure(f"{p}.refit", row.refit * 1e3, "ms", at_most=None if target is None else target * 1e3, note="fit again on n + 1 trials"),
+                figure(f"{p}.predict", row.predict * 1e3, "ms", note="1,000 candidates"),
+            ]
+    return figures
+
+
+def bench_ranking(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
+    """Ranking 1,000 candidates (given predictions) under every measure."""
+    from llcps.models.benchmark import time_ranking
+    from llcps.models.measures import MEASURES
+
+    _say(progress, "ranking: 1,000 candidates")
+    seconds = time_ranking(1000, repeats=3 if quick else 10)
+    return [figure("ranking.all_measures_1000", seconds * 1e3, "ms", at_most=50, note=f"all {len(MEASURES)} measures")]
+
+
+# --------------------------------------------------------------------------- store
+def _trials(n: int, branch: str, start: int = 0) -> Iterator[Any]:
+    """``n`` varied NewTrials on ``branch`` (a seeded pool, cycled)."""
+    from llcps.store import NewTrial
+
+    pool = _pool()
+    for i in range(start, start + n):
+        r = pool[i % len(pool)]
+        yield NewTrial(
+            branch=branch,
+            source="pretrain",
+            spec=r.spec,
+            features=r.features,
+            outcome=r.outcome,
+            solved=r.solved,
+            sim_steps=r.sim_steps,
+            wall_seconds=r.wall_seconds,
+            seed=i,
+        )
+
+
+_POOL: list[Any] = []
+
+
+def _pool() -> list[Any]:
+    if not _POOL:
+        from llcps.models.synthetic import synthetic_trials
+
+        _POOL.extend(synthetic_trials(997, seed=7))
+    return _POOL
+
+
+def bench_store(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
+    """Durable single-trial commits, batched inserts, and the visible set of a branch three levels deep."""
+    from llcps.store import Store
+
+    commits = 300 if quick else 1000
+    visible = VISIBLE_TRIALS_QUICK if quick else VISIBLE_TRIALS
+    batch = 5000
+    with tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp:
+        with Store.open(str(Path(tmp) / "bench.db"), create=True) as store:
+            _say(progress, f"store: {commits} single-trial commits")
+            one_by_one = list(_trials(commits, "main"))
+            with _Clock() as single:
+                for trial in one_by_one:
+                    store.add_trial(trial)
+            # main <- a <- b <- c: a quarter of the trials on each level
+            _say(progress, f"store: {visible:,} trials in batches of {batch:,} on a branch chain")
+            chain = ("main", "level1", "level2", "level3")
+            inserted, batch_wall, batch_cpu = commits, 0.0, 0.0
+            for level, name in enumerate(chain):
+                if level:
+                    store.create_branch(name, from_branch=chain[level - 1])
+                share = (visible - commits) // len(chain) if level < len(chain) - 1 else visible - inserted
+                while share > 0:
+                    rows = list(_trials(min(batch, share), name, start=inserted))
+                    with _Clock() as clock:
+                        store.add_trials(rows)
+                    batch_wall += clock.wall
+                    batch_cpu += clock.cpu
+                    inserted += len(rows)
+                    share -= len(rows)
+            _say(progress, f"store: visible set of {chain[-1]}")
+            loads = []
+            for _ in range(2 if quick else 3):
+                with _Clock() as load:
+                    seen = store.visible_trials(chain[-1])
+                loads.append(load)
+                del seen
+            n_seen = store.count_visible_trials(chain[-1])
+    best_wall = min(c.wall for c in loads)
+    p = "store"
+    return [
+        figure(f"{p}.commits_per_s", commits / single.wall, "trials/s wall", at_least=1000, note="add_trial one at a time, each durable on return"),
+        figure(f"{p}.batched_inserts_per_s", (inserted - commits) / batch_wall, "trials/s wall", note=f"add_trials, {batch:,} per transaction"),
+        figure(f"{p}.visible_load", best_wall, "s wall", at_most=1.0 if visible == VISIBLE_TRIALS else None, note=f"visible_trials of a branch 3 levels deep seeing {n_seen:,} trials"),
+        figure(f"{p}.visible_load_cpu", min(c.cpu for c in loads), "s cpu"),
+        figure(f"{p}.visible_trials", n_seen, "trials"),
+    ]
+
+
+# --------------------------------------------------------------------------- scaling
+def _experiment_seconds(workers: int) -> tuple[float, str]:
+    from llcps.experiments.runner import run_experiment
+    from llcps.store import Store
+
+    with tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp:
+        with Store.open(str(Path(tmp) / "bench.db"), create=True) as store:
+            summary = run_experiment(store, preset=SCALING_PRESET, workers=workers)
+    return summary.wall_seconds, summary.status
+
+
+def bench_scaling(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
+    """The smoke experiment grid on 1 and 2 worker processes (wall time) and the speed-up.
+
+    Worker processes are spawned, so a script calling this needs the
+    ``if __name__ == "__main__":`` guard.
+    """
+    load_before = os.getloadavg()[0]
+    times = {}
+    for workers in (1, 2):
+        _say(progress, f"scaling: {SCALING_PRESET} grid on {workers} worker(s)")
+        seconds, status = _experiment_seconds(workers)
+        if status != "ok":
+            from llcps.errors import LlcpsError
+
+            raise LlcpsError(f"the {SCALING_PRESET} experiment ended {status} on {workers} worker(s)")
+        times[workers] = seconds
+    return [
+        figure("scaling.workers1", times[1], "s wall", note=f"{SCALING_PRESET} preset grid"),
+        figure("scaling.workers2", times[2], "s wall"),
+        figure("scaling.speedup", times[1] / times[2], "ratio", at_least=1.7, note="1-worker / 2-worker wall time"),
+        figure("scaling.load_average", load_before, "runnable", note=f"1-minute load average of the machine before ({os.cpu_count()} CPUs)"),
+    ]
+
+
+# --------------------------------------------------------------------------- all
+GROUPS: dict[str, Callable[[bool, Progress | None], list[Figure]]] = {
+    "physics": bench_physics,
+    "exploration": bench_exploration,
+    "models": bench_models,
+    "ranking": bench_ranking,
+    "store": bench_store,
+    "scaling": bench_scaling,
+}
+#: Groups left out of ``--quick``: the experiment grid alone takes more than a minute.
+SLOW_GROUPS: tuple[str, ...] = ("scaling",)
+
+
+def run_bench(*, quick: bool = False, groups: Sequence[str] | None = None, progress: Progress | None = None) -> list[Figure]:
+    """Run the chosen groups (default: all; with ``quick`` all but :data:`SLOW_GROUPS`).
+
+    Raises:
+        UnknownNameError: for a group not in :data:`GROUPS`.
+    """
+    from llcps.errors import UnknownNameError
+
+    if groups is None:
+        groups = [g for g in GROUPS if not (quick and g in SLOW_GROUPS)]
+    for name in groups:
+        if name not in GROUPS:
+            raise UnknownNameError("bench group", name, list(GROUPS))
+    figures: list[Figure] = []
+    for name in groups:
+        figures += GROUPS[name](quick, progress)
+    return figures
+
+
+__all__ = ["Figure", "GROUPS", "SLOW_GROUPS", "run_bench", "run_exploration", "figure"]
