@@ -16,7 +16,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import db, inspect, inspect_model, inspect_runs, pretrain, replay, solve  # noqa: F401 - inspect_* add `inspect` subcommands
+from llcps.cli import bench, db, inspect, inspect_model, inspect_runs, pretrain, replay, solve  # noqa: F401 - inspect_* add `inspect` subcommands
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
 
 app = new_app(
@@ -50,6 +50,7 @@ app.add_typer(inspect.app, name="inspect")
 app.command("solve")(solve.solve_cli)
 app.command("pretrain")(pretrain.pretrain_cli)
 app.command("replay")(replay.replay_cli)
+app.command("bench")(bench.bench_cli)
 
 
 def main() -> None:

@@ -1,0 +1,54 @@
+"""``llcps bench``: how close each layer comes to the physics bound (see docs/performance.md)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Optional
+
+import typer
+
+from llcps.bench import GROUPS, SLOW_GROUPS, Figure, run_bench
+from llcps.cli._common import JsonFlag, choice_enum, err_console, message, print_json, print_table
+
+GroupName = choice_enum("BenchGroup", tuple(GROUPS))
+
+
+def bench_cli(
+    quick: Annotated[
+        bool,
+        typer.Option("--quick", help=f"Smaller runs, under a minute; leaves out {', '.join(SLOW_GROUPS)}."),
+    ] = False,
+    group: Annotated[
+        Optional[list[GroupName]],  # type: ignore[valid-type]
+        typer.Option("--group", metavar="NAME", help=f"Measure only this group (repeatable): {', '.join(GROUPS)}.", show_default=False),
+    ] = None,
+    as_json: JsonFlag = False,
+) -> None:
+    """Measure physics, exploration, world models, ranking, the store and worker scaling
+    in this process, each against its target.
+
+    Rates are per second of this process's CPU time (stable on a busy machine) and of
+    wall time. Temporary stores only: --db is not touched. Exit code 0 even when a
+    target is missed (the `met` column says which).
+    """
+    groups = [str(g.value) for g in group] if group else None  # type: ignore[attr-defined]
+    with err_console.status("bench") as status:
+        figures = run_bench(quick=quick, groups=groups, progress=lambda text: status.update(f"bench: {text}"))
+    if as_json:
+        print_json([f.as_json() for f in figures])
+        return
+    print_table("llcps bench" + (" --quick" if quick else ""), ("figure", "value", "unit", "target", "met"), [_row(f) for f in figures])
+    missed = [f.name for f in figures if f.met is False]
+    if missed:
+        message(f"targets missed: {', '.join(missed)} (see docs/performance.md)")
+
+
+def _row(f: Figure) -> tuple[str, str, str, str, str]:
+    met = "" if f.met is None else ("yes" if f.met else "NO")
+    return f.name, _num(f.value), f.unit, f.target or "", met
+
+
+def _num(value: float) -> str:
+    """Three significant digits, thousands separated."""
+    if value == 0 or abs(value) >= 100:
+        return f"{value:,.0f}"
+    return f"{value:.3g}"

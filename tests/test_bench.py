@@ -1,0 +1,46 @@
+"""``llcps bench``: every figure of the cheap groups is named, finite and has a unit (never timed)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from typer.testing import CliRunner
+
+from llcps.bench import GROUPS, Figure, figure, run_bench
+from llcps.cli.main import app
+from llcps.errors import UnknownNameError
+
+CHEAP = ("store", "ranking")
+
+
+def test_quick_cheap_groups_give_named_finite_figures() -> None:
+    figures = run_bench(quick=True, groups=CHEAP)
+    assert {f.name.split(".")[0] for f in figures} == set(CHEAP)
+    assert len({f.name for f in figures}) == len(figures)
+    for f in figures:
+        assert f.name and f.unit and math.isfinite(f.value), f
+        assert (f.target is None) == (f.met is None), f
+
+
+def test_target_check_follows_the_bound() -> None:
+    assert figure("x", 1200, "trials/s", at_least=1000).met is True
+    assert figure("x", 60, "ms", at_most=50) == Figure("x", 60.0, "ms", "<= 50", False)
+    assert figure("x", 1, "s").met is None
+
+
+def test_unknown_group_lists_the_known_ones() -> None:
+    with pytest.raises(UnknownNameError) as err:
+        run_bench(groups=["nope"])
+    assert all(name in (err.value.hint or "") + err.value.message for name in GROUPS)
+
+
+def test_cli_json_is_one_array_of_flat_figures() -> None:
+    result = CliRunner().invoke(app, ["bench", "--quick", "--json", "--group", "ranking"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert isinstance(data, list) and data
+    for row in data:
+        assert {"name", "value", "unit"} <= set(row)
+        assert all(not isinstance(v, (dict, list)) for v in row.values())
