@@ -64,6 +64,8 @@ POOL_BRANCH = "pool"
 COMMAND = "experiment run"
 #: Stream tag of :func:`pretrain_subset` (kept apart from every other use of the seed).
 _SUBSET_STREAM = 0x5E7
+#: Where ``llcps experiment run`` writes a preset's report unless told otherwise.
+RESULTS_DIR = Path("results")
 #: Seconds between checks for Ctrl-C and finished tasks.
 _POLL_SECONDS = 0.5
 
@@ -445,6 +447,44 @@ def results_table(store: Store, preset: str, seeds: Iterable[int] | None = None)
     return ResultsTable(r for r in table if r.preset == preset and (wanted is None or r.seed in wanted))
 
 
+def one_preset(table: ResultsTable, preset: str | None = None) -> tuple[str, ResultsTable]:
+    """The rows of ``preset``, or of the table's only preset when none is named.
+
+    Presets share model and measure names, so a report over two of them would mix
+    their cells; a table holding several needs a choice.
+    """
+    presets = table.unique("preset")
+    if preset is None:
+        if len(presets) > 1:
+            raise LlcpsError(
+                f"the results hold {len(presets)} presets: {', '.join(presets)}", hint="choose one with --preset"
+            )
+        if not presets:
+            raise LlcpsError("there are no experiment results", hint="run `llcps experiment run` first")
+        preset = str(presets[0])
+    if preset not in presets:
+        raise LlcpsError(
+            f"no results of preset {preset!r}",
+            hint=f"the results hold: {', '.join(presets)}" if presets else "run `llcps experiment run` first",
+        )
+    return preset, table.filter(preset=preset)
+
+
+def default_out_dir(preset: str) -> Path:
+    """``results/<preset>``."""
+    return RESULTS_DIR / preset
+
+
+def write_report(table: ResultsTable, out_dir: str | Path) -> tuple[Path, dict[str, Any]]:
+    """Build every report file into ``out_dir``; returns it and the analysis as JSON data."""
+    import json
+
+    from llcps.experiments.report import build_report
+
+    paths = build_report(table, out_dir)
+    return paths.out_dir, json.loads(paths.figure2_json.read_text(encoding="utf-8"))
+
+
 def _existing_branches(store: Store) -> set[str]:
     return {b.name for b in store.list_branches()}
 
@@ -487,6 +527,8 @@ def run_experiment(
     validate_preset(grid)
     if engine not in ENGINES:
         raise UnknownNameError("engine", engine, ENGINES)
+    if ray_address is not None and engine != "ray":
+        raise LlcpsError("--ray-address needs --engine ray")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise LlcpsError(f"workers must be at least 1, not {workers!r}", hint="pass --workers 1 or more")
     tasks = plan_tasks(grid, seeds)
@@ -602,6 +644,7 @@ def _exists(store: Store, branches: Iterable[str]) -> bool:
 
 __all__ = [
     "ENGINES",
+    "default_out_dir",
     "LocalEngine",
     "PretrainTask",
     "RayEngine",
@@ -610,8 +653,10 @@ __all__ = [
     "TaskOutput",
     "execute_task",
     "make_engine",
+    "one_preset",
     "plan_tasks",
     "pretrain_subset",
     "results_table",
     "run_experiment",
+    "write_report",
 ]

@@ -1,0 +1,208 @@
+"""``llcps experiment run`` and ``llcps experiment report``: the paper's grid over many seeds."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from llcps.cli._common import JsonFlag, choice_enum, err_console, message, new_app, open_store, print_json, print_table
+from llcps.errors import LlcpsError
+from llcps.experiments.grid import PRESETS
+from llcps.experiments.runner import ENGINES, RunSummary, default_out_dir, one_preset, results_table, run_experiment, write_report
+
+app = new_app("Run the experiment grid (Figure 2 over many seeds) and report on it.")
+
+PresetName = choice_enum("PresetName", tuple(PRESETS))
+EngineName = choice_enum("EngineName", ENGINES)
+
+#: Exit codes of ``llcps experiment run``.
+EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
+
+_PRESET_HELP = "Grid to run: " + "; ".join(
+    f"{p.name} ({len(p.cells())} cells, {p.default_seeds} seeds, budget {p.budget})" for p in PRESETS.values()
+) + "."
+
+
+@app.command("run")
+def run_cli(
+    ctx: typer.Context,
+    preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = "paper",  # type: ignore[valid-type, assignment]
+    seeds: Annotated[
+        Optional[int],
+        typer.Option("--seeds", metavar="N", min=1, help="Seeds 0..N-1 (default: the preset's count).", show_default=False),
+    ] = None,
+    workers: Annotated[
+        Optional[int],
+        typer.Option("--workers", metavar="N", min=1, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
+    ] = None,
+    engine: Annotated[EngineName, typer.Option("--engine", help="local: a process pool; ray: Ray tasks (pip install 'llcps[ray]').")] = "local",  # type: ignore[valid-type, assignment]
+    ray_address: Annotated[
+        Optional[str],
+        typer.Option("--ray-address", metavar="ADDR", help="Ray cluster to join (default: start a local Ray instance).", show_default=False),
+    ] = None,
+    out: Annotated[
+        Optional[Path],
+        typer.Option("--out", metavar="DIR", help="Report directory (default: results/<preset>).", show_default=False, file_okay=False),
+    ] = None,
+    as_json: JsonFlag = False,
+) -> None:
+    """Run every sequence of the grid the store does not hold yet, then write the report.
+
+    Each task (a seed's pretraining, or one sequence) runs in a worker against a
+    private store; this process imports each result in one transaction on the
+    sequence's branch. A re-run skips what is stored: after Ctrl-C (exit 130) or a
+    kill, run the same command again. Results are identical for any --workers and
+    either engine. Exit code 1 when a task failed.
+    """
+    name = str(preset.value)  # type: ignore[attr-defined]
+    n_workers = workers if workers is not None else _cpu_count()
+    try:
+        with open_store(ctx, create=True) as store:
+            with _progress() as bar:
+                task = bar.add_task(f"experiment {name}", total=None, last="")
+
+                def report(done: int, total: int, label: str) -> None:
+                    bar.update(task, completed=done, total=total, last=label)
+
+                summary = run_experiment(
+                    store,
+                    preset=name,
+                    seeds=seeds,
+                    workers=n_workers,
+                    engine=str(engine.value),  # type: ignore[attr-defined]
+                    ray_address=ray_address,
+                    progress=report,
+                )
+            if summary.status == "interrupted":
+                message(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
+                raise typer.Exit(EXIT_INTERRUPTED)
+            table = results_table(store, name, summary.seeds)
+    except KeyboardInterrupt:
+        message("interrupted: every task imported so far is kept; run the same command to resume")
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    for label, error in summary.failed:
+        message(f"task {label} failed: {error}")
+    if summary.blocked:
+        message(f"{summary.blocked} sequence(s) not run: their pretraining failed")
+    if len(table) == 0:
+        raise LlcpsError("no results to report", hint="see the failed tasks above")
+    out_dir, analysis = write_report(table, out if out is not None else default_out_dir(name))
+    if as_json:
+        print_json({"run": summary.as_json(), "report_dir": str(out_dir), **analysis})
+    else:
+        show_run(summary, out_dir)
+        show_figure2(analysis)
+    raise typer.Exit(EXIT_OK if summary.status == "ok" else EXIT_FAILED)
+
+
+@app.command("report")
+def report_cli(
+    ctx: typer.Context,
+    source: Annotated[
+        Optional[Path],
+        typer.Argument(metavar="[DIR]", help="A results directory (its results.csv) or a results .csv/.json file.", show_default=False),
+    ] = None,
+    from_db: Annotated[bool, typer.Option("--from-db", help="Read the results from the store's episodes instead (see --db).")] = False,
+    preset: Annotated[
+        Optional[str],
+        typer.Option("--preset", metavar="NAME", help="Report on this preset only (needed when the results hold several).", show_default=False),
+    ] = None,
+    out: Annotated[
+        Optional[Path],
+        typer.Option("--out", metavar="DIR", help="Report directory (default: DIR itself, or results/<preset> with --from-db).", show_default=False, file_okay=False),
+    ] = None,
+    as_json: JsonFlag = False,
+) -> None:
+    """Rebuild the tables, CSV/JSON, plots and report.md from stored results, running nothing."""
+    from llcps.experiments.results import ResultsTable, table_from_episodes
+
+    if (source is None) == (not from_db):
+        raise LlcpsError("give a results directory or --from-db (one of them)", hint="e.g. `llcps experiment report results/paper`")
+    if source is not None:
+        table = ResultsTable.read(source)
+    else:
+        with open_store(ctx) as store:
+            table = table_from_episodes(store.list_episodes()).table
+    name, table = one_preset(table, preset)
+    if out is None:
+        out = default_out_dir(name) if source is None else (source if source.is_dir() else source.parent)
+    out_dir, analysis = write_report(table, out)
+    if as_json:
+        print_json({"report_dir": str(out_dir), **analysis})
+    else:
+        message(f"report written to {out_dir / 'report.md'}")
+        show_figure2(analysis)
+
+
+def _cpu_count() -> int:
+    import os
+
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+def _progress() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("eta"),
+        TimeRemainingColumn(),
+        TextColumn("{task.fields[last]}"),
+        console=err_console,
+        transient=True,
+    )
+
+
+def show_run(summary: RunSummary, out_dir: Path) -> None:
+    """What the run did, for people (stderr)."""
+    failed = f", {len(summary.failed)} failed" if summary.failed else ""
+    message(
+        f"{summary.preset}: {summary.done} task(s) run, {summary.skipped} already stored{failed} "
+        f"({summary.workers} {summary.engine} worker(s), {summary.wall_seconds:.1f} s); report in {out_dir / 'report.md'}"
+    )
+
+
+def _pct(value: Any) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "n/a"
+    return f"{value:+.0f}%"
+
+
+def _num(value: Any) -> str:
+    return "n/a" if value is None else f"{value:.1f}"
+
+
+def _p(value: Any) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "n/a"
+    return "<0.001" if value < 0.001 else f"{value:.3f}"
+
+
+def show_figure2(analysis: dict[str, Any]) -> None:
+    """Our Figure 2 (update vs reset) with intervals and p-values, beside the paper's."""
+    rows = analysis.get("figure2", [])
+    print_table(
+        f"% change of {analysis.get('metric', 'exploration')} with updates vs reset (negative: updates explored less)",
+        ("model", "measure", "pretrain", "scenario", "seeds", "update", "reset", "% change", "95% CI", "p", "paper"),
+        [
+            (
+                r["model"],
+                r["measure"],
+                r["pretrain_size"],
+                r["scenario"],
+                r["n_seeds"],
+                _num(r["mean_update"]),
+                _num(r["mean_reset"]),
+                _pct(r["pct_change"]),
+                f"[{_pct(r['ci_low'])}, {_pct(r['ci_high'])}]",
+                _p(r["p_value"]),
+                _pct(r["paper_pct_change"]),
+            )
+            for r in rows
+        ],
+    )

@@ -1,0 +1,346 @@
+"""The experiment runner: payload transfer, the smoke grid end to end, identical results for
+any worker count and engine, resuming after kill -9, and the experiment commands."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Iterator
+
+import pytest
+from typer.testing import CliRunner
+
+from llcps.cli.main import app
+from llcps.domain import ACTIONS
+from llcps.errors import LlcpsError, StoreError
+from llcps.experiments.grid import PRESETS, SCENARIO_SEQUENCE, Cell, Sequence, pretrain_branch_name
+from llcps.experiments.results import COLUMNS, ResultsTable
+from llcps.experiments.runner import (
+    PretrainTask,
+    SequenceTask,
+    make_engine,
+    plan_tasks,
+    pretrain_subset,
+    results_table,
+    run_experiment,
+)
+from llcps.experiments.transfer import count_rows, export_branches, import_payload, inverse
+from llcps.store import Store
+
+SMOKE = PRESETS["smoke"]
+
+
+# -- what a store holds, without ids or clocks -----------------------------------------------
+def trial_key(t: Any) -> tuple:
+    return (t.source, t.scenario, t.spec, t.features, t.outcome.bits(), t.solved, t.sim_steps, t.seed, dict(t.extra))
+
+
+def store_signature(store: Store, prefix: str = "exp-") -> dict[str, dict[str, Any]]:
+    """Per experiment branch: its own trials, episodes, operators and what it sees (ids left out)."""
+    out: dict[str, dict[str, Any]] = {}
+    for info in store.list_branches():
+        if not info.name.startswith(prefix):
+            continue
+        visible = store.visible_trials(info.name)
+        episodes = sorted(store.list_episodes(branch=info.name), key=lambda e: e.id)
+        out[info.name] = {
+            "parent": info.parent,
+            "own": [trial_key(t) for t in visible if t.branch == info.name],
+            "seen_at_fork": [trial_key(t) for t in visible if t.branch != info.name],
+            "episodes": [
+                (e.scenario, e.seed, e.status, *(e.summary.get(k) for k in ("exploration_trials", "plan_trials", "sim_steps")))
+                for e in episodes
+            ],
+            "operators": [(o.name, o.pddl, o.scenario) for o in store.visible_operators(info.name) if o.branch == info.name],
+        }
+    return out
+
+
+def table_key(table: ResultsTable) -> list[tuple]:
+    return [(r.key, r.branch, r.solved, r.exploration_trials, r.sim_seconds) for r in table]
+
+
+# -- tasks and pretraining subsets (no simulation) -------------------------------------------
+def test_tasks_cover_the_grid_and_never_share_a_branch() -> None:
+    preset = PRESETS["paper"]
+    tasks = plan_tasks(preset, 3)
+    pretraining = [t for t in tasks if isinstance(t, PretrainTask)]
+    sequences = [t for t in tasks if isinstance(t, SequenceTask)]
+    assert [t.seed for t in pretraining] == [0, 1, 2]
+    assert {t.sequence for t in sequences} == set(preset.sequences(3))
+    branches = [b for t in tasks for b in t.branches]
+    assert len(branches) == len(set(branches))
+    # A seed's pretraining comes before its sequences, which read its branches.
+    for i, task in enumerate(tasks):
+        if isinstance(task, SequenceTask):
+            producer = next(j for j, t in enumerate(tasks) if task.pretrain_branch in t.branches)
+            assert producer < i and task.budget == preset.budget
+
+
+def test_pretraining_subset_takes_one_trial_per_action_deterministically(store: Store, new_trial) -> None:
+    store.create_branch("pool", from_branch="main", at=0)
+    store.add_trials([new_trial(i, branch="pool") for i in range(40)])
+    pool = store.visible_trials("pool")
+    assert {t.spec.action for t in pool} == set(ACTIONS)
+    four = pretrain_subset(pool, 4, seed=3)
+    assert sorted(t.spec.action for t in four) == sorted(ACTIONS)
+    assert [t.id for t in four] == sorted(t.id for t in four)  # the pool's order
+    assert [t.id for t in pretrain_subset(pool, 4, seed=3)] == [t.id for t in four]
+    assert len({tuple(t.id for t in pretrain_subset(pool, 4, seed=s)) for s in range(6)}) > 1
+    assert pretrain_subset(pool, 40, seed=3) == pool
+    six = pretrain_subset(pool, 6, seed=0)
+    assert len(six) == 6 and all(sum(t.spec.action == a for t in six) in (1, 2) for a in ACTIONS)
+
+
+# -- transfer: export and import round-trip -----------------------------------------------------
+def _source_store(store: Store, new_trial) -> dict[str, Any]:
+    """base (pretraining, shared snapshot) <- child (a run, an episode, trials, an operator)."""
+    store.create_branch("base", from_branch="main", at=0)
+    shared = store.put_snapshot(scene={"name": "shared"}, state=b"\x01" * 64)
+    own = store.put_snapshot(scene={"name": "own"}, state=b"\x02" * 64)
+    store.add_trials([new_trial(i, branch="base", snapshot_id=shared if i % 2 else own) for i in range(6)])
+    store.create_branch("child", from_branch="base")
+    run = store.start_run(command="solve", seed=7, config={"budget": 5}, branch="child")
+    episode = store.start_episode(run_id=run, branch="child", scenario="scenario1", condition="novelty", model="nb", measure="most-changes", seed=7)
+    child_ids = store.add_trials(
+        [new_trial(100 + i, branch="child", source="exploration", run_id=run, episode_id=episode, snapshot_id=shared) for i in range(3)]
+    )
+    store.add_operator(branch="child", name="op", pddl="(:action op)", definition={"k": 1}, scenario="scenario1", episode_id=episode)
+    store.finish_episode(episode, status="solved", summary={"episode_id": episode, "run_id": run, "resolving_trial_id": child_ids[-1], "exploration_trials": 3})
+    store.finish_run(run, status="solved")
+    return {"run": run, "episode": episode, "child_ids": child_ids}
+
+
+def test_payload_round_trip_remaps_ids_and_dedups_snapshots(store: Store, tmp_path: Path, new_trial) -> None:
+    _source_store(store, new_trial)
+    payload = export_branches(store, ["base", "child"])
+    assert count_rows(payload) == {"branches": 2, "runs": 1, "episodes": 1, "snapshots": 2, "trials": 9, "operators": 1}
+    with Store.open(str(tmp_path / "dest.db"), create=True) as dest:
+        # Ids in the destination start elsewhere, and one snapshot is there already.
+        dest.create_branch("other", from_branch="main", at=0)
+        dest.add_trials([new_trial(1000 + i, branch="other") for i in range(5)])
+        dest.put_snapshot(scene={"name": "shared"}, state=b"\x01" * 64)
+        ids = import_payload(dest, payload)
+        assert store_signature(dest, "")["child"] == store_signature(store, "")["child"]
+        assert store_signature(dest, "")["base"] == store_signature(store, "")["base"]
+        moved = dest.visible_trials("child")
+        assert [t.id for t in moved] == sorted(t.id for t in moved) and min(t.id for t in moved) > 5
+        assert len({t.snapshot_id for t in moved}) == 2  # the shared snapshot was reused, not copied
+        assert dest.get_snapshot(moved[0].snapshot_id).state in (b"\x01" * 64, b"\x02" * 64)
+        op = dest.visible_operators("child")[0]
+        assert op.watermark == max(t.id for t in moved) and op.episode_id == ids.episodes[payload.episodes[0].id]
+        episode = dest.list_episodes(branch="child")[0]
+        assert episode.summary["episode_id"] == episode.id and episode.run_id == episode.summary["run_id"]
+        assert episode.summary["resolving_trial_id"] == max(t.id for t in moved)
+        assert {t.run_id for t in moved if t.branch == "child"} == {episode.run_id}
+        # A second import writes nothing at all: the transaction is all or nothing.
+        before = dest.status().trials_total
+        with pytest.raises(StoreError, match="already exists"):
+            import_payload(dest, payload)
+        assert dest.status().trials_total == before and len(dest.list_episodes()) == 1
+
+
+def test_payload_seeds_a_private_store_and_comes_back_onto_the_original_ids(store: Store, tmp_path: Path, new_trial) -> None:
+    _source_store(store, new_trial)
+    base = export_branches(store, ["base"], snapshots=False, provenance=False)
+    assert base.snapshots == () and all(t.snapshot_id is None and t.run_id is None for t in base.trials)
+    with Store.open(str(tmp_path / "private.db"), create=True) as private:
+        private.create_branch("filler", from_branch="main", at=0)
+        private.add_trials([new_trial(500 + i, branch="filler") for i in range(10)])  # private ids differ
+        seeded = import_payload(private, base)
+        private.create_branch("work", from_branch="base")
+        private.add_trials([new_trial(900 + i, branch="work", source="exploration") for i in range(2)])
+        private.add_operator(branch="work", name="w", pddl="(w)", definition={}, scenario=None, episode_id=None)
+        back = export_branches(private, ["work"], external=inverse(seeded.trials))
+    import_payload(store, back)
+    work = store.visible_trials("work")
+    assert [trial_key(t) for t in work] == [trial_key(t) for t in store.visible_trials("base")] + [
+        trial_key(t) for t in back.trials
+    ]
+    assert store.resolve_branch("work").fork_point == max(t.id for t in store.visible_trials("base"))
+    assert store.visible_operators("work")[0].watermark == max(t.id for t in work)
+
+
+# -- the smoke grid, run for real -------------------------------------------------------------
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Store, Any]]:
+    """The smoke grid on one local worker: the run every other run must reproduce."""
+    path = tmp_path_factory.mktemp("reference") / "ref.db"
+    with Store.open(str(path), create=True) as store:
+        summary = run_experiment(store, preset="smoke", workers=1)
+        yield store, summary
+
+
+def test_smoke_grid_runs_end_to_end_into_a_well_formed_table(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    store, summary = reference
+    assert summary.status == "ok" and summary.done == summary.tasks == SMOKE.default_seeds * (1 + len(SMOKE.cells()))
+    table = results_table(store, "smoke")
+    sequences = set(SMOKE.sequences())
+    assert len(table) == len(sequences) * len(SCENARIO_SEQUENCE)
+    assert table.complete_sequences() == sequences and table.missing(SMOKE.sequences()) == ()
+    assert ResultsTable.read_csv(table.write_csv(tmp_path / "t.csv")) == table
+    for row in table:
+        assert set(row.__dict__) == set(COLUMNS)
+        assert 0 <= row.exploration_trials <= SMOKE.budget and row.sim_seconds > 0
+        assert row.branch == row.sequence.episode_branch(row.scenario)
+    for seed in range(SMOKE.default_seeds):
+        pretraining = store.visible_trials(pretrain_branch_name("smoke", 4, seed))
+        assert len(pretraining) == 4 and {t.source for t in pretraining} == {"pretrain"}
+        assert all(t.snapshot_id is not None for t in pretraining)  # replayable
+    for seq in SMOKE.sequences():
+        fork = max(t.id for t in store.visible_trials(seq.pretrain_branch))
+        for scenario in SCENARIO_SEQUENCE:
+            info = store.resolve_branch(seq.episode_branch(scenario))
+            assert info.parent == seq.pretrain_branch and info.fork_point == fork
+            (episode,) = [e for e in store.list_episodes(branch=info.name) if e.scenario == scenario]
+            assert episode.seed == seq.seed and episode.status in ("solved", "budget_exhausted")
+    # update: one branch holds all three scenarios; reset: each scenario saw only the pretraining set
+    update = Sequence("smoke", Cell("nb", "most-changes", 4, "update"), 0)
+    assert len(store.list_episodes(branch=update.branch_name)) == 3
+
+
+def test_results_are_identical_with_two_workers(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    ref_store, _ = reference
+    with Store.open(str(tmp_path / "two.db"), create=True) as store:
+        summary = run_experiment(store, preset="smoke", workers=2)
+        assert summary.status == "ok" and summary.workers == 2
+        assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke"))
+        assert store_signature(store) == store_signature(ref_store)
+
+
+def test_ray_engine_gives_the_local_engine_results(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    pytest.importorskip("ray", reason="Ray is not installed (pip install 'llcps[ray]')")
+    ref_store, _ = reference
+    with Store.open(str(tmp_path / "ray.db"), create=True) as store:
+        summary = run_experiment(store, preset="smoke", workers=2, engine="ray")
+        assert summary.status == "ok" and summary.engine == "ray"
+        assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke"))
+        assert store_signature(store) == store_signature(ref_store)
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _has_branch(db: Path, name: str) -> bool:
+    try:  # the file may still be being created by the run
+        with Store.open(str(db)) as store:
+            return name in {b.name for b in store.list_branches()}
+    except StoreError:
+        return False
+
+
+def _llcps(*args: str) -> list[str]:
+    return [sys.executable, "-m", "llcps.cli.main", *args]
+
+
+def test_kill_9_then_run_again_completes_without_duplicates(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    ref_store, _ = reference
+    db, out = tmp_path / "killed.db", tmp_path / "report"
+    args = ("--db", str(db), "experiment", "run", "--preset", "smoke", "--seeds", "1", "--workers", "1", "--out", str(out))
+    first = pretrain_branch_name("smoke", 4, 0)
+    child = subprocess.Popen(_llcps(*args), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 240
+        while True:  # wait until the first task (the seed's pretraining) is imported
+            assert child.poll() is None, "the run ended before it could be killed"
+            assert time.monotonic() < deadline, "the first task was never imported"
+            if _has_branch(db, first):
+                break
+            time.sleep(0.2)
+        workers = _children(child.pid)
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.kill()
+        child.wait()
+    deadline = time.monotonic() + 30
+    while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not any(_alive(p) for p in workers), "workers outlived the killed run"
+
+    done = subprocess.run(_llcps(*args, "--json"), capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    data = json.loads(done.stdout)
+    assert data["run"]["tasks_skipped"] >= 1 and data["run"]["tasks_skipped"] + data["run"]["tasks_done"] == 3
+    assert data["figure2"] and (out / "report.md").exists()
+    with Store.open(str(db)) as store:
+        ours = store_signature(store)
+        expected = {k: v for k, v in store_signature(ref_store).items() if k.endswith("-s0") or "-s0-" in k}
+        assert ours == expected  # each branch once, with exactly the uninterrupted run's trials
+        assert len(store.list_episodes()) == 2 * len(SCENARIO_SEQUENCE)
+
+
+def test_rerun_skips_every_stored_task(reference: tuple[Store, Any]) -> None:
+    store, _ = reference
+    before = store_signature(store)
+    summary = run_experiment(store, preset="smoke", workers=2)
+    assert (summary.done, summary.skipped, summary.status) == (0, summary.tasks, "ok")
+    assert store_signature(store) == before
+
+
+def test_a_task_with_only_some_branches_is_refused(store: Store) -> None:
+    seq = SMOKE.sequences(1)[1]
+    assert seq.cell.condition == "reset"
+    store.create_branch(seq.episode_branch("scenario2"), from_branch="main", at=0)
+    with pytest.raises(LlcpsError, match="only some of their branches"):
+        run_experiment(store, preset="smoke", seeds=1)
+
+
+# -- the commands -------------------------------------------------------------------------------
+def test_report_rebuilds_from_a_directory_and_from_the_store(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    store, _ = reference
+    db = store.url.split("///", 1)[1]
+    runner = CliRunner()
+    from_db = runner.invoke(app, ["--db", db, "experiment", "report", "--from-db", "--out", str(tmp_path / "a"), "--json"])
+    assert from_db.exit_code == 0, from_db.output
+    data = json.loads(from_db.stdout)
+    assert data["overview"]["rows"] == len(SMOKE.sequences()) * 3
+    assert {(r["scenario"], r["n_seeds"]) for r in data["figure2"]} == {(s, SMOKE.default_seeds) for s in SCENARIO_SEQUENCE}
+    again = runner.invoke(app, ["experiment", "report", str(tmp_path / "a"), "--out", str(tmp_path / "b"), "--json"])
+    assert again.exit_code == 0, again.output
+    assert json.loads(again.stdout)["figure2"] == data["figure2"]
+    assert (tmp_path / "b" / "results.csv").read_text() == (tmp_path / "a" / "results.csv").read_text()
+    text = runner.invoke(app, ["experiment", "report", str(tmp_path / "a")])
+    assert text.exit_code == 0 and "scenario3" in text.stdout
+
+
+@pytest.mark.parametrize(
+    "argv, error",
+    [
+        (["experiment", "report"], "one of them"),
+        (["experiment", "report", "--from-db", "--preset", "paper"], "no results of preset 'paper'"),
+        (["experiment", "run", "--preset", "smoke", "--engine", "local", "--ray-address", "auto"], "--ray-address needs --engine ray"),
+    ],
+)
+def test_bad_experiment_input_is_one_error_line(reference: tuple[Store, Any], argv: list[str], error: str) -> None:
+    db = reference[0].url.split("///", 1)[1]
+    result = CliRunner().invoke(app, ["--db", db, *argv])
+    assert result.exit_code == 2 and error in result.stderr and "Traceback" not in result.output
+
+
+def test_ray_engine_without_ray_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    with pytest.raises(LlcpsError) as info:
+        make_engine("ray", 2)
+    assert info.value.hint == "pip install 'llcps[ray]'" and "not installed" in info.value.message
