@@ -35,12 +35,12 @@ class Timing:
     predict: float
 
 
-def _best(action: Callable[[], object], repeats: int) -> float:
+def _best(action: Callable[[], object], repeats: int, clock: Callable[[], float] = time.perf_counter) -> float:
     times = []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start = clock()
         action()
-        times.append(time.perf_counter() - start)
+        times.append(clock() - start)
     return min(times)
 
 
@@ -51,29 +51,34 @@ def time_world_models(
     seed: int = 0,
     candidates: int = 1000,
     repeats: int = 3,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> list[Timing]:
-    """Time fit / refit / predict of each model at each training-set size."""
+    """Time fit / refit / predict of each model at each training-set size.
+
+    ``clock``: wall time by default; ``time.process_time`` (CPU time of the process)
+    is steadier on a busy machine for single-threaded models.
+    """
     pool = synthetic_trials(max(sizes) + 1, seed=seed)
     queries = [r.model_input for r in synthetic_trials(candidates, seed=seed + 1)]
     rows = []
     for name in names:
         for n in sizes:
-            fit = _best(lambda: make_world_model(name, seed).fit(pool[:n]), repeats)
+            fit = _best(lambda: make_world_model(name, seed).fit(pool[:n]), repeats, clock)
             model = make_world_model(name, seed)
             growing = list(pool[:n])
 
             def refit() -> None:
                 model.fit(growing[:n])
                 growing.append(pool[n])
-                start = time.perf_counter()
+                start = clock()
                 model.fit(growing)
-                refit_times.append(time.perf_counter() - start)
+                refit_times.append(clock() - start)
                 growing.pop()
 
             refit_times: list[float] = []
             for _ in range(repeats):
                 refit()
-            predict = _best(lambda: model.predict_proba(queries), repeats)
+            predict = _best(lambda: model.predict_proba(queries), repeats, clock)
             rows.append(Timing(name, n, fit, min(refit_times), predict))
     return rows
 
