@@ -21,7 +21,7 @@ from llcps.scenarios import SCENARIOS
 from llcps.store import Store
 
 PRETRAIN_TRIALS = 30
-BUDGET = 120
+BUDGET = 467  # the whole candidate space: a novelty that can be resolved is
 
 
 @pytest.fixture(scope="module")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -162,17 +163,32 @@ class Agent:
     def run_plan(
         self, kb: KnowledgeBase, steps: Sequence[GroundAction], *, store: bool = True
     ) -> tuple[State, GroundAction | None, object]:
-        """Execute a plan step by step with the monitor; stop at the first failing step."""
+        """Execute a plan step by step with the monitor; stop at the first failing step.
+
+        The monitor checks the effects the plan relies on (causal links): those in the
+        goal or needed by a later step's preconditions. A learned operator records every
+        change it was seen to make; an incidental one (a neighbour nudged) need not
+        recur for the plan to work. Reaching the goal ends the plan early.
+        """
         state = perceive(self.world)
-        for step in steps:
+        for index, step in enumerate(steps):
             spec = self.controller_call(step)
             stored = self.snapshot()[1] if store else None
             trial, _ = self.execute(spec, source="plan", snapshot_id=stored)
             state = trial.after
-            failure = check_step(step, state)
+            if self.scenario.goal_reached(state):
+                return state, None, None
+            failure = check_step(_relied_on(step, steps[index + 1 :], self.scenario), state)
             if failure is not None:
                 return state, step, failure
         return state, None, None
+
+
+def _relied_on(step: GroundAction, later: Sequence[GroundAction], scenario: Scenario) -> GroundAction:
+    """``step`` with only the effects the goal or a later step's preconditions need."""
+    needed_true = set(scenario.goal_pos).union(*(s.preconditions for s in later))
+    needed_false = set(scenario.goal_neg).union(*(s.negative_preconditions for s in later))
+    return replace(step, add=step.add & needed_true, delete=step.delete & needed_false)
 
 
 def solve(
