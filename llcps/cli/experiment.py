@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from llcps.cli._common import JsonFlag, choice_enum, err_console, message, new_app, open_store, print_json, print_table
@@ -33,8 +34,11 @@ def run_cli(
     preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = "paper",  # type: ignore[valid-type, assignment]
     seeds: Annotated[
         Optional[int],
-        typer.Option("--seeds", metavar="N", min=1, help="Seeds 0..N-1 (default: the preset's count).", show_default=False),
+        typer.Option("--seeds", metavar="N", min=1, help="How many seeds (default: the preset's count).", show_default=False),
     ] = None,
+    first_seed: Annotated[
+        int, typer.Option("--first-seed", metavar="K", min=0, help="Start the seeds at K (K..K+N-1): runners on several machines sharing one PostgreSQL store take disjoint seeds.")
+    ] = 0,
     workers: Annotated[
         Optional[int],
         typer.Option("--workers", metavar="N", min=1, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
@@ -71,7 +75,7 @@ def run_cli(
                 summary = run_experiment(
                     store,
                     preset=name,
-                    seeds=seeds,
+                    seeds=_seeds(name, seeds, first_seed),
                     workers=n_workers,
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
@@ -138,6 +142,11 @@ def report_cli(
         show_figure2(analysis)
 
 
+def _seeds(preset: str, count: int | None, first: int) -> range:
+    n = PRESETS[preset].default_seeds if count is None else count
+    return range(first, first + n)
+
+
 def _cpu_count() -> int:
     import os
 
@@ -173,6 +182,12 @@ def _pct(value: Any) -> str:
     return f"{value:+.0f}%"
 
 
+def _ci(low: Any, high: Any) -> str:
+    if low is None or high is None:
+        return "n/a"
+    return escape(f"[{_pct(low)}, {_pct(high)}]")  # not a markup tag
+
+
 def _num(value: Any) -> str:
     return "n/a" if value is None else f"{value:.1f}"
 
@@ -199,7 +214,7 @@ def show_figure2(analysis: dict[str, Any]) -> None:
                 _num(r["mean_update"]),
                 _num(r["mean_reset"]),
                 _pct(r["pct_change"]),
-                f"[{_pct(r['ci_low'])}, {_pct(r['ci_high'])}]",
+                _ci(r["ci_low"], r["ci_high"]),
                 _p(r["p_value"]),
                 _pct(r["paper_pct_change"]),
             )
