@@ -22,9 +22,10 @@ from __future__ import annotations
 import os
 import tempfile
 import time
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Self
 
 #: Exploration episode of the bench: scenario 1's novelty needs several trials to resolve.
 EXPLORE_SCENARIO = "scenario1"
@@ -87,7 +88,7 @@ def figure(name: str, value: float, unit: str, *, at_least: float | None = None,
 class _Clock:
     """Wall and CPU seconds of a block."""
 
-    def __enter__(self) -> "_Clock":
+    def __enter__(self) -> Self:
         self._wall, self._cpu = time.perf_counter(), time.process_time()
         return self
 
@@ -178,10 +179,12 @@ def run_exploration(budget: int, *, scenario: str = EXPLORE_SCENARIO, seed: int 
 
     config = SolveConfig(scenario=scenario, budget=budget, seed=seed)
     warm_up(config.model)
-    with tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp:
-        with Store.open(str(Path(tmp) / "bench.db"), create=True) as store:
-            with _Clock() as clock:
-                result = solve(store, branch=None, config=config, command="bench")
+    with (
+        tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp,
+        Store.open(str(Path(tmp) / "bench.db"), create=True) as store,
+        _Clock() as clock,
+    ):
+        result = solve(store, branch=None, config=config, command="bench")
     return ExplorationRun(
         status=result.status,
         sim_steps=result.sim_steps,
@@ -390,14 +393,32 @@ def bench_store(quick: bool = False, progress: Progress | None = None) -> list[F
 
 
 # --------------------------------------------------------------------------- scaling
-def _experiment_seconds(workers: int) -> tuple[float, str]:
+@dataclass(frozen=True)
+class ExperimentRun:
+    """One run of the scaling grid: wall seconds, summed task seconds, CPU seconds of all processes."""
+
+    wall: float
+    task_seconds: float
+    cpu: float
+    status: str
+
+
+def run_scaling_grid(workers: int, *, preset: str = SCALING_PRESET) -> ExperimentRun:
+    """Run ``preset``'s experiment grid into a fresh temporary store on ``workers`` processes."""
+    import resource
+
     from llcps.experiments.runner import run_experiment
     from llcps.store import Store
 
-    with tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp:
-        with Store.open(str(Path(tmp) / "bench.db"), create=True) as store:
-            summary = run_experiment(store, preset=SCALING_PRESET, workers=workers)
-    return summary.wall_seconds, summary.status
+    def children() -> float:
+        usage = resource.getrusage(resource.RUSAGE_CHILDREN)  # workers are reaped when the pool closes
+        return usage.ru_utime + usage.ru_stime
+
+    cpu0, kids0 = time.process_time(), children()
+    with tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp, Store.open(str(Path(tmp) / "bench.db"), create=True) as store:
+        summary = run_experiment(store, preset=preset, workers=workers)
+    cpu = time.process_time() - cpu0 + children() - kids0
+    return ExperimentRun(summary.wall_seconds, sum(summary.task_seconds.values()), cpu, summary.status)
 
 
 def bench_scaling(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
@@ -406,21 +427,29 @@ def bench_scaling(quick: bool = False, progress: Progress | None = None) -> list
     Worker processes are spawned, so a script calling this needs the
     ``if __name__ == "__main__":`` guard.
     """
+    from llcps.errors import LlcpsError
+
     load_before = os.getloadavg()[0]
-    times = {}
+    runs = {}
     for workers in (1, 2):
         _say(progress, f"scaling: {SCALING_PRESET} grid on {workers} worker(s)")
-        seconds, status = _experiment_seconds(workers)
-        if status != "ok":
-            from llcps.errors import LlcpsError
-
-            raise LlcpsError(f"the {SCALING_PRESET} experiment ended {status} on {workers} worker(s)")
-        times[workers] = seconds
-    return [
-        figure("scaling.workers1", times[1], "s wall", note=f"{SCALING_PRESET} preset grid"),
-        figure("scaling.workers2", times[2], "s wall"),
-        figure("scaling.speedup", times[1] / times[2], "ratio", at_least=1.7, note="1-worker / 2-worker wall time"),
-        figure("scaling.load_average", load_before, "runnable", note=f"1-minute load average of the machine before ({os.cpu_count()} CPUs)"),
+        run = run_scaling_grid(workers)
+        if run.status != "ok":
+            raise LlcpsError(f"the {SCALING_PRESET} experiment ended {run.status} on {workers} worker(s)")
+        runs[workers] = run
+    figures = []
+    for workers, run in runs.items():
+        p = f"scaling.workers{workers}"
+        figures += [
+            figure(p, run.wall, "s wall", note=f"{SCALING_PRESET} preset grid"),
+            figure(f"{p}.task_seconds", run.task_seconds, "s wall", note="the tasks' own wall seconds, summed"),
+            figure(f"{p}.cpu", run.cpu, "s cpu", note="this process and its workers"),
+            figure(f"{p}.core_share", run.cpu / (run.wall * workers), "ratio", note="CPU seconds per worker per wall second: below 1, the cores were busy elsewhere"),
+        ]
+    return figures + [
+        figure("scaling.speedup", runs[1].wall / runs[2].wall, "ratio", at_least=1.7, note="1-worker / 2-worker wall time"),
+        figure("scaling.load_average", load_before, "runnable", note=f"1-minute load average before, on {os.cpu_count()} CPUs"),
+        figure("scaling.load_average_after", os.getloadavg()[0], "runnable"),
     ]
 
 
@@ -456,4 +485,4 @@ def run_bench(*, quick: bool = False, groups: Sequence[str] | None = None, progr
     return figures
 
 
-__all__ = ["Figure", "GROUPS", "SLOW_GROUPS", "run_bench", "run_exploration", "figure"]
+__all__ = ["GROUPS", "SLOW_GROUPS", "Figure", "figure", "run_bench", "run_exploration", "run_scaling_grid", "warm_up"]

@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from llcps.bench import GROUPS, SLOW_GROUPS, Figure, run_bench
-from llcps.cli._common import JsonFlag, choice_enum, err_console, message, print_json, print_table
+from llcps.cli._common import (
+    JsonFlag,
+    choice_enum,
+    err_console,
+    message,
+    print_json,
+    print_table,
+)
 
 GroupName = choice_enum("BenchGroup", tuple(GROUPS))
 
@@ -18,7 +25,7 @@ def bench_cli(
         typer.Option("--quick", help=f"Smaller runs, under a minute; leaves out {', '.join(SLOW_GROUPS)}."),
     ] = False,
     group: Annotated[
-        Optional[list[GroupName]],  # type: ignore[valid-type]
+        list[GroupName] | None,  # type: ignore[valid-type]
         typer.Option("--group", metavar="NAME", help=f"Measure only this group (repeatable): {', '.join(GROUPS)}.", show_default=False),
     ] = None,
     as_json: JsonFlag = False,
