@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from llcps.errors import LlcpsError, UnknownNameError
+from llcps.errors import LlcpsError, StoreError, UnknownNameError
 from llcps.experiments.grid import (
     SCENARIO_SEQUENCE,
     Preset,
@@ -68,6 +68,10 @@ _SUBSET_STREAM = 0x5E7
 RESULTS_DIR = Path("results")
 #: Seconds between checks for Ctrl-C and finished tasks.
 _POLL_SECONDS = 0.5
+
+class EngineError(LlcpsError):
+    """The engine itself failed (a worker process died), not one task."""
+
 
 ProgressCallback = Callable[[int, int, str], None]
 """Called as ``progress(done, total, label)`` after each task is imported (or fails)."""
@@ -320,7 +324,7 @@ class LocalEngine:
         try:
             return handle.result()
         except BrokenProcessPool:
-            raise LlcpsError(
+            raise EngineError(
                 "a worker process died (out of memory, or killed)",
                 hint="every task imported so far is kept; run the same command again to resume",
             ) from None
@@ -611,7 +615,7 @@ def _loop(
             task = in_flight.pop(handle)
             try:
                 output = runner.result(handle)
-            except LlcpsError:
+            except EngineError:
                 raise
             except Exception as exc:  # noqa: BLE001 - one failed task must not end the run
                 summary.failed.append((task.label, f"{type(exc).__name__}: {exc}"))
@@ -619,18 +623,30 @@ def _loop(
                     failed_pretraining.update(task.branches)
             else:
                 refill()  # keep the workers busy while the parent writes
-                if all(b in existing for b in task.branches) or _exists(store, task.branches):
-                    summary.skipped += 1  # imported meanwhile by another run on the same store
-                else:
-                    import_payload(store, output.payload)
+                if _import(store, output.payload, task):
                     summary.done += 1
                     summary.task_seconds[task.label] = output.wall_seconds
+                else:
+                    summary.skipped += 1  # imported meanwhile by another run on the same store
                 existing.update(task.branches)
             finished += 1
             if progress is not None:
                 progress(finished, len(todo), task.label)
             refill()
     summary.blocked += len(pending)
+
+
+def _import(store: Store, payload: Payload, task: Task) -> bool:
+    """Import a task's payload; False when another runner on the same store got there first."""
+    if _exists(store, task.branches):
+        return False
+    try:
+        import_payload(store, payload)
+    except StoreError:
+        if _exists(store, task.branches):  # lost the race; the transaction wrote nothing
+            return False
+        raise
+    return True
 
 
 def _exists(store: Store, branches: Iterable[str]) -> bool:
@@ -644,6 +660,7 @@ def _exists(store: Store, branches: Iterable[str]) -> bool:
 
 __all__ = [
     "ENGINES",
+    "EngineError",
     "default_out_dir",
     "LocalEngine",
     "PretrainTask",
