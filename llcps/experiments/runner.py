@@ -27,6 +27,7 @@ runs with the sequence's seed and the preset's budget.
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -193,17 +194,28 @@ def _limit_threads() -> None:
     _limited = True
 
 
+_scratch: str | None = None  # the private store's directory of the task in progress
+
+
+def _stop_worker(*_: object) -> None:
+    """Leave at once (the parent dropped this task), without a task directory behind."""
+    if _scratch is not None:
+        shutil.rmtree(_scratch, ignore_errors=True)
+    os._exit(1)
+
+
 def _exit_with_parent(parent: int) -> None:
     """End this worker when the run that started it is gone (e.g. killed with -9)."""
     while True:
         time.sleep(1.0)
         if os.getppid() != parent:
-            os._exit(1)
+            _stop_worker()
 
 
 def _init_local_worker() -> None:
     """Initializer of local pool workers."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    signal.signal(signal.SIGTERM, _stop_worker)
     try:
         sys.stdout.flush()
         os.dup2(2, 1)  # native code prints to fd 1; the parent's stdout is for data
@@ -218,14 +230,19 @@ def execute_task(task: Task) -> TaskOutput:
 
     The same function runs in a local pool process and as a Ray task.
     """
+    global _scratch
     _limit_threads()
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="llcps-task-") as tmp:
-        with Store.open(str(Path(tmp) / "task.db"), create=True) as store:
-            if isinstance(task, PretrainTask):
-                payload, statuses = _run_pretrain(store, task), ()
-            else:
-                payload, statuses = _run_sequence(store, task)
+        _scratch = tmp
+        try:
+            with Store.open(str(Path(tmp) / "task.db"), create=True) as store:
+                if isinstance(task, PretrainTask):
+                    payload, statuses = _run_pretrain(store, task), ()
+                else:
+                    payload, statuses = _run_sequence(store, task)
+        finally:
+            _scratch = None
     return TaskOutput(task.label, payload, time.perf_counter() - started, statuses)
 
 
