@@ -293,8 +293,9 @@ def bench_exploration(quick: bool = False, progress: Progress | None = None) -> 
 # --------------------------------------------------------------------------- world models
 #: Refit targets at 10,000 trials (seconds) by model name.
 REFIT_TARGETS = {"nb": 0.020, "nn": 2.0}
-#: Models timed once per size in the full run: a fit takes seconds, so the minimum of three adds little.
-SLOW_MODELS = ("nn", "forest")
+#: Models timed once per size in the full run: a fit takes about a second or more, so the
+#: minimum of three adds little but time.
+SLOW_MODELS = ("nn", "logreg", "forest")
 
 
 def bench_models(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
@@ -418,7 +419,7 @@ def bench_store(quick: bool = False, progress: Progress | None = None) -> list[F
 
     commits = 300 if quick else 1000
     visible = VISIBLE_TRIALS_QUICK if quick else VISIBLE_TRIALS
-    repeats = 2 if quick else 3
+    repeats = 2
     target = 1.0 if visible == VISIBLE_TRIALS else None
     with tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp:
         with Store.open(str(Path(tmp) / "commits.db"), create=True) as store:
