@@ -609,7 +609,6 @@ def _loop(
         return isinstance(task, SequenceTask) and task.pretrain_branch in failed_pretraining
 
     def refill() -> None:
-        nonlocal pending
         for task in [t for t in pending if blocked(t)]:
             summary.blocked += 1
             pending.remove(task)
