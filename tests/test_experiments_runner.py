@@ -116,11 +116,23 @@ def _source_store(store: Store, new_trial) -> dict[str, Any]:
     return {"run": run, "episode": episode, "child_ids": child_ids}
 
 
-def test_payload_round_trip_remaps_ids_and_dedups_snapshots(store: Store, tmp_path: Path, new_trial) -> None:
+@pytest.fixture(params=["sqlite", "postgresql"])
+def dest_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """A new, empty store's URL: a SQLite file, or a fresh PostgreSQL schema when one is configured."""
+    if request.param == "sqlite":
+        return str(tmp_path / "dest.db")
+    if not os.environ.get("LLCPS_TEST_POSTGRES_URL"):
+        pytest.skip("set LLCPS_TEST_POSTGRES_URL to test on PostgreSQL")
+    from test_store_postgres import _fresh_schema_url
+
+    return _fresh_schema_url()
+
+
+def test_payload_round_trip_remaps_ids_and_dedups_snapshots(store: Store, dest_url: str, new_trial) -> None:
     _source_store(store, new_trial)
     payload = export_branches(store, ["base", "child"])
     assert count_rows(payload) == {"branches": 2, "runs": 1, "episodes": 1, "snapshots": 2, "trials": 9, "operators": 1}
-    with Store.open(str(tmp_path / "dest.db"), create=True) as dest:
+    with Store.open(dest_url, create=True) as dest:
         # Ids in the destination start elsewhere, and one snapshot is there already.
         dest.create_branch("other", from_branch="main", at=0)
         dest.add_trials([new_trial(1000 + i, branch="other") for i in range(5)])
