@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -112,15 +112,13 @@ class Agent:
         trial = run_trial(self.world, spec)
         if snapshot_id is None:
             return trial, None
-        state_after = trial.after
-        solved = self.scenario.goal_reached(state_after)
         new = NewTrial(
             branch=self.branch,
             source=source,
             spec=spec,
             features=trial.features,
             outcome=trial.outcome,
-            solved=solved,
+            solved=self.scenario.goal_reached(trial.after),
             sim_steps=trial.sim_steps,
             wall_seconds=trial.wall_seconds,
             seed=self.config.seed,
@@ -130,22 +128,7 @@ class Agent:
             scenario=self.scenario.name,
         )
         trial_id = self.store.add_trial(new)
-        record = TrialRecord(
-            id=trial_id,
-            branch=self.branch,
-            source=source,
-            spec=spec,
-            features=trial.features,
-            outcome=trial.outcome,
-            solved=solved,
-            sim_steps=trial.sim_steps,
-            wall_seconds=trial.wall_seconds,
-            seed=self.config.seed,
-            run_id=self.result.run_id,
-            episode_id=self.result.episode_id,
-            snapshot_id=snapshot_id,
-            scenario=self.scenario.name,
-        )
+        record = TrialRecord(id=trial_id, **{f.name: getattr(new, f.name) for f in fields(NewTrial)})
         self.records.append(record)
         self.result.sim_steps += trial.sim_steps
         if source == "plan":

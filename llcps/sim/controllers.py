@@ -275,6 +275,34 @@ def _support_z(world: "World", x: float, y: float, below: float, ignore: int) ->
     return world.scene.table.floor_z
 
 
+def _carry(
+    world: "World",
+    m: Motion,
+    obj: str,
+    grasp: tuple[float, float, float],
+    carry_z: float,
+    target: tuple[float, float],
+    params: "ControllerParams",
+    safe_z: float,
+) -> bool:
+    """Check the waypoints, pick ``obj``, lift it and carry it above ``target`` at ``rate``.
+
+    Returns:
+        False when the action was refused (a waypoint out of reach) or the grasp
+        failed; the arm is then back home with nothing held.
+    """
+    tx, ty = target
+    if not _reachable(world, grasp, (tx, ty, max(carry_z, grasp[2] + params.movement_magnitude))):
+        return False
+    if not _pick(world, m, obj, safe_z):
+        m.open_hand()
+        m.go_home(safe_z)
+        return False
+    _lift(m, params, carry_z)
+    m.move_to((tx, ty, m.target[2]), params.rate)
+    return True
+
+
 def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params: "ControllerParams") -> None:
     """Grasp ``o`` from the top, lift, carry over ``c`` at ``rate``, lower in (top) or
     release offset toward a side from carry height."""
@@ -289,14 +317,8 @@ def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params:
         side = SIDE[params.orientation]
         off = SIDE_RELEASE_OFFSET * g.inner_half(world, container, side)
         tx, ty = cx + side[0] * off, cy + side[1] * off
-    if not _reachable(world, grasp, (tx, ty, max(carry_z, grasp[2] + params.movement_magnitude))):
+    if not _carry(world, m, obj, grasp, carry_z, (tx, ty), params, safe_z):
         return
-    if not _pick(world, m, obj, safe_z):
-        m.open_hand()
-        m.go_home(safe_z)
-        return
-    _lift(m, params, carry_z)
-    m.move_to((tx, ty, m.target[2]), params.rate)
     if params.orientation == "top":
         m.move_to((tx, ty, g.inner_floor_z(world, container) + 0.015 + held), VERTICAL_SPEED)
     m.open_hand()
@@ -314,14 +336,8 @@ def remove_from_container(world: "World", m: Motion, args: tuple[str, ...], para
     cx, cy, _ = world.center(container)
     reach = g.extent_along(world, container, side) + g.extent_along(world, obj, side) + SET_DOWN_GAP
     tx, ty = cx + side[0] * reach, cy + side[1] * reach
-    if not _reachable(world, grasp, (tx, ty, max(carry_z, grasp[2] + params.movement_magnitude))):
+    if not _carry(world, m, obj, grasp, carry_z, (tx, ty), params, safe_z):
         return
-    if not _pick(world, m, obj, safe_z):
-        m.open_hand()
-        m.go_home(safe_z)
-        return
-    _lift(m, params, carry_z)
-    m.move_to((tx, ty, m.target[2]), params.rate)
     support = _support_z(world, tx, ty, m.target[2] - held - 0.005, world.body(obj))
     m.move_to((tx, ty, support + 0.01 + held), VERTICAL_SPEED)
     m.open_hand()
