@@ -264,6 +264,19 @@ PRESETS: dict[str, Preset] = {
         PAPER_PRETRAIN_SIZES,
         default_seeds=20,
     ),
+    # Model-guided exploration against no model, scenario by scenario: each episode starts
+    # from the seed's pretraining set (condition reset), with the whole candidate space as
+    # budget so that every episode that can be solved is.
+    "vs_random": Preset(
+        "vs_random",
+        ("nb", "random"),
+        ("goal-directed",),
+        (30,),
+        conditions=("reset",),
+        default_seeds=10,
+        budget=467,
+        pretrain_pool=30,
+    ),
     # Small enough for the test suite: 8 random interactions per seed, 5 exploration trials per episode.
     "smoke": Preset("smoke", ("nb",), ("most-changes",), (4,), default_seeds=2, budget=5, pretrain_pool=8),
 }
