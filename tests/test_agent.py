@@ -4,7 +4,6 @@ keeps branches apart, replays bit for bit, and stops cleanly."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
