@@ -52,6 +52,13 @@ def run_cli(
         Optional[Path],
         typer.Option("--out", metavar="DIR", help="Report directory (default: results/<preset>).", show_default=False, file_okay=False),
     ] = None,
+    memo: Annotated[
+        bool,
+        typer.Option(
+            "--memo/--no-memo",
+            help="Answer a trial a worker already simulated (same scene, state and call) from that simulation; results are identical either way.",
+        ),
+    ] = True,
     as_json: JsonFlag = False,
 ) -> None:
     """Run every sequence of the grid the store does not hold yet, then write the report.
@@ -80,6 +87,7 @@ def run_cli(
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
                     progress=report,
+                    memo=memo,
                 )
             if summary.status == "interrupted":
                 message(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")

@@ -26,7 +26,8 @@ from llcps.errors import LlcpsError
 from llcps.models.measures import rank
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
-from llcps.sim.controllers import PUSH_DIRECTION
+from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
+from llcps.sim.memo import TrialMemo, memo_key
 from llcps.sim.perception import entity_features, perceive
 from llcps.sim.render import GifRecorder
 from llcps.sim.trial import TrialResult, run_trial
@@ -65,6 +66,7 @@ class Agent:
         config: SolveConfig,
         result: SolveResult,
         records: list[TrialRecord],
+        memo: TrialMemo | None = None,
     ) -> None:
         self.store = store
         self.branch = branch
@@ -75,6 +77,11 @@ class Agent:
         self.records = records
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
         self.recorder: GifRecorder | None = None
+        self.memo = memo
+        # Physics state of each stored snapshot this episode took, by snapshot id.
+        self._states: dict[int, bytes] = {}
+        # End state of a trial answered by the memo, loaded when the world is next used.
+        self._pending: bytes | None = None
 
     def filmed(self):
         """A context that records frames into the episode's GIF, if one was asked for."""
@@ -104,14 +111,35 @@ class Agent:
         return max(PUSH_DIRECTIONS, key=lambda k: float(np.dot(PUSH_DIRECTIONS[k], d)))
 
     # -- trials ----------------------------------------------------------------
-    def execute(self, spec: TrialSpec, *, source: str, snapshot_id: int | None) -> tuple[TrialResult, TrialRecord | None]:
-        """Run one trial from the current physics state and store it durably.
+    def execute(
+        self, spec: TrialSpec, *, source: str, snapshot_id: int | None, start: int | None = None
+    ) -> tuple[TrialResult, TrialRecord | None]:
+        """Run one trial and store it durably.
 
-        With ``snapshot_id=None`` the trial is a re-enactment for a GIF: it is not stored.
+        The trial starts from the stored snapshot ``start`` if given, else from the
+        world's current state, which must then be the state of ``snapshot_id``. With
+        ``snapshot_id=None`` the trial is a re-enactment for a GIF: it is not stored.
+        A stored trial leaves the world in its serialized end state, so what follows
+        is the same whether the trial was simulated or answered by the memo.
         """
-        trial = run_trial(self.world, spec)
-        if snapshot_id is None:
-            return trial, None
+        trial: TrialResult | None = None
+        key: bytes | None = None
+        if snapshot_id is not None and self.memo is not None and self.recorder is None:
+            key = memo_key(self.world.scene.to_dict(), self._states[snapshot_id], spec, DEFAULT_MAX_STEPS)
+            cached = self.memo.get(key)
+            if cached is not None:
+                trial, self._pending = cached
+        if trial is None:
+            if start is not None:
+                self.restore(start)
+            else:
+                self.sync()
+            trial = run_trial(self.world, spec)
+            if snapshot_id is None:
+                return trial, None
+            end = self.world.serialize_state()
+            if key is not None:
+                self.memo.put(key, trial, end)
         new = NewTrial(
             branch=self.branch,
             source=source,
@@ -137,11 +165,24 @@ class Agent:
             self.result.exploration_trials += 1
         return trial, record
 
-    def snapshot(self) -> tuple[int, int]:
-        """Snapshot the world in memory and in the store; returns (memory id, store id)."""
-        memory = self.world.snapshot()
-        stored = self.store.put_snapshot(scene=self.world.scene.to_dict(), state=self.world.serialize_state())
-        return memory, stored
+    def snapshot(self) -> int:
+        """Save the world's physics state in the store; returns the snapshot id."""
+        self.sync()
+        state = self.world.serialize_state()
+        stored = self.store.put_snapshot(scene=self.world.scene.to_dict(), state=state)
+        self._states[stored] = state
+        return stored
+
+    def restore(self, snapshot_id: int) -> None:
+        """Return the world to a snapshot taken by :meth:`snapshot`."""
+        self._pending = None
+        self.world.restore_serialized(self._states[snapshot_id])
+
+    def sync(self) -> None:
+        """Bring the world to the end state of the last trial, if the memo answered it."""
+        if self._pending is not None:
+            state, self._pending = self._pending, None
+            self.world.restore_serialized(state)
 
     def run_plan(
         self, kb: KnowledgeBase, steps: Sequence[GroundAction], *, store: bool = True
@@ -153,10 +194,11 @@ class Agent:
         change it was seen to make; an incidental one (a neighbour nudged) need not
         recur for the plan to work. Reaching the goal ends the plan early.
         """
+        self.sync()
         state = perceive(self.world)
         for index, step in enumerate(steps):
             spec = self.controller_call(step)
-            stored = self.snapshot()[1] if store else None
+            stored = self.snapshot() if store else None
             trial, _ = self.execute(spec, source="plan", snapshot_id=stored)
             state = trial.after
             if self.scenario.goal_reached(state):
@@ -183,6 +225,7 @@ def solve(
     gui: bool = False,
     gif: str | Path | None = None,
     progress: ProgressCallback | None = None,
+    memo: TrialMemo | None = None,
 ) -> SolveResult:
     """Solve one scenario on one branch; see the module docstring.
 
@@ -194,6 +237,8 @@ def solve(
         gui: open a PyBullet GUI window (needs a display).
         gif: write the plan's execution and the resolving trial to this GIF.
         progress: optional callback for progress bars.
+        memo: trials already simulated (:mod:`llcps.sim.memo`), to answer repeats without
+            stepping the engine; what the episode records is the same with or without it.
 
     Returns:
         The episode summary; ``status`` is ``solved``, ``budget_exhausted``,
@@ -237,6 +282,7 @@ def solve(
             config=config,
             result=result,
             records=records,
+            memo=memo,
         )
         if gif is not None:
             agent.recorder = GifRecorder(world, every=GIF_EVERY)
@@ -281,8 +327,8 @@ def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progre
 def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failure_state: State, result, progress):
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
     world, config = agent.world, agent.config
+    snapshot = agent.snapshot()
     failed_spec = agent.controller_call(failed_step)
-    memory_snap, stored_snap = agent.snapshot()
     candidates = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
     result.candidates = len(candidates)
     features = {name: entity_features(world, name) for name in agent.kinds}
@@ -295,8 +341,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
         index = order.pop(0)
         remaining.remove(index)
         spec = candidates[index]
-        world.restore(memory_snap)
-        trial, record = agent.execute(spec, source="exploration", snapshot_id=stored_snap)
+        trial, record = agent.execute(spec, source="exploration", snapshot_id=snapshot, start=snapshot)
         tried += 1
         if progress is not None:
             progress("explore", result.exploration_trials, min(config.budget, len(candidates)))
@@ -326,7 +371,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
             result.resolving_trial_id = record.id
             result.status = "solved"
             if agent.recorder is not None:
-                _film_resolution(agent, kb, spec, memory_snap)
+                _film_resolution(agent, kb, spec, snapshot)
             return new_kb
         if tried % config.refit_every == 0 and remaining:
             model.fit(agent.records)
@@ -340,7 +385,7 @@ def _film_resolution(agent: Agent, kb: KnowledgeBase, spec: TrialSpec, snapshot:
 
     Physics is deterministic from the snapshot, so the film shows what was recorded.
     """
-    agent.world.restore(snapshot)
+    agent.restore(snapshot)
     with agent.filmed():
         trial, _ = agent.execute(spec, source="exploration", snapshot_id=None)
         if not agent.scenario.goal_reached(trial.after):

@@ -36,7 +36,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor
 from concurrent.futures import wait as wait_futures
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -106,6 +106,10 @@ class SequenceTask:
     sequence: Sequence
     budget: int
     base: Payload | None = None
+    #: Exploration trials between world-model refits (the preset's ``refit_every``).
+    refit_every: int = 1
+    #: Answer repeated trials from the worker's :class:`~llcps.sim.memo.TrialMemo`.
+    memo: bool = True
 
     @property
     def branches(self) -> tuple[str, ...]:
@@ -133,14 +137,18 @@ class TaskOutput:
     statuses: tuple[str, ...] = ()
 
 
-def plan_tasks(preset: Preset, seeds: int | Iterable[int] | None = None) -> list[Task]:
+def plan_tasks(preset: Preset, seeds: int | Iterable[int] | None = None, *, memo: bool = True) -> list[Task]:
     """Every task of a run, seed by seed: the seed's pretraining, then its sequences."""
     chosen = _seed_list(preset.default_seeds if seeds is None else seeds)
     sequences = preset.sequences(chosen)
     tasks: list[Task] = []
     for seed in chosen:
         tasks.append(PretrainTask(preset.name, seed, preset.pretrain_pool, tuple(preset.pretrain_sizes)))
-        tasks.extend(SequenceTask(s, preset.budget) for s in sequences if s.seed == seed)
+        tasks.extend(
+            SequenceTask(s, preset.budget, refit_every=preset.refit_every, memo=memo)
+            for s in sequences
+            if s.seed == seed
+        )
     return tasks
 
 
@@ -195,6 +203,17 @@ def _limit_threads() -> None:
 
 
 _scratch: str | None = None  # the private store's directory of the task in progress
+_memo = None  # this worker's TrialMemo, made by the first sequence task that asks for one
+
+
+def _worker_memo():
+    """The worker process's trial memo, kept across its tasks."""
+    global _memo
+    if _memo is None:
+        from llcps.sim.memo import TrialMemo
+
+        _memo = TrialMemo()
+    return _memo
 
 
 def _stop_worker(*_: object) -> None:
@@ -294,6 +313,7 @@ def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str,
         raise LlcpsError(f"task {task.label} was sent without its pretraining trials")
     seeded = import_payload(store, task.base)
     seq = task.sequence
+    memo = _worker_memo() if task.memo else None
     statuses: list[str] = []
     for scenario in SCENARIO_SEQUENCE:
         branch = seq.episode_branch(scenario)
@@ -306,8 +326,9 @@ def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str,
             measure=seq.cell.measure,
             seed=seq.seed,
             budget=task.budget,
+            refit_every=task.refit_every,
         )
-        result = solve(store, branch=branch, config=config, command=f"{COMMAND} --preset {seq.preset}")
+        result = solve(store, branch=branch, config=config, command=f"{COMMAND} --preset {seq.preset}", memo=memo)
         if result.status == "interrupted":
             raise RuntimeError(f"{task.label}: {scenario} was interrupted")
         statuses.append(result.status)
@@ -529,6 +550,7 @@ def run_experiment(
     engine: str = "local",
     ray_address: str | None = None,
     progress: ProgressCallback | None = None,
+    memo: bool = True,
 ) -> RunSummary:
     """Run every task of a preset's grid that the store does not hold yet.
 
@@ -540,6 +562,8 @@ def run_experiment(
         engine: one of :data:`ENGINES`.
         ray_address: a Ray cluster (None: start a local instance with ``workers`` CPUs).
         progress: see :data:`ProgressCallback`.
+        memo: let each worker answer repeated trials from the physics it already ran
+            (:mod:`llcps.sim.memo`); the results are the same either way.
 
     Returns:
         What ran; on Ctrl-C the tasks imported so far stay and ``status`` is ``interrupted``.
@@ -552,7 +576,7 @@ def run_experiment(
         raise LlcpsError("--ray-address needs --engine ray")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise LlcpsError(f"workers must be at least 1, not {workers!r}", hint="pass --workers 1 or more")
-    tasks = plan_tasks(grid, seeds)
+    tasks = plan_tasks(grid, seeds, memo=memo)
     seed_list = tuple(dict.fromkeys(t.seed if isinstance(t, PretrainTask) else t.sequence.seed for t in tasks))
     summary = RunSummary(preset=grid.name, seeds=seed_list, engine=engine, workers=workers, tasks=len(tasks))
     existing = _existing_branches(store)
@@ -563,7 +587,7 @@ def run_experiment(
     summary.run_id = store.start_run(
         command=f"{COMMAND} --preset {grid.name}",
         seed=None,
-        config={"preset": grid.name, "seeds": list(seed_list), "workers": workers, "engine": engine},
+        config={"preset": grid.name, "seeds": list(seed_list), "workers": workers, "engine": engine, "memo": memo},
         branch=MAIN_BRANCH,
     )
     runner = None
@@ -622,7 +646,7 @@ def _loop(
                 if base is None:
                     base = export_branches(store, [task.pretrain_branch], snapshots=False, provenance=False)
                     bases[task.pretrain_branch] = base
-                task = SequenceTask(task.sequence, task.budget, base)
+                task = replace(task, base=base)
             in_flight[runner.submit(task)] = task
 
     refill()
