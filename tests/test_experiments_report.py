@@ -16,7 +16,13 @@ from llcps.experiments.results import COLUMNS, ResultRow, ResultsTable, table_fr
 
 # -- grid ----------------------------------------------------------------------------------
 
-EXPECTED_SIZES = {"paper": (2 * 4 * 2 * 2, 20), "full": (5 * 5 * 2 * 2, 20), "smoke": (2, 2), "vs_random": (2, 10)}
+EXPECTED_SIZES = {
+    "paper": (2 * 4 * 2 * 2, 20),
+    "full": (5 * 5 * 2 * 2, 20),
+    "smoke": (2, 2),
+    "vs_random": (2, 10),
+    "random": (1, 20),
+}
 
 
 def test_every_preset_has_a_documented_size() -> None:

@@ -337,6 +337,40 @@ def test_report_rebuilds_from_a_directory_and_from_the_store(reference: tuple[St
     assert text.exit_code == 0 and "scenario3" in text.stdout
 
 
+def test_report_takes_the_random_baseline_from_another_preset(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    db = reference[0].url.split("///", 1)[1]
+    runner = CliRunner()
+    assert runner.invoke(app, ["--db", db, "experiment", "report", "--from-db", "--out", str(tmp_path / "a")]).exit_code == 0
+    smoke = ResultsTable.read(tmp_path / "a" / "results.csv")
+    baseline = [
+        replace(
+            row,
+            preset="random",
+            model="random",
+            condition="reset",
+            exploration_trials=row.exploration_trials + 100,
+            branch=Sequence("random", Cell("random", row.measure, row.pretrain_size, "reset"), row.seed).episode_branch(row.scenario),
+        )
+        for row in smoke.filter(condition="reset")
+    ]
+    ResultsTable([*smoke, *baseline]).write_csv(tmp_path / "both.csv")
+    result = runner.invoke(
+        app, ["experiment", "report", str(tmp_path / "both.csv"), "--preset", "smoke", "--baseline-preset", "random",
+              "--out", str(tmp_path / "c"), "--json"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert {r["model"] for r in data["random_comparison"]} == {"nb"}
+    best = data["best_versus_random"]
+    assert sorted(r["scenario"] for r in best) == sorted(SCENARIO_SEQUENCE)
+    assert all(r["condition"] == "reset" and r["median_model"] < r["median_random"] for r in best)
+    assert "The best model x measure per scenario" in (tmp_path / "c" / "report.md").read_text()
+    missing = runner.invoke(app, ["experiment", "report", str(tmp_path / "a"), "--baseline-preset", "random"])
+    assert missing.exit_code == 2 and "no random-model results of preset 'random'" in missing.stderr
+
+
 @pytest.mark.parametrize(
     "argv, error",
     [

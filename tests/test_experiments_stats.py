@@ -163,7 +163,11 @@ def test_random_comparison_paired_and_pooled() -> None:
     for seed, trials in enumerate((40, 50, 60)):
         rows.append(_row("random", "most-changes", 4, "update", seed, "scenario2", trials))
     table = ResultsTable(rows)
-    (cmp,) = stats.random_comparison(table)
+
+    def same_cell(comparisons):  # the others fall back to random's rows of the scenario
+        return [c for c in comparisons if (c.pretrain_size, c.condition, c.scenario) == (4, "update", "scenario2")]
+
+    (cmp,) = same_cell(stats.random_comparison(table))
     assert (cmp.model, cmp.condition, cmp.test, cmp.n_model, cmp.n_random) == ("nb", "update", "wilcoxon", 3, 3)
     assert cmp.median_model == 20 and cmp.median_random == 50
     assert cmp.pct_change_median == pytest.approx(-60.0)
@@ -173,10 +177,27 @@ def test_random_comparison_paired_and_pooled() -> None:
         [r for r in table if r.model != "random"]
         + [_row("random", "least-destructive", 4, "update", s, "scenario2", t) for s, t in enumerate((40, 50, 60))]
     )
-    (pooled,) = stats.random_comparison(other)
+    (pooled,) = same_cell(stats.random_comparison(other))
     assert pooled.test == "mann-whitney"
     assert pooled.p_value == pytest.approx(0.1)  # 12, 20, 35 all below 40, 50, 60
     assert stats.random_comparison(_fixed_table()) == ()
+
+
+def test_best_measure_against_random_from_another_pretraining_size() -> None:
+    rows = []
+    for seed in range(3):
+        rows.append(_row("nb", "most-changes", 200, "reset", seed, "scenario2", 30 + seed))
+        rows.append(_row("nb", "least-destructive", 200, "reset", seed, "scenario2", 10 + seed))
+        rows.append(_row("nn", "least-destructive", 200, "update", seed, "scenario2", 1 + seed))  # not reset
+        rows.append(_row("random", "most-changes", 4, "reset", seed, "scenario2", 40 + 10 * seed))
+    comparisons = stats.random_comparison(ResultsTable(rows))
+    # random ran with 4 pretraining points only: its rows of the scenario are the baseline
+    assert len(comparisons) == 3 and all(c.n_random == 3 and c.test == "mann-whitney" for c in comparisons)
+    (best,) = stats.best_versus_random(comparisons)
+    assert (best.model, best.measure, best.condition, best.median_model) == ("nb", "least-destructive", "reset", 11)
+    assert best.median_random == 50 and best.pct_change_median == pytest.approx(-78.0)
+    assert best.p_value == pytest.approx(0.1)  # 10, 11, 12 all below 40, 50, 60
+    assert stats.best_versus_random(comparisons, condition="update")[0].model == "nn"
 
 
 def test_cumulative_exploration_sums_along_the_sequence() -> None:

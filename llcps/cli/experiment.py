@@ -13,7 +13,16 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from llcps.cli._common import JsonFlag, choice_enum, err_console, message, new_app, open_store, print_json, print_table
 from llcps.errors import LlcpsError
 from llcps.experiments.grid import PRESETS
-from llcps.experiments.runner import ENGINES, RunSummary, default_out_dir, one_preset, results_table, run_experiment, write_report
+from llcps.experiments.runner import (
+    ENGINES,
+    RunSummary,
+    default_out_dir,
+    one_preset,
+    results_table,
+    run_experiment,
+    with_baseline,
+    write_report,
+)
 
 app = new_app("Run the experiment grid (Figure 2 over many seeds) and report on it.")
 
@@ -123,6 +132,15 @@ def report_cli(
         Optional[str],
         typer.Option("--preset", metavar="NAME", help="Report on this preset only (needed when the results hold several).", show_default=False),
     ] = None,
+    baseline_preset: Annotated[
+        Optional[str],
+        typer.Option(
+            "--baseline-preset",
+            metavar="NAME",
+            help="Compare with the random-model results of this preset too (e.g. `random`, run on the same store).",
+            show_default=False,
+        ),
+    ] = None,
     out: Annotated[
         Optional[Path],
         typer.Option("--out", metavar="DIR", help="Report directory (default: DIR itself, or results/<preset> with --from-db).", show_default=False, file_okay=False),
@@ -139,7 +157,10 @@ def report_cli(
     else:
         with open_store(ctx) as store:
             table = table_from_episodes(store.list_episodes()).table
+    source_table = table
     name, table = one_preset(table, preset)
+    if baseline_preset is not None:
+        table = with_baseline(table, source_table, baseline_preset)
     if out is None:
         out = default_out_dir(name) if source is None else (source if source.is_dir() else source.parent)
     out_dir, analysis = write_report(table, out)

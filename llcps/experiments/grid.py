@@ -289,6 +289,12 @@ PRESETS: dict[str, Preset] = {
         budget=467,
         pretrain_pool=30,
     ),
+    # The no-model baseline of the paper grid, at its budget: the random order uses no
+    # training data, so 4 pretraining points stand for any number (`experiment report
+    # --baseline-preset random` adds it to the paper grid's comparison).
+    "random": Preset(
+        "random", ("random",), ("most-changes",), (4,), conditions=("reset",), default_seeds=20, budget=150, pretrain_pool=4
+    ),
     # Small enough for the test suite: 8 random interactions per seed, 5 exploration trials per episode.
     "smoke": Preset("smoke", ("nb",), ("most-changes",), (4,), default_seeds=2, budget=5, pretrain_pool=8),
 }

@@ -512,6 +512,24 @@ def one_preset(table: ResultsTable, preset: str | None = None) -> tuple[str, Res
     return preset, table.filter(preset=preset)
 
 
+def with_baseline(table: ResultsTable, source: ResultsTable, baseline_preset: str) -> ResultsTable:
+    """``table`` plus the random-order rows of ``baseline_preset`` from ``source``.
+
+    A grid without the random model (``paper``) gets its baseline from a preset run
+    beside it in the same store (``random``); the random order uses no training data,
+    so its rows stand for any pretraining size.
+    """
+    from llcps.experiments.stats import BASELINE_MODEL
+
+    extra = source.filter(preset=baseline_preset, model=BASELINE_MODEL)
+    if len(extra) == 0:
+        raise LlcpsError(
+            f"no {BASELINE_MODEL}-model results of preset {baseline_preset!r}",
+            hint=f"run `llcps experiment run --preset {baseline_preset}` on the same store first",
+        )
+    return ResultsTable([*table, *extra])
+
+
 def default_out_dir(preset: str) -> Path:
     """``results/<preset>``."""
     return RESULTS_DIR / preset
@@ -711,6 +729,7 @@ __all__ = [
     "execute_task",
     "make_engine",
     "one_preset",
+    "with_baseline",
     "plan_tasks",
     "pretrain_subset",
     "results_table",

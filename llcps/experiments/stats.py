@@ -416,7 +416,9 @@ def random_comparison(
     The baseline is the random model under the same measure, pretraining size,
     condition and scenario when the table has it; then the test is a paired Wilcoxon
     over common seeds (if at least two). Otherwise every random sequence of that
-    (pretraining size, condition, scenario) is pooled and the test is Mann-Whitney U.
+    (pretraining size, condition, scenario) is pooled, or failing that every random
+    sequence of the scenario (the random order uses no training data, so neither the
+    pretraining size nor the condition changes it), and the test is Mann-Whitney U.
     Empty when the table has no baseline rows.
     """
     _check_metric(metric)
@@ -428,6 +430,7 @@ def random_comparison(
     pooled = _group(
         (row for rows in base.values() for row in rows), lambda r: (r.pretrain_size, r.condition, r.scenario)
     )
+    per_scenario = _group((row for rows in base.values() for row in rows), lambda r: r.scenario)
     out: list[RandomComparison] = []
     groups = _group(
         (r for r in table if r.model != baseline),
@@ -447,7 +450,8 @@ def random_comparison(
             baseline_values = np.array(list(theirs.values()))
         else:
             theirs, common = {}, []
-            baseline_values = np.array([row.metric(metric) for row in pooled.get((size, condition, scenario), [])])
+            rows = pooled.get((size, condition, scenario)) or per_scenario.get(scenario, [])
+            baseline_values = np.array([row.metric(metric) for row in rows])
             if baseline_values.size == 0:
                 continue
         if len(common) >= 2:
@@ -479,6 +483,27 @@ def random_comparison(
             )
         )
     return tuple(out)
+
+
+def best_versus_random(
+    comparisons: Iterable[RandomComparison], *, condition: str = "reset"
+) -> tuple[RandomComparison, ...]:
+    """Per (pretraining size, scenario), the model x measure with the lowest median, against random.
+
+    ``reset`` by default: every episode then starts from the pretraining set, as in the
+    paper's question of which measure explores best. Ties go to the first in Figure 2's
+    order. Choosing the best of several cells favours it: read the p-value as descriptive.
+    """
+    best: dict[tuple[int, str], RandomComparison] = {}
+    for c in comparisons:
+        if c.condition != condition:
+            continue
+        key = (c.pretrain_size, c.scenario)
+        if key not in best or c.median_model < best[key].median_model:
+            best[key] = c
+    return tuple(
+        best[k] for k in sorted(best, key=lambda k: (-k[0], scenario_rank(k[1])))
+    )
 
 
 # --------------------------------------------------------------------------------------
