@@ -226,3 +226,40 @@ def test_importing_the_package_stays_light():
     code = "import sys, llcps.models; print(any(m in sys.modules for m in ('torch', 'sklearn', 'typer', 'rich')))"
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout
     assert out.strip() == "False"
+
+
+@pytest.mark.parametrize("name", [n for n in MODELS if n != "nn"])
+def test_update_of_the_other_models_is_a_refit(trials, candidates, name):
+    grown = make_world_model(name, 0).fit(trials[:150]).update(trials)
+    assert np.array_equal(grown.predict_proba(candidates), make_world_model(name, 0).fit(trials).predict_proba(candidates))
+
+
+def test_network_update_continues_from_its_weights_deterministically(trials, candidates):
+    from llcps.models.neural import NeuralNetworkModel
+
+    def grown():
+        model = make_world_model("nn", 0).fit(trials[:150])
+        encoder = model.encoder.params()
+        before = model.predict_proba(candidates)
+        model.update(trials)
+        return model, encoder, before
+
+    model, encoder, before = grown()
+    again, _, _ = grown()
+    after = model.predict_proba(candidates)
+    assert np.array_equal(after, again.predict_proba(candidates))  # the same seed and data, bit for bit
+    assert not np.array_equal(after, before)  # it trained on the new trials
+    assert not np.array_equal(after, make_world_model("nn", 0).fit(trials).predict_proba(candidates))  # not a refit
+    assert 0 < model.training_log["steps"] <= NeuralNetworkModel.update_steps
+    assert model.n_trials == len(trials)
+    assert all(np.array_equal(encoder[k], v) for k, v in model.encoder.params().items())  # inputs keep their meaning
+    # the new trials are learned: lower loss on them than before the update
+    new = outcome_matrix(trials[150:])
+    assert np.mean((model.predict_proba(trials[150:]) - new) ** 2) < np.mean(
+        (make_world_model("nn", 0).fit(trials[:150]).predict_proba(trials[150:]) - new) ** 2
+    )
+
+
+def test_update_of_an_unfitted_network_is_a_fit(trials, candidates):
+    fresh = make_world_model("nn", 0).update(trials)
+    assert np.array_equal(fresh.predict_proba(candidates), make_world_model("nn", 0).fit(trials).predict_proba(candidates))

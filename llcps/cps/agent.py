@@ -374,7 +374,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
                 _film_resolution(agent, kb, spec, snapshot)
             return new_kb
         if tried % config.refit_every == 0 and remaining:
-            model.fit(agent.records)
+            model.update(agent.records)
             order = _rank(model, inputs, remaining, config, desired)
     result.status = "budget_exhausted"
     return kb

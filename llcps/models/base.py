@@ -51,6 +51,15 @@ class WorldModel(ABC):
     def fit(self, records: Sequence[TrialRecord]) -> WorldModel:
         """Fit on the training set (any size, including 0), replacing earlier fits."""
 
+    def update(self, records: Sequence[TrialRecord]) -> WorldModel:
+        """Bring the model up to ``records``, a training set that grew since the last fit.
+
+        What the agent calls during exploration, where the set grows by a few trials at a
+        time. A full refit here; a model whose fit is costly may continue from its current
+        state instead (the network does).
+        """
+        return self.fit(records)
+
     @abstractmethod
     def predict_proba(self, candidates: Sequence[WorldModelInput | TrialRecord]) -> np.ndarray:
         """Predicted P(bit = 1) per candidate: float64 (n, 6) in [0, 1], OUTCOME_NAMES order."""

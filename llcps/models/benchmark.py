@@ -5,7 +5,7 @@ Times are the minimum over repeats (the least disturbed run) of wall-clock secon
 on this machine; they are figures to report, never assertions in tests.
 
 - *fit*: a fresh model fitted on n trials (every trial encoded).
-- *refit*: the same model fitted again on those n trials plus one new one, as the
+- *refit*: the same model brought up to those n trials plus one new one (``update``), as the
   agent does after each exploration trial (known trials' rows are reused).
 - *predict*: predicted Omega for 1,000 candidates.
 """
@@ -71,7 +71,7 @@ def time_world_models(
                 model.fit(growing[:n])
                 growing.append(pool[n])
                 start = clock()
-                model.fit(growing)
+                model.update(growing)
                 refit_times.append(clock() - start)
                 growing.pop()
 

@@ -6,8 +6,9 @@ drawn from a local ``torch.Generator`` (the global torch RNG is never touched), 
 fitting and predicting run on one intra-op thread with deterministic algorithms,
 so the floating-point reduction order does not depend on the machine's core count.
 Training is bounded (at most :attr:`NeuralNetworkModel.max_steps` minibatch steps,
-stopping early when the epoch loss plateaus) so a refit at 10,000 trials stays
-within seconds.
+stopping early when the epoch loss plateaus) so a fit at 10,000 trials stays
+within seconds; a refit during exploration fine-tunes the current weights instead
+of starting over (:meth:`NeuralNetworkModel.update`).
 """
 
 from __future__ import annotations
@@ -75,6 +76,10 @@ class NeuralNetworkModel(EncodedWorldModel):
     #: Stop after this many epochs without the epoch loss improving by min_improvement.
     patience: ClassVar[int] = 10
     min_improvement: ClassVar[float] = 1e-3
+    #: A refit during exploration (:meth:`update`) continues from the current weights for
+    #: at most this many steps, starting at this fraction of the learning rate.
+    update_steps: ClassVar[int] = 40
+    update_lr_fraction: ClassVar[float] = 0.25
 
     def _reset(self) -> None:
         self._network: nn.Sequential | None = None
@@ -84,42 +89,80 @@ class NeuralNetworkModel(EncodedWorldModel):
         with _deterministic_torch():
             generator = torch.Generator().manual_seed(self.seed & 0xFFFF_FFFF_FFFF_FFFF)
             network = build_network(self.hidden, generator)
-            inputs = torch.from_numpy(np.ascontiguousarray(features, dtype=np.float32))
-            targets = torch.from_numpy(outcomes.astype(np.float32))
-            optimizer = torch.optim.Adam(network.parameters(), lr=self.learning_rate, weight_decay=self.weight_decay)
-            n, batch = len(inputs), min(self.batch_size, len(inputs))
-            planned = min(self.max_steps, self.max_epochs * math.ceil(n / batch))
-            gamma = self.final_lr_fraction ** (1.0 / planned)
-            schedule = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=gamma)
-            loss_fn = nn.BCEWithLogitsLoss()
-            steps = epochs = stale = 0
-            best = math.inf
-            epoch_loss = math.nan
-            network.train()
-            while steps < planned and stale < self.patience:
-                order = torch.randperm(n, generator=generator)
-                total, seen = 0.0, 0
-                for start in range(0, n, batch):
-                    if steps == planned:
-                        break
-                    index = order[start : start + batch]
-                    optimizer.zero_grad(set_to_none=True)
-                    loss = loss_fn(network(inputs[index]), targets[index])
-                    loss.backward()
-                    optimizer.step()
-                    schedule.step()
-                    steps += 1
-                    total += loss.item() * len(index)
-                    seen += len(index)
-                epochs += 1
-                epoch_loss = total / max(seen, 1)
-                if epoch_loss < best - self.min_improvement:
-                    best, stale = epoch_loss, 0
-                else:
-                    stale += 1
-            network.eval()
+            self.training_log = self._train(
+                network, features, outcomes, generator, max_steps=self.max_steps, learning_rate=self.learning_rate
+            )
         self._network = network
-        self.training_log = {"steps": steps, "epochs": epochs, "final_loss": epoch_loss}
+
+    def _continue_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> bool:
+        """Fine-tune the current weights on the grown set: a short run at a lower rate.
+
+        A within-episode refit sees the set it was fitted on plus a few trials; starting
+        from the weights already fitted, :attr:`update_steps` steps at
+        :attr:`update_lr_fraction` of the rate take in the new trials for a fraction of a
+        full fit's cost. The minibatch order is drawn from the seed and the set's size.
+        """
+        if self._network is None:
+            return False
+        with _deterministic_torch():
+            stream = (self.seed * 1_000_003 + len(features)) & 0xFFFF_FFFF_FFFF_FFFF
+            generator = torch.Generator().manual_seed(stream)
+            self.training_log = self._train(
+                self._network,
+                features,
+                outcomes,
+                generator,
+                max_steps=self.update_steps,
+                learning_rate=self.learning_rate * self.update_lr_fraction,
+            )
+        return True
+
+    def _train(
+        self,
+        network: nn.Sequential,
+        features: np.ndarray,
+        outcomes: np.ndarray,
+        generator: torch.Generator,
+        *,
+        max_steps: int,
+        learning_rate: float,
+    ) -> dict[str, Any]:
+        """Adam on binary cross-entropy with an exponentially decaying rate; returns the training log."""
+        inputs = torch.from_numpy(np.ascontiguousarray(features, dtype=np.float32))
+        targets = torch.from_numpy(outcomes.astype(np.float32))
+        optimizer = torch.optim.Adam(network.parameters(), lr=learning_rate, weight_decay=self.weight_decay)
+        n, batch = len(inputs), min(self.batch_size, len(inputs))
+        planned = min(max_steps, self.max_epochs * math.ceil(n / batch))
+        gamma = self.final_lr_fraction ** (1.0 / planned)
+        schedule = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=gamma)
+        loss_fn = nn.BCEWithLogitsLoss()
+        steps = epochs = stale = 0
+        best = math.inf
+        epoch_loss = math.nan
+        network.train()
+        while steps < planned and stale < self.patience:
+            order = torch.randperm(n, generator=generator)
+            total, seen = 0.0, 0
+            for start in range(0, n, batch):
+                if steps == planned:
+                    break
+                index = order[start : start + batch]
+                optimizer.zero_grad(set_to_none=True)
+                loss = loss_fn(network(inputs[index]), targets[index])
+                loss.backward()
+                optimizer.step()
+                schedule.step()
+                steps += 1
+                total += loss.item() * len(index)
+                seen += len(index)
+            epochs += 1
+            epoch_loss = total / max(seen, 1)
+            if epoch_loss < best - self.min_improvement:
+                best, stale = epoch_loss, 0
+            else:
+                stale += 1
+        network.eval()
+        return {"steps": steps, "epochs": epochs, "final_loss": epoch_loss}
 
     def _predict_encoded(self, features: np.ndarray) -> np.ndarray:
         assert self._network is not None
