@@ -154,6 +154,12 @@ def test_figure2_pairs_seeds_and_adjusts_only_scenarios_2_and_3() -> None:
     assert math.isnan(by_scenario["scenario1"].p_holm)
     assert by_scenario["scenario2"].p_holm == pytest.approx(0.5)  # a family of one
     assert by_scenario["scenario1"].pct_change == pytest.approx(100 * (18 - 21) / 21)
+    assert not by_scenario["scenario1"].identical  # seed 1: 6 against 9
+    one_seed = ResultsTable(
+        [_row("nb", "most-changes", 4, c, 0, "scenario1", 5) for c in ("update", "reset")]
+    )  # too few seeds for a test, but identical all the same
+    (control,) = stats.figure2_table(one_seed, resamples=10)
+    assert control.identical and math.isnan(control.p_value)
     assert [r.scenario for r in stats.figure2_table(table, resamples=500)] == ["scenario1", "scenario2"]
     assert stats.figure2_table(table, resamples=500, seed=1) == stats.figure2_table(table, resamples=500, seed=1)
 

@@ -391,7 +391,7 @@ def summary_lines(analysis: Analysis) -> list[str]:
         )
     control = [r for r in rows if r.scenario == SCENARIO_SEQUENCE[0]]
     if control:
-        identical = [r for r in control if r.p_reason == "all paired differences are zero"]
+        identical = [r for r in control if r.identical]
         sig = [r for r in control if r.significant]
         worst = max(control, key=lambda r: abs(r.pct_change) if not math.isnan(r.pct_change) else -1.0)
         lines.append(

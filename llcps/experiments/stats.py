@@ -256,6 +256,8 @@ class Figure2Row:
     p_reason: str
     #: Holm-adjusted over the Figure-2 family (scenarios 2 and 3); NaN elsewhere.
     p_holm: float
+    #: Every paired seed has the same value under both conditions.
+    identical: bool
     solved_update: float
     solved_reset: float
     paper_pct_change: float | None
@@ -319,6 +321,7 @@ def figure2_table(
                 p_value=p,
                 p_reason=reason,
                 p_holm=math.nan,
+                identical=bool(np.array_equal(u, r)),
                 solved_update=float(np.mean([solved_u[s] for s in seeds])),
                 solved_reset=float(np.mean([solved_r[s] for s in seeds])),
                 paper_pct_change=PAPER_FIGURE2.get((model, measure, size, scenario)),
