@@ -98,9 +98,12 @@ class RandomForestModel(EncodedWorldModel):
 
     def _fit_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
         self._train = (features, outcomes)
+        targets = outcomes[:, self.learned]
+        if targets.shape[1] == 1:  # one learnable bit: a single-output forest takes y as a vector
+            targets = targets[:, 0]
         self._forest = RandomForestClassifier(
             n_estimators=self.n_estimators, random_state=self.seed & 0xFFFFFFFF, n_jobs=1
-        ).fit(features, outcomes[:, self.learned])
+        ).fit(features, targets)
 
     def _predict_encoded(self, features: np.ndarray) -> np.ndarray:
         assert self._forest is not None
