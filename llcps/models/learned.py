@@ -53,27 +53,28 @@ class EncodedWorldModel(WorldModel):
         return self
 
     def update(self, records: Sequence[TrialRecord]) -> EncodedWorldModel:
-        """Continue from the current fit if the learner can (:meth:`_continue_encoded`), else refit.
+        """Continue from the current fit if the learner can (:meth:`_can_continue`), else refit.
 
         A continued learner keeps the encoder of its last full fit, so its inputs mean what
         they meant when it was trained; the label prior and the learnable bits follow the
         grown set.
         """
-        if not self.learned.any():
+        if not (self.learned.any() and self._can_continue()):
             return self.fit(records)
         raw, outcomes = self._table.encode(records)
-        learned = learnable_labels(outcomes)
-        features = self.encoder.transform(raw)
-        if not self._continue_encoded(features, outcomes):
-            return self.fit(records)
+        self._continue_encoded(self.encoder.transform(raw), outcomes)
         self.n_trials = len(raw)
         self.prior = label_prior(outcomes)
-        self.learned = learned
+        self.learned = learnable_labels(outcomes)
         return self
 
-    def _continue_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> bool:
-        """Train the fitted learner further on the grown set; ``False`` if it cannot (then it is refitted)."""
+    def _can_continue(self) -> bool:
+        """Whether the learner can train further from its fitted state (:meth:`_continue_encoded`)."""
         return False
+
+    def _continue_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
+        """Train the fitted learner further on the grown set (encoded as for :meth:`_fit_encoded`)."""
+        raise NotImplementedError
 
     def predict_proba(self, candidates: Sequence[WorldModelInput | TrialRecord]) -> np.ndarray:
         """P(bit = 1) per candidate; bits not learned get the training prior."""

@@ -94,7 +94,10 @@ class NeuralNetworkModel(EncodedWorldModel):
             )
         self._network = network
 
-    def _continue_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> bool:
+    def _can_continue(self) -> bool:
+        return self._network is not None
+
+    def _continue_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
         """Fine-tune the current weights on the grown set: a short run at a lower rate.
 
         A within-episode refit sees the set it was fitted on plus a few trials; starting
@@ -102,8 +105,7 @@ class NeuralNetworkModel(EncodedWorldModel):
         :attr:`update_lr_fraction` of the rate take in the new trials for a fraction of a
         full fit's cost. The minibatch order is drawn from the seed and the set's size.
         """
-        if self._network is None:
-            return False
+        assert self._network is not None
         with _deterministic_torch():
             stream = (self.seed * 1_000_003 + len(features)) & 0xFFFF_FFFF_FFFF_FFFF
             generator = torch.Generator().manual_seed(stream)
@@ -115,7 +117,6 @@ class NeuralNetworkModel(EncodedWorldModel):
                 max_steps=self.update_steps,
                 learning_rate=self.learning_rate * self.update_lr_fraction,
             )
-        return True
 
     def _train(
         self,
