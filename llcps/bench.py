@@ -342,19 +342,19 @@ def bench_ranking(quick: bool = False, progress: Progress | None = None) -> list
 
 # --------------------------------------------------------------------------- store
 def _trials(n: int, branch: str, start: int = 0, *, unique: bool = True) -> Iterator[Any]:
-    """``n`` NewTrials on ``branch``: a seeded pool of 997 cycled; with ``unique`` every
+    """``n`` TrialRecords on ``branch``: a seeded pool of 997 cycled; with ``unique`` every
     trial's features are made distinct (the store's decoder shares repeated ones).
     """
     from dataclasses import replace
 
-    from llcps.store import NewTrial
+    from llcps.domain import TrialRecord
 
     pool = _pool()
     for i in range(start, start + n):
         r = pool[i % len(pool)]
         first = r.features[0]
         features = (replace(first, volume=first.volume * (1.0 + i * 1e-9)),) + r.features[1:] if unique else r.features
-        yield NewTrial(
+        yield TrialRecord(
             branch=branch,
             source="pretrain",
             spec=r.spec,

@@ -196,9 +196,12 @@ class Outcome:
 
 @dataclass(frozen=True)
 class TrialRecord:
-    """A trial as the experience store keeps it: the lifelong training set's unit."""
+    """A trial as the experience store keeps it: the lifelong training set's unit.
 
-    id: int
+    The one record type of a trial, written and read alike: a trial about to be
+    stored has no ``id`` and no ``created_at`` yet; the store assigns both.
+    """
+
     branch: str
     source: str
     spec: TrialSpec
@@ -208,6 +211,7 @@ class TrialRecord:
     sim_steps: int
     wall_seconds: float
     seed: int
+    id: int | None = None
     run_id: int | None = None
     episode_id: int | None = None
     snapshot_id: int | None = None

@@ -183,7 +183,7 @@ def pretrain(
     """
     if n < 0:
         raise LlcpsError(f"the number of trials must be >= 0, got {n}", hint="pass --n 200, say")
-    from llcps.store import NewTrial
+    from llcps.domain import TrialRecord
 
     name = store.resolve_branch(branch).name
     summary = PretrainSummary(branch=name, seed=seed, requested=n)
@@ -199,7 +199,7 @@ def pretrain(
             r = trial.result
             snapshot_id = store.put_snapshot(scene=trial.scene.to_dict(), state=trial.state)
             trial_id = store.add_trial(
-                NewTrial(
+                TrialRecord(
                     branch=name,
                     source="pretrain",
                     spec=r.spec,

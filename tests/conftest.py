@@ -25,5 +25,5 @@ def store(tmp_path: Path) -> Iterator[Store]:
 
 @pytest.fixture
 def new_trial():  # noqa: ANN201 - returns the sample_trial factory
-    """``new_trial(seed, branch=..., source=..., **overrides) -> NewTrial``."""
+    """``new_trial(seed, branch=..., source=..., **overrides) -> TrialRecord``."""
     return sample_trial

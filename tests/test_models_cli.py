@@ -9,10 +9,11 @@ import pytest
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
+from llcps.domain import TrialRecord
 from llcps.models import MEASURES, PAPER_MODELS
 from llcps.models.synthetic import synthetic_trials
 from llcps.scenarios import SCENARIOS
-from llcps.store import NewTrial, Store
+from llcps.store import Store
 
 
 @pytest.fixture
@@ -21,7 +22,7 @@ def db(tmp_path):
     with Store.open(path, create=True) as store:
         store.add_trials(
             [
-                NewTrial(
+                TrialRecord(
                     branch="main",
                     source="pretrain",
                     spec=r.spec,

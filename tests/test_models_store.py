@@ -8,15 +8,15 @@ import logging
 import numpy as np
 import pytest
 
+from llcps.domain import TrialRecord
 from llcps.models import fit_or_load
 from llcps.models.synthetic import synthetic_trials
-from llcps.store import NewTrial
 
 
 def add_toy_trials(store, n, *, seed, branch="main"):
     store.add_trials(
         [
-            NewTrial(
+            TrialRecord(
                 branch=branch,
                 source="pretrain",
                 spec=r.spec,

@@ -14,9 +14,8 @@ from llcps.errors import LlcpsError, StoreError, UnknownNameError
 from llcps.store import MAIN_BRANCH, Store, validate_branch_name
 
 
-def _expected_record(trial_id: int, new, created_at: str) -> TrialRecord:  # noqa: ANN001
-    fields = {f.name: getattr(new, f.name) for f in dataclasses.fields(new)}
-    return TrialRecord(id=trial_id, created_at=created_at, **fields)
+def _expected_record(trial_id: int, new: TrialRecord, created_at: str) -> TrialRecord:
+    return dataclasses.replace(new, id=trial_id, created_at=created_at)
 
 
 @pytest.fixture(scope="module")

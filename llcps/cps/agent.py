@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -32,7 +32,7 @@ from llcps.sim.perception import entity_features, perceive
 from llcps.sim.render import GifRecorder
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import World
-from llcps.store import NewTrial, Store
+from llcps.store import Store
 from llcps.symbolic.knowledge import KnowledgeBase, Task
 from llcps.symbolic.monitor import check_step
 from llcps.symbolic.operators import learn_operator, refine_failed_action
@@ -140,7 +140,7 @@ class Agent:
             end = self.world.serialize_state()
             if key is not None:
                 self.memo.put(key, trial, end)
-        new = NewTrial(
+        new = TrialRecord(
             branch=self.branch,
             source=source,
             spec=spec,
@@ -156,7 +156,7 @@ class Agent:
             scenario=self.scenario.name,
         )
         trial_id = self.store.add_trial(new)
-        record = TrialRecord(id=trial_id, **{f.name: getattr(new, f.name) for f in fields(NewTrial)})
+        record = replace(new, id=trial_id)
         self.records.append(record)
         self.result.sim_steps += trial.sim_steps
         if source == "plan":

@@ -267,7 +267,7 @@ def execute_task(task: Task) -> TaskOutput:
 
 def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
     from llcps.pretrain import pretrain
-    from llcps.store import NewTrial
+    from llcps.domain import TrialRecord
 
     own = {size: name for size, name in zip(task.sizes, task.branches)}
     pool_branch = own.get(task.pool, POOL_BRANCH)
@@ -283,7 +283,7 @@ def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
         run_id = store.start_run(command=f"{COMMAND} (pretraining subset)", seed=task.seed, config=config, branch=name)
         store.add_trials(
             [
-                NewTrial(
+                TrialRecord(
                     branch=name,
                     source=t.source,
                     spec=t.spec,

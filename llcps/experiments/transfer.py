@@ -30,7 +30,7 @@ from sqlalchemy import insert, select, update
 
 from llcps.domain import TrialRecord
 from llcps.errors import StoreError
-from llcps.store import EpisodeRecord, NewTrial, OperatorRecord, RunRecord, SnapshotRecord, Store
+from llcps.store import EpisodeRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
 from llcps.store.schema import Branch, Episode, Operator, Run, Snapshot, Trial
 from llcps.store.trials import trial_row
 
@@ -283,21 +283,11 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
         if trials:
             rows = [
                 trial_row(
-                    NewTrial(
-                        branch=t.branch,
-                        source=t.source,
-                        spec=t.spec,
-                        features=t.features,
-                        outcome=t.outcome,
-                        solved=t.solved,
-                        sim_steps=t.sim_steps,
-                        wall_seconds=t.wall_seconds,
-                        seed=t.seed,
+                    replace(
+                        t,
                         run_id=_need(run_ids, t.run_id, "run"),
                         episode_id=_need(episode_ids, t.episode_id, "episode"),
                         snapshot_id=_need(snapshot_ids, t.snapshot_id, "snapshot"),
-                        scenario=t.scenario,
-                        extra=t.extra,
                     ),
                     branch_id=branch_id(t.branch),
                     created_at=_time(t.created_at) or _now(),

@@ -7,30 +7,8 @@ small record here. None of them holds a database session.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any, Mapping
-
-from llcps.domain import EntityFeatures, Outcome, TrialSpec
-
-
-@dataclass(frozen=True)
-class NewTrial:
-    """A trial to write: everything but the id and timestamp the store assigns."""
-
-    branch: str
-    source: str
-    spec: TrialSpec
-    features: tuple[EntityFeatures, ...]
-    outcome: Outcome
-    solved: bool
-    sim_steps: int
-    wall_seconds: float
-    seed: int
-    run_id: int | None = None
-    episode_id: int | None = None
-    snapshot_id: int | None = None
-    scenario: str | None = None
-    extra: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

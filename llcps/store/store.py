@@ -44,7 +44,6 @@ from llcps.store.records import (
     BranchInfo,
     EpisodeRecord,
     ModelArtifact,
-    NewTrial,
     OperatorRecord,
     RunRecord,
     SnapshotRecord,
@@ -724,11 +723,11 @@ class Store:
             self._branch_ids[name] = bid
         return bid
 
-    def add_trial(self, trial: NewTrial) -> int:
+    def add_trial(self, trial: TrialRecord) -> int:
         """Write one trial; it is committed (durable) when this returns its id."""
         return self.add_trials([trial])[0]
 
-    def add_trials(self, trials: Sequence[NewTrial]) -> list[int]:
+    def add_trials(self, trials: Sequence[TrialRecord]) -> list[int]:
         """Write several trials in one transaction; ids in input order."""
         if not trials:
             return []

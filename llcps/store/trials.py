@@ -1,4 +1,4 @@
-"""Trials between :class:`NewTrial` / :class:`~llcps.domain.TrialRecord` and table rows.
+"""Trials between :class:`~llcps.domain.TrialRecord` and table rows.
 
 Reading the lifelong training set is the hot path (every model refit loads it),
 so rows are read with Core selects that skip SQLAlchemy's JSON and datetime
@@ -28,11 +28,10 @@ from llcps.domain import (
     TrialSpec,
 )
 from llcps.errors import LlcpsError
-from llcps.store.records import NewTrial
 from llcps.store.schema import Trial
 
 
-def trial_row(trial: NewTrial, *, branch_id: int, created_at: datetime) -> dict[str, Any]:
+def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> dict[str, Any]:
     """The column values of a new trial, after checking what the domain types cannot."""
     if trial.source not in TRIAL_SOURCES:
         raise LlcpsError(f"unknown trial source {trial.source!r}", hint=f"known sources: {', '.join(TRIAL_SOURCES)}")
