@@ -23,6 +23,7 @@ from pybullet_utils import bullet_client
 
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.sim import native_output_silenced
+from llcps.sim import snapshot as snapshots
 from llcps.sim.entities import (
     Entity,
     EntitySpec,
@@ -40,6 +41,10 @@ FLOOR = "floor"
 
 #: zlib level of serialized states (a scene's state shrinks from ~90 kB to ~40 kB in ~1 ms).
 STATE_COMPRESSION = 3
+
+#: Reference states (a freshly built scene, raw) by scene key, for checking stored states.
+_REFERENCES: dict[str, bytes] = {}
+_REFERENCE_CAPACITY = 32
 
 #: Rest thresholds used by :meth:`World.settle` and the controllers.
 REST_LINEAR = 0.005  # m/s
@@ -182,6 +187,7 @@ class World:
         if self.gui:
             c.configureDebugVisualizer(p.COV_ENABLE_GUI, 0)
         self.scene = scene
+        self._scene_key = snapshots.scene_key(scene.to_dict())
         self.entities = {}
         self.fixtures = {}
         table = scene.table
@@ -338,40 +344,69 @@ class World:
         The world then continues from exactly these bytes (it is restored from
         them), so whatever runs next replays bit for bit from the stored state in
         any process. A grasp is not part of the state: take snapshots between trials.
+        The state is remembered as trusted, so restoring it skips the checks.
         """
-        fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
-        os.close(fd)
-        try:
-            self.client.saveBullet(path)
-            with open(path, "rb") as fh:
-                raw = fh.read()
-        finally:
-            os.unlink(path)
-        state = zlib.compress(raw, STATE_COMPRESSION)
-        self.restore_serialized(state)
-        return state
+        raw = self._save_raw()
+        snapshots.TRUSTED.add((self._scene_key, snapshots.state_digest(raw)))
+        self._restore_raw(raw)
+        return zlib.compress(raw, STATE_COMPRESSION)
 
-    def restore_serialized(self, state: bytes) -> None:
+    def restore_serialized(self, state: bytes, *, probe: bool = True) -> None:
         """Rebuild the scene and load a state made by :meth:`serialize_state` in a world
         built from the same scene (in this process or any other).
 
         Afterwards the world is exactly a fresh ``World.from_scene(scene)`` with the
         state restored; the motors hold the restored pose and nothing is grasped.
+
+        A state this process did not make or check before is untrusted: it is
+        inflated under a size cap, its structure is checked against the scene's
+        (:func:`llcps.sim.snapshot.check_state`) and, with ``probe``, it is restored
+        once in a child process first, so that a state that would crash the engine
+        becomes a clean error (see :mod:`llcps.sim.snapshot`).
+
+        Raises:
+            StateError: the state is too large, malformed, or not one of this scene.
         """
-        if not state.startswith(b"BULLET"):  # compressed (raw .bullet files are accepted too)
-            try:
-                state = zlib.decompress(state)
-            except zlib.error as exc:
-                raise LlcpsError("not a physics state", hint="states come from World.serialize_state()") from exc
+        raw = snapshots.decompress_state(state)
+        key = (self._scene_key, snapshots.state_digest(raw))
+        if key not in snapshots.TRUSTED:
+            snapshots.check_state(raw, self.reference_state())
+            if probe:
+                snapshots.probe_states(self.scene.to_dict(), [raw])
+            snapshots.TRUSTED.add(key)
+        self._restore_raw(raw)
+
+    def reference_state(self) -> bytes:
+        """The raw state of this world's scene freshly built: what a stored state is checked against."""
+        found = _REFERENCES.get(self._scene_key)
+        if found is None:
+            self.load(self.scene)
+            found = self._save_raw()
+            _REFERENCES[self._scene_key] = found
+            while len(_REFERENCES) > _REFERENCE_CAPACITY:
+                _REFERENCES.pop(next(iter(_REFERENCES)))
+        return found
+
+    def _save_raw(self) -> bytes:
+        fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
+        os.close(fd)
+        try:
+            self.client.saveBullet(path)
+            with open(path, "rb") as fh:
+                return fh.read()
+        finally:
+            os.unlink(path)
+
+    def _restore_raw(self, raw: bytes) -> None:
         self.load(self.scene)
         fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
         try:
             with os.fdopen(fd, "wb") as fh:
-                fh.write(state)
+                fh.write(raw)
             try:
                 self.client.restoreState(fileName=path)
             except p.error as exc:
-                raise LlcpsError(
+                raise snapshots.StateError(
                     "cannot restore the physics state: it does not match this scene",
                     hint="restore a state into World.from_scene(<the scene it was saved with>)",
                 ) from exc
