@@ -1,11 +1,12 @@
 """The experience store: every trial the robot executes, on git-like branches.
 
-Visibility rule: a branch B with parent P forked at trial id f sees its own rows
-plus the rows P sees with id <= f (recursively, so the limit for a grandparent is
-the smaller of the two fork points). Trial ids only grow, so a branch's own trials
-all have ids above its fork point and "what B saw up to id w" is a prefix.
-Learned operators and world models follow the same rule, with their watermark
-(the largest trial id visible when they were made) in place of the id.
+Which rows a branch sees is the algebra of :mod:`llcps.store.visibility`; this
+module maps it onto queries. Every write is one transaction that holds the
+store's writer lock (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: an advisory lock),
+so trial ids commit in increasing order, as that algebra needs.
+
+Every byte read back is untrusted: a row that does not decode is a
+:class:`~llcps.errors.StoreError` naming the row, never a crash.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import hashlib
 import json
 import re
 from contextlib import contextmanager
-from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any, Iterator, Mapping, Sequence
 
@@ -35,10 +35,10 @@ from sqlalchemy import (
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 
 import llcps
-from llcps.domain import TrialRecord
+from llcps.domain import TrialRecord, check_id
 from llcps.errors import LlcpsError, StoreError, UnknownNameError
 from llcps.store import engine as engines
-from llcps.store import migrations
+from llcps.store import migrations, visibility
 from llcps.store.records import (
     BranchChange,
     BranchInfo,
@@ -60,6 +60,7 @@ from llcps.store.schema import (
     Trial,
     WorldModel,
 )
+from llcps.store.visibility import BranchRow, Link
 from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, iso_timestamp, trial_row
 
 #: The root branch every store starts with.
@@ -71,6 +72,11 @@ CURRENT_BRANCH_KEY = "current_branch"
 PRETRAIN = "pretrain"
 
 RESET_TARGETS: tuple[str, ...] = (PRETRAIN, "empty")
+
+#: Largest stored physics state read back (bytes, compressed); larger rows are refused unread.
+MAX_SNAPSHOT_BYTES = 8 * 2**20
+
+_CHANGED = "the row was changed outside llcps; use another trial, or restore the database from a copy"
 
 _WHITESPACE = re.compile(r"\s")
 _INSERT_TRIAL = insert(Trial)
@@ -117,24 +123,6 @@ def _db_error(exc: SQLAlchemyError) -> StoreError:
     return StoreError(f"database error: {detail}", hint=hint)
 
 
-@dataclass(frozen=True)
-class _Link:
-    """One branch of a visibility chain and the largest id visible from it (None: all)."""
-
-    branch_id: int
-    name: str
-    limit: int | None
-
-
-def _visible(chain: Sequence[_Link], branch_col: Any, id_col: Any) -> ColumnElement[bool]:
-    return or_(
-        *(
-            branch_col == link.branch_id if link.limit is None else and_(branch_col == link.branch_id, id_col <= link.limit)
-            for link in chain
-        )
-    )
-
-
 class Store:
     """A handle on one experience database. Create it with :meth:`Store.open`.
 
@@ -165,23 +153,17 @@ class Store:
         """
         url = engines.resolve_url(url_or_path)
         path = engines.sqlite_path(url)
-        exists = engines.check_sqlite_file(path, create=create) if path is not None else True
+        if path is not None and not engines.check_sqlite_file(path, create=create):
+            engines.create_sqlite_file(path)
         engine = engines.make_engine(url)
         store = cls(engine, url)
         try:
-            try:
-                if not exists:
-                    engines.set_sqlite_application_id(engine)
-                    store.upgrade()
-                else:
-                    store._check_schema(create=create, allow_outdated=allow_outdated)
-            except SQLAlchemyError as exc:
-                raise _db_error(exc) from exc
+            store._check_schema(create=create, allow_outdated=allow_outdated)
+        except SQLAlchemyError as exc:
+            engine.dispose()
+            raise _db_error(exc) from exc
         except BaseException:
             engine.dispose()
-            if not exists and path is not None:  # do not leave a half-made store behind
-                for suffix in ("", "-wal", "-shm"):
-                    path.with_name(path.name + suffix).unlink(missing_ok=True)
             raise
         return store
 
@@ -206,7 +188,7 @@ class Store:
                     hint="choose another --db; the database was left untouched",
                 )
             if not create:
-                raise StoreError(f"no llcps store at {self.url}", hint="create one with `llcps db init`")
+                raise StoreError(f"no llcps store at {self.url}", hint="create one with `llcps db init` (or pass --create)")
             self.upgrade()
             return
         head = migrations.head_revision()
@@ -271,6 +253,8 @@ class Store:
         try:
             with engine.connect() as conn:
                 conn.execution_options(**{engines.WRITE_OPTION: True})
+                # The transaction holds the writer lock and Alembic reads the revision
+                # inside it, so a concurrent upgrade finds the work done.
                 with conn.begin():
                     migrations.upgrade(conn)
         except SQLAlchemyError as exc:
@@ -305,6 +289,8 @@ class Store:
                 yield conn
         except SQLAlchemyError as exc:
             raise _db_error(exc) from exc
+        except json.JSONDecodeError as exc:  # a JSON column's text, decoded as rows are read
+            raise StoreError(f"a stored JSON value is malformed ({exc})", hint=_CHANGED) from None
 
     @contextmanager
     def _write(self) -> Iterator[Connection]:
@@ -331,20 +317,9 @@ class Store:
     def _branches(self, conn: Connection) -> list[Any]:
         return list(conn.execute(select(Branch.id, Branch.name, Branch.parent_id, Branch.fork_point, Branch.created_at).order_by(Branch.id)))
 
-    def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[_Link]:
+    def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[Link]:
         rows = self._branches(conn) if rows is None else rows
-        by_id = {r.id: r for r in rows}
-        row = next((r for r in rows if r.name == name), None)
-        if row is None:
-            raise UnknownNameError("branch", name, [r.name for r in rows])
-        chain: list[_Link] = []
-        limit: int | None = None
-        while True:
-            chain.append(_Link(row.id, row.name, limit))
-            if row.parent_id is None:
-                return chain
-            limit = row.fork_point if limit is None else min(limit, row.fork_point)
-            row = by_id[row.parent_id]
+        return visibility.chain([BranchRow(r.id, r.name, r.parent_id, r.fork_point) for r in rows], name)
 
     def _name(self, conn: Connection, name: str | None) -> str:
         if name is not None:
@@ -372,10 +347,10 @@ class Store:
         with self._read() as conn:
             return self._info(conn, self._name(conn, name))
 
-    def _count(self, conn: Connection, chain: Sequence[_Link], *extra: ColumnElement[bool]) -> int:
-        return conn.scalar(select(func.count()).select_from(Trial).where(_visible(chain, Trial.branch_id, Trial.id), *extra)) or 0
+    def _count(self, conn: Connection, chain: Sequence[Link], *extra: ColumnElement[bool]) -> int:
+        return conn.scalar(select(func.count()).select_from(Trial).where(visibility.clause(chain, Trial.branch_id, Trial.id), *extra)) or 0
 
-    def _max_visible(self, conn: Connection, chain: Sequence[_Link], *extra: ColumnElement[bool]) -> int:
+    def _max_visible(self, conn: Connection, chain: Sequence[Link], *extra: ColumnElement[bool]) -> int:
         best = 0
         for link in chain:  # one index range per link beats one OR scan
             stmt = select(func.max(Trial.id)).where(Trial.branch_id == link.branch_id, *extra)
@@ -428,7 +403,7 @@ class Store:
             conn.execute(insert(Branch).values(name=name, parent_id=chain[0].branch_id, fork_point=fork, created_at=_now()))
             return self._info(conn, name)
 
-    def _fork_point(self, conn: Connection, chain: Sequence[_Link], at: int | str | None) -> int:
+    def _fork_point(self, conn: Connection, chain: Sequence[Link], at: int | str | None) -> int:
         if at is None:
             return self._max_visible(conn, chain)
         if isinstance(at, str):
@@ -437,6 +412,7 @@ class Store:
             if not at.strip().isdigit():
                 raise LlcpsError(f"invalid fork point {at!r}", hint="pass a trial id or 'pretrain'")
             at = int(at)
+        check_id(at, "fork point")
         if at == 0:
             return 0
         if at < 0 or self._count(conn, chain, Trial.id == at) == 0:
@@ -484,7 +460,7 @@ class Store:
             ),
             default=None,
         )
-        blocking = [r.name for r in children if first_removed is not None and r.fork_point >= first_removed]
+        blocking = visibility.blocking_children(children, first_removed)
         if blocking:
             raise StoreError(
                 f"branch(es) {', '.join(blocking)} forked from {name!r} after trial {first_removed - 1}",
@@ -621,7 +597,7 @@ class Store:
                     id=r.id,
                     command=r.command,
                     seed=r.seed,
-                    config=r.config,
+                    config=_mapping(r.config, f"run {r.id}", "config"),
                     branch=r.branch,
                     llcps_version=r.llcps_version,
                     status=r.status,
@@ -664,7 +640,7 @@ class Store:
                     measure=r.measure,
                     seed=r.seed,
                     status=r.status,
-                    summary=r.summary,
+                    summary=_mapping(r.summary, f"episode {r.id}", "summary"),
                     started_at=iso_timestamp(r.started_at) or "",
                     finished_at=iso_timestamp(r.finished_at),
                 )
@@ -707,12 +683,28 @@ class Store:
             return conn.scalar(select(Snapshot.id).where(Snapshot.sha256 == sha))
 
     def get_snapshot(self, snapshot_id: int) -> SnapshotRecord:
-        """A stored physics state by id."""
+        """A stored physics state by id, after checking its size and its content hash.
+
+        Raises:
+            StoreError: the row is larger than :data:`MAX_SNAPSHOT_BYTES`, its scene is
+                not a JSON object, or scene and state no longer match the stored hash.
+        """
+        check_id(snapshot_id, "snapshot id")
         with self._read() as conn:
+            size = conn.execute(select(func.length(Snapshot.state)).where(Snapshot.id == snapshot_id)).first()
+            if size is None:
+                raise LlcpsError(f"unknown snapshot {snapshot_id}", hint="snapshot ids come from a trial's snapshot_id")
+            if size[0] is None or size[0] > MAX_SNAPSHOT_BYTES:
+                raise StoreError(f"snapshot {snapshot_id} holds {size[0]} bytes, more than the {MAX_SNAPSHOT_BYTES:,} a physics state may", hint=_CHANGED)
             row = conn.execute(select(Snapshot.id, Snapshot.scene, Snapshot.state, Snapshot.sha256).where(Snapshot.id == snapshot_id)).first()
         if row is None:
             raise LlcpsError(f"unknown snapshot {snapshot_id}", hint="snapshot ids come from a trial's snapshot_id")
-        return SnapshotRecord(id=row.id, scene=row.scene, state=bytes(row.state), sha256=row.sha256)
+        if not isinstance(row.scene, dict) or not isinstance(row.state, (bytes, bytearray, memoryview)):
+            raise StoreError(f"snapshot {snapshot_id} is malformed: its scene is not a JSON object", hint=_CHANGED)
+        state = bytes(row.state)
+        if not isinstance(row.sha256, str) or self.snapshot_hash(row.scene, state) != row.sha256:
+            raise StoreError(f"snapshot {snapshot_id} does not match its content hash: it was changed after it was stored", hint=_CHANGED)
+        return SnapshotRecord(id=row.id, scene=row.scene, state=state, sha256=row.sha256)
 
     # ----------------------------------------------------------------- trials
 
@@ -751,6 +743,7 @@ class Store:
 
     def get_trial(self, trial_id: int) -> TrialRecord:
         """One trial by id, on whatever branch owns it."""
+        check_id(trial_id, "trial id")
         with self._read() as conn:
             names = {r.id: r.name for r in self._branches(conn)}
             row = conn.execute(select(*TRIAL_COLUMNS).where(Trial.id == trial_id)).first()
@@ -790,11 +783,14 @@ class Store:
             limit: at most this many, taken from the start of the order.
             newest_first: descending id order.
         """
+        for value, what in ((limit, "limit"), (after_id, "after_id")):
+            if value is not None:
+                check_id(value, what)
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
             stmt = (
                 select(*TRIAL_COLUMNS)
-                .where(_visible(chain, Trial.branch_id, Trial.id), *self._trial_filters(source, scenario, solved, after_id))
+                .where(visibility.clause(chain, Trial.branch_id, Trial.id), *self._trial_filters(source, scenario, solved, after_id))
                 .order_by(Trial.id.desc() if newest_first else Trial.id)
                 .limit(limit)
             )
@@ -846,7 +842,7 @@ class Store:
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
             names = {link.branch_id: link.name for link in chain}
-            stmt = select(Operator).where(_visible(chain, Operator.branch_id, Operator.watermark)).order_by(Operator.id)
+            stmt = select(Operator).where(visibility.clause(chain, Operator.branch_id, Operator.watermark)).order_by(Operator.id)
             return [
                 OperatorRecord(
                     id=r.id,
@@ -897,7 +893,7 @@ class Store:
             names = {link.branch_id: link.name for link in chain}
             row = conn.execute(
                 select(WorldModel)
-                .where(_visible(chain, WorldModel.branch_id, WorldModel.watermark), WorldModel.name == name, WorldModel.seed == seed)
+                .where(visibility.clause(chain, WorldModel.branch_id, WorldModel.watermark), WorldModel.name == name, WorldModel.seed == seed)
                 .order_by(WorldModel.watermark.desc(), WorldModel.id.desc())
                 .limit(1)
             ).first()
@@ -929,7 +925,7 @@ class Store:
             chain = self._chain(conn, name, rows)
             by_source = dict(
                 conn.execute(
-                    select(Trial.source, func.count()).where(_visible(chain, Trial.branch_id, Trial.id)).group_by(Trial.source)
+                    select(Trial.source, func.count()).where(visibility.clause(chain, Trial.branch_id, Trial.id)).group_by(Trial.source)
                 ).all()
             )
             return StoreStatus(
@@ -944,6 +940,13 @@ class Store:
                 visible_trials=sum(by_source.values()),
                 visible_by_source=by_source,
             )
+
+
+def _mapping(value: Any, row: str, column: str) -> Mapping[str, Any]:
+    """A JSON column that must hold an object."""
+    if not isinstance(value, dict):
+        raise StoreError(f"{row} is malformed: its {column} is not a JSON object", hint=_CHANGED)
+    return value
 
 
 def _applied(change: BranchChange) -> BranchChange:

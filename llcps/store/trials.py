@@ -4,12 +4,20 @@ Reading the lifelong training set is the hot path (every model refit loads it),
 so rows are read with Core selects that skip SQLAlchemy's JSON and datetime
 processing, and the immutable parts of a record that repeat across trials
 (controller settings, entity features, outcomes) are built once per load.
+
+Rows are untrusted input. Each distinct spec, feature set and outcome is checked
+when it is first built (names from the vocabulary, finite numbers, exact fields),
+and each row's scalars by type, so a row changed outside llcps gives a
+:class:`~llcps.errors.StoreError` naming its trial id instead of a crash later.
+A malformed row is refused rather than skipped: skipping it would silently change
+a branch's training set.
 """
 
 from __future__ import annotations
 
 import gc
 import json
+import math
 from contextlib import contextmanager
 from dataclasses import fields
 from datetime import datetime
@@ -19,7 +27,9 @@ from sqlalchemy import String, Text, type_coerce
 
 from llcps.domain import (
     ACTIONS,
+    COLORS,
     OUTCOME_NAMES,
+    SHAPES,
     TRIAL_SOURCES,
     ControllerParams,
     EntityFeatures,
@@ -27,7 +37,7 @@ from llcps.domain import (
     TrialRecord,
     TrialSpec,
 )
-from llcps.errors import LlcpsError
+from llcps.errors import LlcpsError, StoreError
 from llcps.store.schema import Trial
 
 
@@ -96,6 +106,10 @@ def _json(value: Any) -> Any:
     return json.loads(value) if isinstance(value, str) else value
 
 
+class _Malformed(ValueError):
+    """A stored value that does not describe what its column should hold."""
+
+
 def _key(value: Any) -> Any:
     return value if isinstance(value, str) else json.dumps(value, sort_keys=True)
 
@@ -128,6 +142,16 @@ def gc_paused() -> Iterator[None]:
 
 _TRIAL_RECORD_FIELDS = frozenset(f.name for f in fields(TrialRecord))
 _ENTITY_FEATURE_FIELDS = frozenset(f.name for f in fields(EntityFeatures))
+_ENTITY_NUMBERS = tuple(f.name for f in fields(EntityFeatures) if f.name not in ("shape", "color"))
+_SOURCES = frozenset(TRIAL_SOURCES)
+_SCALAR_TYPES = (int, int, float, int)
+
+
+def _extra(value: Any) -> dict[str, Any]:
+    decoded = _json(value)
+    if not isinstance(decoded, dict):
+        raise _Malformed("extra is not a JSON object")
+    return decoded
 
 
 def _frozen(cls: type[Any], values: dict[str, Any]) -> Any:
@@ -159,8 +183,13 @@ class TrialDecoder:
         spec = self._specs.get(key)
         if spec is None:
             if action not in ACTIONS:
-                raise LlcpsError(f"stored trial has unknown action {action!r}", hint="upgrade llcps")
-            spec = TrialSpec(action, tuple(_json(arguments)), ControllerParams(rate, magnitude, orientation))
+                raise _Malformed(f"unknown action {action!r}")
+            names = _json(arguments)
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise _Malformed("arguments are not a list of entity names")
+            if not all(type(v) is float and math.isfinite(v) for v in (rate, magnitude)):
+                raise _Malformed("rate or movement magnitude is not a finite number")
+            spec = TrialSpec(action, tuple(names), ControllerParams(rate, magnitude, orientation))
             self._specs[key] = spec
         return spec
 
@@ -169,9 +198,15 @@ class TrialDecoder:
         found = self._features.get(key)
         if found is None:
             decoded = _json(features)
+            if not isinstance(decoded, list):
+                raise _Malformed("features are not a list")
             for entity in decoded:
-                if entity.keys() != _ENTITY_FEATURE_FIELDS:
-                    raise LlcpsError(f"stored features have fields {sorted(entity)}", hint="upgrade llcps")
+                if not isinstance(entity, dict) or entity.keys() != _ENTITY_FEATURE_FIELDS:
+                    raise _Malformed(f"features have fields {sorted(entity) if isinstance(entity, dict) else type(entity).__name__}")
+                if entity["shape"] not in SHAPES or entity["color"] not in COLORS:
+                    raise _Malformed(f"features name an unknown shape or color ({entity['shape']!r}, {entity['color']!r})")
+                if not all(type(entity[k]) in (int, float) and math.isfinite(entity[k]) for k in _ENTITY_NUMBERS):
+                    raise _Malformed("features hold a value that is not a finite number")
             found = tuple(_frozen(EntityFeatures, entity) for entity in decoded)
             self._features[key] = found
         return found
@@ -179,17 +214,43 @@ class TrialDecoder:
     def _outcome(self, bits: tuple[int, ...]) -> Outcome:
         found = self._outcomes.get(bits)
         if found is None:
+            if not all(b in (0, 1) and type(b) in (int, bool) for b in bits):
+                raise _Malformed(f"outcome bits {bits!r} are not 0 or 1")
             found = Outcome.from_bits(bits)
             self._outcomes[bits] = found
         return found
 
-    def decode(self, rows: Iterable[Sequence[Any]]) -> list[TrialRecord]:
-        """Decode many rows (the hot loop: locals, caches, no per-row validation)."""
+    def decode(self, rows: Sequence[Sequence[Any]]) -> list[TrialRecord]:
+        """Decode many rows of :data:`TRIAL_COLUMNS`.
+
+        Raises:
+            StoreError: a row is malformed (the message names its trial id).
+        """
+        try:
+            return self._decode(rows)
+        except (ValueError, TypeError, KeyError, AttributeError, RecursionError) as exc:
+            for row in rows:  # find the row to name: slow, but only on the way to an error
+                try:
+                    self._decode([row])
+                except (ValueError, TypeError, KeyError, AttributeError, RecursionError) as row_exc:
+                    exc = row_exc
+                    trial = row[0]
+                    break
+            else:  # pragma: no cover - a batch fails only through one of its rows
+                trial = "?"
+            raise StoreError(
+                f"stored trial {trial} is malformed: {exc}",
+                hint="the row was changed outside llcps; delete it or restore the database from a copy",
+            ) from None
+
+    def _decode(self, rows: Iterable[Sequence[Any]]) -> list[TrialRecord]:
+        """The hot loop: locals, caches, and only type checks per row."""
         names = self._names
         specs, spec_of = self._specs, self._spec
         features_cache, features_of = self._features, self._feature_tuple
         outcomes, outcome_of = self._outcomes, self._outcome
         new, record_cls = object.__new__, TrialRecord
+        sources = _SOURCES
         out: list[TrialRecord] = []
         append = out.append
         for (
@@ -205,6 +266,8 @@ class TrialDecoder:
                 entity_features = features_of(features)
             bits = (b0, b1, b2, b3, b4, b5)
             outcome = outcomes.get(bits) or outcome_of(bits)
+            if (type(sim_steps), type(seed), type(wall_seconds), type(branch_id)) != _SCALAR_TYPES or source not in sources:
+                raise _Malformed(f"source, steps, seconds or seed of the wrong type ({source!r}, {sim_steps!r}, {wall_seconds!r}, {seed!r})")
             record = new(record_cls)  # see _frozen: complete, valid values only
             record.__dict__.update(
                 {
@@ -223,7 +286,7 @@ class TrialDecoder:
                     "snapshot_id": snapshot_id,
                     "scenario": scenario,
                     "created_at": created_at if created_at is None or isinstance(created_at, str) else iso_timestamp(created_at),
-                    "extra": {} if extra in ("{}", None) else _json(extra),
+                    "extra": {} if extra in ("{}", None) else _extra(extra),
                 }
             )
             append(record)
