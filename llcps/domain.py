@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Iterable, Mapping
 
+from llcps.errors import LlcpsError
+
 #: The four actions of Table 1, in the order of their encoding (1..4).
 ACTIONS: tuple[str, ...] = ("push", "push_together", "remove_from_container", "place_in_container")
 
@@ -29,6 +31,26 @@ ORIENTATIONS: tuple[str, ...] = ("left", "top", "right", "front")
 #: Entity shapes and colors of Table 1, in the order of their encoding.
 SHAPES: tuple[str, ...] = ("sphere", "box", "cylinder")
 COLORS: tuple[str, ...] = ("red", "blue", "green")
+
+#: Largest seed accepted anywhere: every consumer (numpy, torch, scikit-learn) takes 32 bits.
+MAX_SEED = 2**32 - 1
+#: Largest id (trial, snapshot, run, ...) a store can hold: a signed 64-bit integer.
+MAX_ID = 2**63 - 1
+
+
+def check_seed(seed: int, what: str = "seed") -> int:
+    """Refuse a seed outside 0..MAX_SEED before any work starts (and anything is stored)."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise LlcpsError(f"{what} must be an integer from 0 to {MAX_SEED}, got {seed!r}", hint=f"pass a {what} in 0..{MAX_SEED}")
+    return seed
+
+
+def check_id(value: int, what: str = "id") -> int:
+    """Refuse an id no store can hold (a database would fail on it with an overflow)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_ID:
+        raise LlcpsError(f"{what} must be an integer from 0 to {MAX_ID}, got {value!r}", hint="see `llcps inspect trials` for ids")
+    return value
+
 
 #: Where a trial came from.
 TRIAL_SOURCES: tuple[str, ...] = ("pretrain", "plan", "exploration", "replay")

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 import numpy as np
 
-from llcps.domain import ACTIONS, OUTCOME_NAMES
+from llcps.domain import ACTIONS, OUTCOME_NAMES, check_seed
 from llcps.errors import LlcpsError
 from llcps.sim.motion import control_loop_rate
 from llcps.sim.sampler import sample_interaction
@@ -27,6 +27,9 @@ if TYPE_CHECKING:
 
 #: ``progress(done, total)`` after every stored trial.
 ProgressCallback = Callable[[int, int], None]
+
+#: Most random interactions one pretraining run may ask for.
+MAX_PRETRAIN_TRIALS = 10_000_000
 
 #: Measure the raw control-loop rate on every k-th trial's scene (0: never).
 CONTROL_LOOP_EVERY = 10
@@ -181,8 +184,9 @@ def pretrain(
         progress: called after every stored trial.
         control_loop_every: measure the raw control-loop rate on every k-th scene (0: never).
     """
-    if n < 0:
-        raise LlcpsError(f"the number of trials must be >= 0, got {n}", hint="pass --n 200, say")
+    if not 0 <= n <= MAX_PRETRAIN_TRIALS:
+        raise LlcpsError(f"the number of trials must be from 0 to {MAX_PRETRAIN_TRIALS}, got {n}", hint="pass --n 200, say")
+    check_seed(seed)
     from llcps.domain import TrialRecord
 
     name = store.resolve_branch(branch).name

@@ -255,6 +255,11 @@ def solve(
         seed=config.seed,
         branch=branch_name,
     )
+    # What the store holds is read (and checked) first: a malformed row stops the
+    # episode before it records a run.
+    records = list(store.visible_trials(branch_name))
+    model = fit_or_load(store, branch_name, config.model, config.seed, records=records)
+    kb = load_knowledge(store, branch_name)
     result.run_id = store.start_run(
         command=command, seed=config.seed, config=_config_json(config), branch=branch_name
     )
@@ -269,9 +274,6 @@ def solve(
     )
     world: World | None = None
     try:
-        records = list(store.visible_trials(branch_name))
-        model = fit_or_load(store, branch_name, config.model, config.seed, records=records)
-        kb = load_knowledge(store, branch_name)
         world = World.from_scene(scenario.scene(config.condition), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
         agent = Agent(

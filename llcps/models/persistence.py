@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING, Sequence
 
-from llcps.domain import TrialRecord
+from llcps.domain import TrialRecord, check_seed
 from llcps.errors import LlcpsError
 from llcps.models.base import WorldModel
 from llcps.models.registry import world_model_entry
@@ -44,6 +44,7 @@ def fit_or_load(
         UnknownNameError: ``name`` is not a registered world model.
     """
     entry = world_model_entry(name)
+    check_seed(seed, "model seed")
     watermark = store.max_visible_trial_id(branch)
     stored = store.latest_world_model(branch, name, seed)
     if stored is not None and stored.watermark == watermark:
