@@ -120,7 +120,7 @@ def test_bad_input_is_one_clear_error_and_changes_nothing(tmp_path: Path, args: 
 def test_interrupt_keeps_completed_trials_and_marks_the_episode(tmp_path: Path) -> None:
     db = tmp_path / "sigint.db"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "llcps.cli.main", "--db", str(db), "solve", "scenario1", "--budget", "400", "--json"],
+        [sys.executable, "-m", "llcps.cli.main", "--db", str(db), "solve", "scenario1", "--budget", "400", "--create", "--json"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -270,7 +270,7 @@ def _llcps(*args: str) -> list[str]:
 def test_kill_9_then_run_again_completes_without_duplicates(reference: tuple[Store, Any], tmp_path: Path) -> None:
     ref_store, _ = reference
     db, out = tmp_path / "killed.db", tmp_path / "report"
-    args = ("--db", str(db), "experiment", "run", "--preset", "smoke", "--seeds", "1", "--workers", "1", "--out", str(out))
+    args = ("--db", str(db), "experiment", "run", "--preset", "smoke", "--seeds", "1", "--workers", "1", "--out", str(out), "--create")
     first = pretrain_branch_name("smoke", 4, 0)
     child = subprocess.Popen(_llcps(*args), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:

@@ -19,9 +19,11 @@ from llcps.cli._common import (
     print_table,
     selected_branch,
 )
-from llcps.errors import LlcpsError
+from llcps.domain import MAX_ID
+from llcps.outputs import check_output_file, write_error
 from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
 from llcps.store.export import EXPORT_FORMATS, export_trials
+from llcps.store.schema import MAX_BRANCH_NAME
 
 app = new_app("Create, inspect, migrate, branch and export the experience store.")
 
@@ -30,7 +32,9 @@ ExportFormat = choice_enum("ExportFormat", EXPORT_FORMATS)
 DEFAULT_RESET_TARGET = ResetTarget(PRETRAIN)
 DEFAULT_EXPORT_FORMAT = ExportFormat("csv")
 
-BranchName = Annotated[str, typer.Argument(metavar="NAME", help="Branch name (no whitespace, '/', '..'; at most 100 characters).", show_default=False)]
+BranchName = Annotated[
+    str, typer.Argument(metavar="NAME", help=f"Branch name (no whitespace, '/', '..'; at most {MAX_BRANCH_NAME} characters).", show_default=False)
+]
 
 
 def _print_status(store: Store, branch: str | None, as_json: bool) -> None:
@@ -62,13 +66,21 @@ def _print_branch(info: BranchInfo, as_json: bool, text: str) -> None:
     message(text)
 
 
-def _confirm(change: BranchChange, as_json: bool, yes: bool) -> None:
-    """Show a dry run; without --yes stop with an error so scripts notice."""
-    if yes:
-        return
+def _dry_run(change: BranchChange, as_json: bool) -> None:
+    """Report what a removal would do; nothing changed (exit 0: a dry run is not an error)."""
     if as_json:
         print_json(change.as_json())
-    raise LlcpsError(f"{change.summary}; nothing changed", hint="rerun with --yes to do it")
+    message(f"{change.summary}; nothing changed (rerun with --yes to do it)")
+
+
+def _fork_point(value: Optional[str]) -> Optional[str]:
+    """``--at``: 'pretrain' or a trial id within the range a store can hold."""
+    if value is None or value == PRETRAIN:
+        return value
+    text = value.strip()
+    if not text.isdigit() or int(text) > MAX_ID:
+        raise typer.BadParameter(f"{value!r} is neither 'pretrain' nor a trial id from 0 to {MAX_ID}")
+    return text
 
 
 @app.command("init")
@@ -124,16 +136,13 @@ def branch_cli(
             help="Fork point: a trial id the parent sees, or 'pretrain' for its last pretraining trial "
             "(default: the parent's latest trial).",
             show_default=False,
+            callback=_fork_point,
         ),
     ] = None,
     as_json: JsonFlag = False,
 ) -> None:
     """Create a branch that sees its parent's trials up to the fork point (it is not checked out)."""
-    fork: int | str | None = at
-    if at is not None and at != PRETRAIN:
-        if not at.strip().isdigit():
-            raise LlcpsError(f"invalid --at {at!r}", hint="pass a trial id or 'pretrain'")
-        fork = int(at)
+    fork: int | str | None = int(at) if at is not None and at != PRETRAIN else at
     with open_store(ctx) as store:
         info = store.create_branch(name, from_branch=from_branch or selected_branch(ctx), at=fork)
     _print_branch(
@@ -166,8 +175,10 @@ def reset_cli(
     with open_store(ctx) as store:
         name = store.resolve_branch(selected_branch(ctx)).name
         target = str(to.value)  # type: ignore[attr-defined]
-        _confirm(store.reset_branch(name, to=target, dry_run=True), as_json, yes)
-        change = store.reset_branch(name, to=target, dry_run=False)
+        change = store.reset_branch(name, to=target, dry_run=not yes)
+    if not yes:
+        _dry_run(change, as_json)
+        return
     if as_json:
         print_json(change.as_json())
     message(change.summary)
@@ -177,8 +188,10 @@ def reset_cli(
 def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_json: JsonFlag = False) -> None:
     """Delete a branch and everything it owns (not main, the current branch, or a parent)."""
     with open_store(ctx) as store:
-        _confirm(store.delete_branch(name, dry_run=True), as_json, yes)
-        change = store.delete_branch(name, dry_run=False)
+        change = store.delete_branch(name, dry_run=not yes)
+    if not yes:
+        _dry_run(change, as_json)
+        return
     if as_json:
         print_json(change.as_json())
     message(change.summary)
@@ -202,17 +215,21 @@ def export_cli(
         typer.Option("--format", help="csv: one flat row per trial; jsonl: one JSON trial per line."),
     ] = DEFAULT_EXPORT_FORMAT,  # type: ignore[assignment]
     out: Annotated[
-        Optional[Path], typer.Option("--out", metavar="FILE", help="File to write (default: stdout).", show_default=False, dir_okay=False)
+        Optional[Path],
+        typer.Option("--out", metavar="FILE", help="File to write (default: stdout); its directory must exist.", show_default=False),
     ] = None,
 ) -> None:
     """Export the trials --branch (default: the current branch) sees, in id order."""
+    if out is not None:
+        check_output_file(out, what="--out")
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name
         if out is None:
             count = export_trials(store, branch, str(fmt.value), sys.stdout)  # type: ignore[attr-defined]
         else:
-            if not out.parent.is_dir():
-                raise LlcpsError(f"directory {out.parent} does not exist", hint="create it first or choose another --out")
-            with out.open("w", newline="", encoding="utf-8") as fh:
-                count = export_trials(store, branch, str(fmt.value), fh)  # type: ignore[attr-defined]
+            try:
+                with out.open("w", newline="", encoding="utf-8") as fh:
+                    count = export_trials(store, branch, str(fmt.value), fh)  # type: ignore[attr-defined]
+            except OSError as exc:
+                raise write_error(out, exc, what="--out") from None
     message(f"exported {count} trial(s) of branch {branch}" + (f" to {out}" if out else ""))

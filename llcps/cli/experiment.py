@@ -10,8 +10,10 @@ import typer
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from llcps.cli._common import JsonFlag, choice_enum, err_console, message, new_app, open_store, print_json, print_table
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, err_console, message, new_app, open_store, print_json, print_table
+from llcps.domain import MAX_SEED
 from llcps.errors import LlcpsError
+from llcps.outputs import check_output_dir
 from llcps.experiments.grid import PRESETS
 from llcps.experiments.runner import (
     ENGINES,
@@ -29,6 +31,10 @@ app = new_app("Run the experiment grid (Figure 2 over many seeds) and report on 
 PresetName = choice_enum("PresetName", tuple(PRESETS))
 EngineName = choice_enum("EngineName", ENGINES)
 
+#: Most seeds and workers one run may ask for.
+MAX_SEEDS = 10_000
+MAX_WORKERS = 1024
+
 #: Exit codes of ``llcps experiment run``.
 EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 
@@ -43,14 +49,18 @@ def run_cli(
     preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = "paper",  # type: ignore[valid-type, assignment]
     seeds: Annotated[
         Optional[int],
-        typer.Option("--seeds", metavar="N", min=1, help="How many seeds (default: the preset's count).", show_default=False),
+        typer.Option("--seeds", metavar="N", min=1, max=MAX_SEEDS, help="How many seeds (default: the preset's count).", show_default=False),
     ] = None,
     first_seed: Annotated[
-        int, typer.Option("--first-seed", metavar="K", min=0, help="Start the seeds at K (K..K+N-1): runners on several machines sharing one PostgreSQL store take disjoint seeds.")
+        int,
+        typer.Option(
+            "--first-seed", metavar="K", min=0, max=MAX_SEED,
+            help="Start the seeds at K (K..K+N-1): runners on several machines sharing one PostgreSQL store take disjoint seeds.",
+        ),
     ] = 0,
     workers: Annotated[
         Optional[int],
-        typer.Option("--workers", metavar="N", min=1, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
+        typer.Option("--workers", metavar="N", min=1, max=MAX_WORKERS, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
     ] = None,
     engine: Annotated[EngineName, typer.Option("--engine", help="local: a process pool; ray: Ray tasks (pip install 'llcps[ray]').")] = "local",  # type: ignore[valid-type, assignment]
     ray_address: Annotated[
@@ -68,6 +78,7 @@ def run_cli(
             help="Answer a trial a worker already simulated (same scene, state and call) from that simulation; results are identical either way.",
         ),
     ] = True,
+    create: CreateFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Run every sequence of the grid the store does not hold yet, then write the report.
@@ -80,18 +91,20 @@ def run_cli(
     """
     name = str(preset.value)  # type: ignore[attr-defined]
     n_workers = workers if workers is not None else _cpu_count()
+    seed_range = _seeds(name, seeds, first_seed)
+    out_dir = check_output_dir(out if out is not None else default_out_dir(name), what="--out")
     try:
-        with open_store(ctx, create=True) as store:
+        with open_store(ctx, create=create) as store:
             with _progress() as bar:
                 task = bar.add_task(f"experiment {name}", total=None, last="")
 
                 def report(done: int, total: int, label: str) -> None:
-                    bar.update(task, completed=done, total=total, last=label)
+                    bar.update(task, completed=done, total=total, last=escape(label))
 
                 summary = run_experiment(
                     store,
                     preset=name,
-                    seeds=_seeds(name, seeds, first_seed),
+                    seeds=seed_range,
                     workers=n_workers,
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
@@ -111,7 +124,7 @@ def run_cli(
         message(f"{summary.blocked} sequence(s) not run: their pretraining failed")
     if len(table) == 0:
         raise LlcpsError("no results to report", hint="see the failed tasks above")
-    out_dir, analysis = write_report(table, out if out is not None else default_out_dir(name))
+    out_dir, analysis = write_report(table, out_dir)
     if as_json:
         print_json({"run": summary.as_json(), "report_dir": str(out_dir), **analysis})
     else:
@@ -163,7 +176,7 @@ def report_cli(
         table = with_baseline(table, source_table, baseline_preset)
     if out is None:
         out = default_out_dir(name) if source is None else (source if source.is_dir() else source.parent)
-    out_dir, analysis = write_report(table, out)
+    out_dir, analysis = write_report(table, check_output_dir(out, what="--out"))
     if as_json:
         print_json({"report_dir": str(out_dir), **analysis})
     else:
@@ -173,6 +186,8 @@ def report_cli(
 
 def _seeds(preset: str, count: int | None, first: int) -> range:
     n = PRESETS[preset].default_seeds if count is None else count
+    if first + n - 1 > MAX_SEED:
+        raise LlcpsError(f"seeds {first}..{first + n - 1} go beyond the largest seed {MAX_SEED}", hint="lower --first-seed or --seeds")
     return range(first, first + n)
 
 
@@ -214,7 +229,7 @@ def _pct(value: Any) -> str:
 def _ci(low: Any, high: Any) -> str:
     if low is None or high is None:
         return "n/a"
-    return escape(f"[{_pct(low)}, {_pct(high)}]")  # not a markup tag
+    return f"[{_pct(low)}, {_pct(high)}]"
 
 
 def _num(value: Any) -> str:

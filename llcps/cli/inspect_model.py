@@ -9,13 +9,17 @@ import typer
 
 from llcps.cli._common import JsonFlag, choice_enum, message, open_store, print_json, print_table, selected_branch
 from llcps.cli.inspect import app
-from llcps.domain import OUTCOME_NAMES
+from llcps.domain import MAX_SEED, OUTCOME_NAMES
 from llcps.models import PAPER_MODELS, WORLD_MODELS
+from llcps.scenarios import get_scenario
 
 if TYPE_CHECKING:
     from llcps.models.inspection import ModelInspection
 
 ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
+
+#: Most candidates listed per measure.
+MAX_TOP = 1000
 
 _SHORT = {name: ("+" if name.startswith("positive") else "-") + name.split("_", 1)[1][:5] for name in OUTCOME_NAMES}
 
@@ -31,13 +35,14 @@ def model_cli(
         Optional[str],
         typer.Option("--scenario", metavar="NAME", help="Also rank this scenario's failure-state candidates under every measure.", show_default=False),
     ] = None,
-    top: Annotated[int, typer.Option("--top", min=1, metavar="K", help="Candidates shown per measure.")] = 5,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the held-out split, the models and tie-breaks.")] = 0,
+    top: Annotated[int, typer.Option("--top", min=1, max=MAX_TOP, metavar="K", help="Candidates shown per measure.")] = 5,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the held-out split, the models and tie-breaks.")] = 0,
     test_fraction: Annotated[float, typer.Option("--test-fraction", min=0.01, max=0.99, help="Share of trials held out.")] = 0.25,
     as_json: JsonFlag = False,
 ) -> None:
     """Evaluate world models on the branch's trials (held-out split) next to the majority baseline."""
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
+    scenario = None if scenario is None else get_scenario(scenario).name
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name
         from llcps.models.inspection import inspect_models  # sklearn loads only when used

@@ -8,12 +8,13 @@ import typer
 
 from llcps.cli._common import JsonFlag, open_store, print_json, print_table, selected_branch
 from llcps.cli.inspect import app
+from llcps.domain import MAX_ID
 
 
 @app.command("runs")
 def runs_cli(
     ctx: typer.Context,
-    limit: Annotated[int, typer.Option("--limit", min=0, metavar="N", help="Show the newest N episodes; 0 shows all.")] = 20,
+    limit: Annotated[int, typer.Option("--limit", min=0, max=MAX_ID, metavar="N", help="Show the newest N episodes; 0 shows all.")] = 20,
     all_branches: Annotated[bool, typer.Option("--all", help="Episodes of every branch, not just --branch.")] = False,
     as_json: JsonFlag = False,
 ) -> None:

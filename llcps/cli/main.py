@@ -31,16 +31,25 @@ def _global_options(
     ctx: typer.Context,
     db_location: Annotated[
         str,
-        typer.Option("--db", envvar="LLCPS_DB", metavar="PATH|URL", help="Experience store: a SQLite file path or an SQLAlchemy URL."),
+        typer.Option(
+            "--db", envvar="LLCPS_DB", metavar="PATH|URL", help="Experience store: a SQLite file path or an SQLAlchemy URL (before or after the command)."
+        ),
     ] = DEFAULT_DB,
     branch: Annotated[
         Optional[str],
         typer.Option(
-            "--branch", envvar="LLCPS_BRANCH", metavar="NAME", help="Branch to read and write (default: the store's current branch).", show_default=False
+            "--branch",
+            envvar="LLCPS_BRANCH",
+            metavar="NAME",
+            help="Branch to read and write (default: the store's current branch; before or after the command).",
+            show_default=False,
         ),
     ] = None,
 ) -> None:
-    """Life-long creative problem solving with world models trained on an experience store."""
+    """Life-long creative problem solving with world models trained on an experience store.
+
+    Every error prints `error:` and `hint:` lines on stderr and exits 2.
+    """
     ctx.obj = CliContext(db=db_location, branch=branch)
 
 

@@ -8,10 +8,10 @@ from typing import Annotated, Optional
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from llcps.cli._common import JsonFlag, choice_enum, err_console, open_store, print_json, print_table, selected_branch
-from llcps.domain import OUTCOME_NAMES
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, err_console, open_store, print_json, print_table, selected_branch
+from llcps.domain import MAX_SEED, OUTCOME_NAMES
 from llcps.models import PAPER_MODELS, WORLD_MODELS
-from llcps.pretrain import PretrainSummary, pretrain
+from llcps.pretrain import MAX_PRETRAIN_TRIALS, PretrainSummary, pretrain
 
 ModelName = choice_enum("PretrainModel", tuple(WORLD_MODELS))
 
@@ -19,9 +19,9 @@ ModelName = choice_enum("PretrainModel", tuple(WORLD_MODELS))
 def pretrain_cli(
     ctx: typer.Context,
     n: Annotated[
-        int, typer.Option("--n", metavar="N", min=0, help="Number of random interactions (trials) to run.")
+        int, typer.Option("--n", metavar="N", min=0, max=MAX_PRETRAIN_TRIALS, help="Number of random interactions (trials) to run.")
     ] = 200,
-    seed: Annotated[int, typer.Option("--seed", help="Run seed; trial i gets its own seed derived from it.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Run seed; trial i gets its own seed derived from it.")] = 0,
     model: Annotated[
         Optional[list[ModelName]],  # type: ignore[valid-type]
         typer.Option(
@@ -31,7 +31,10 @@ def pretrain_cli(
             show_default=False,
         ),
     ] = None,
-    model_seed: Annotated[int, typer.Option("--model-seed", help="Seed of the fitted models (`llcps solve --seed` reuses a model fitted with its seed).")] = 0,
+    model_seed: Annotated[
+        int, typer.Option("--model-seed", min=0, max=MAX_SEED, help="Seed of the fitted models (`llcps solve --seed` reuses a model fitted with its seed).")
+    ] = 0,
+    create: CreateFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Run N random interactions in settled random scenes, store each as a trial, then
@@ -40,7 +43,7 @@ def pretrain_cli(
     The same seed writes the same trials (features, outcome, sim steps) bit for bit.
     """
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
-    with open_store(ctx, create=True) as store:
+    with open_store(ctx, create=create) as store:
         with Progress(
             TextColumn("pretraining"),
             BarColumn(),

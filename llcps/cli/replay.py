@@ -8,19 +8,28 @@ from typing import Annotated, Optional
 import typer
 
 from llcps.cli._common import JsonFlag, message, open_store, print_json, print_table
+from llcps.domain import MAX_ID
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 
 
 def replay_cli(
     ctx: typer.Context,
-    trial_id: Annotated[int, typer.Argument(metavar="TRIAL_ID", help="Id of a stored trial (see `llcps inspect trials`).", show_default=False)],
-    gif: Annotated[Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the replay to a GIF.", show_default=False)] = None,
+    trial_id: Annotated[
+        int, typer.Argument(metavar="TRIAL_ID", min=1, max=MAX_ID, help="Id of a stored trial (see `llcps inspect trials`).", show_default=False)
+    ],
+    gif: Annotated[
+        Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the replay to a GIF (PATH ends in .gif; its directory must exist).", show_default=False)
+    ] = None,
     gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Restore a trial's start state, run it again, compare Omega, solved and sim steps.
 
-    Exit code 0 when everything matches what was recorded, 1 when it does not.
+    Exit code 0 when everything matches what was recorded, 1 when it does not, 2 for
+    bad input (a stored trial or physics state that fails its checks included).
     """
+    if gif is not None:
+        check_output_file(gif, what="--gif", suffixes=GIF_SUFFIXES)
     from llcps.cps.replay import replay  # the simulator loads only when needed
 
     with open_store(ctx) as store:

@@ -9,8 +9,10 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.syntax import Syntax
 
-from llcps.cli._common import JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
-from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, SolveConfig
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
+from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, MAX_BUDGET, SolveConfig
+from llcps.domain import MAX_SEED
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models import MEASURES, WORLD_MODELS
 from llcps.scenarios import CONDITIONS, SCENARIOS
 
@@ -33,11 +35,16 @@ def solve_cli(
     condition: Annotated[Condition, typer.Option("--condition", help="Original (the plan works) or novelty (it fails).")] = "novelty",  # type: ignore[valid-type, assignment]
     model: Annotated[ModelName, typer.Option("--model", help="World model that ranks exploration.")] = DEFAULT_MODEL,  # type: ignore[valid-type, assignment]
     measure: Annotated[MeasureName, typer.Option("--measure", help="Measure that orders candidates by the model's prediction.")] = DEFAULT_MEASURE,  # type: ignore[valid-type, assignment]
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the model and of tie-breaks; recorded with every trial.")] = 0,
-    budget: Annotated[int, typer.Option("--budget", metavar="N", help="Most exploration trials before giving up (exit 1).")] = DEFAULT_BUDGET,
-    refit_every: Annotated[int, typer.Option("--refit-every", metavar="N", help="Refit the world model after every N exploration trials.")] = 1,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the model and of tie-breaks; recorded with every trial.")] = 0,
+    budget: Annotated[int, typer.Option("--budget", metavar="N", min=0, max=MAX_BUDGET, help="Most exploration trials before giving up (exit 1).")] = DEFAULT_BUDGET,
+    refit_every: Annotated[
+        int, typer.Option("--refit-every", metavar="N", min=1, max=MAX_BUDGET, help="Refit the world model after every N exploration trials.")
+    ] = 1,
     gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
-    gif: Annotated[Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the plan and the resolving trial to a GIF.", show_default=False)] = None,
+    gif: Annotated[
+        Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the plan and the resolving trial to a GIF (PATH ends in .gif; its directory must exist).", show_default=False)
+    ] = None,
+    create: CreateFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Plan, execute, explore on failure, learn an operator; every trial goes to the store.
@@ -55,9 +62,11 @@ def solve_cli(
         refit_every=refit_every,
     )
     config.validate()
+    if gif is not None:
+        check_output_file(gif, what="--gif", suffixes=GIF_SUFFIXES)
     from llcps.cps.agent import solve  # the simulator loads only when a command needs it
 
-    with open_store(ctx, create=True) as store, _progress() as progress:
+    with open_store(ctx, create=create) as store, _progress() as progress:
         task = progress.add_task("exploring", total=None, visible=False)
 
         def report(phase: str, done: int, total: int) -> None:

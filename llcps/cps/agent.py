@@ -24,6 +24,7 @@ from llcps.cps.outcomes import desired_outcome
 from llcps.domain import ControllerParams, State, TrialRecord, TrialSpec, WorldModelInput
 from llcps.errors import LlcpsError
 from llcps.models.measures import rank
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
 from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
@@ -245,6 +246,8 @@ def solve(
         ``no_plan`` or ``interrupted``.
     """
     scenario = config.validate()
+    if gif is not None:
+        check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
     branch_name = store.resolve_branch(branch).name
     started = time.perf_counter()
     result = SolveResult(

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from llcps.domain import Outcome, TrialRecord
 from llcps.errors import LlcpsError
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.store import Store
 
 
@@ -64,18 +65,23 @@ def replay(store: Store, trial_id: int, *, gif: str | Path | None = None, gui: b
         gui: watch it in a PyBullet window (needs a display).
 
     Raises:
-        LlcpsError: the trial does not exist or has no stored start state.
+        LlcpsError: the trial does not exist or has no stored start state; its snapshot
+            fails its hash, size or structure checks (see :mod:`llcps.sim.snapshot`).
     """
     from llcps.scenarios import get_scenario
     from llcps.sim.render import GifRecorder
     from llcps.sim.trial import run_trial
-    from llcps.sim.world import World
+    from llcps.sim.world import SceneSpec, World
 
+    if gif is not None:
+        check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
     trial = store.get_trial(trial_id)
     if trial.snapshot_id is None:
-        raise LlcpsError(f"trial {trial_id} has no stored start state, so it cannot be replayed")
+        raise LlcpsError(f"trial {trial_id} has no stored start state, so it cannot be replayed", hint="replay a trial with a snapshot_id")
     snapshot = store.get_snapshot(trial.snapshot_id)
-    world = World.from_scene(snapshot.scene, gui=gui)
+    scene = SceneSpec.from_dict(snapshot.scene)  # checked before the engine builds anything
+    goal = get_scenario(trial.scenario) if trial.scenario else None
+    world = World.from_scene(scene, gui=gui)
     try:
         world.restore_serialized(snapshot.state)
         recorder = GifRecorder(world) if gif is not None else None
@@ -85,7 +91,7 @@ def replay(store: Store, trial_id: int, *, gif: str | Path | None = None, gui: b
             recorder.save(gif, speedup=2.0)
         else:
             result = run_trial(world, trial.spec)
-        solved = get_scenario(trial.scenario).goal_reached(result.after) if trial.scenario else False
+        solved = goal.goal_reached(result.after) if goal is not None else False
     finally:
         world.close()
     return ReplayReport(

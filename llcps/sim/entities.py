@@ -16,6 +16,7 @@ which are rotated by ``yaw`` about +z.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass
 from typing import Any, Mapping, Sequence
 
@@ -57,11 +58,30 @@ ROLLING_FRICTION = 0.0005
 SPINNING_FRICTION = 0.001
 
 
-def _triple(values: Sequence[float], what: str) -> tuple[float, float, float]:
-    out = tuple(float(v) for v in values)
-    if len(out) != 3:
+#: Bounds of what a scene may describe (m, kg): a stored scene is untrusted input, and
+#: a kilometre-wide box or a million-kilogram cube would stall the engine.
+MAX_EXTENT = 10.0
+MAX_DISTANCE = 100.0
+MAX_MASS = 1000.0
+MAX_NAME = 64
+
+
+def _triple(values: Sequence[float], what: str, bound: float) -> tuple[float, float, float]:
+    if isinstance(values, (str, bytes)) or len(values) != 3:
         raise ValueError(f"{what} needs 3 numbers, got {values!r}")
+    out = tuple(_number(v, what, bound) for v in values)
     return out  # type: ignore[return-value]
+
+
+def _number(value: object, what: str, bound: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not -bound <= float(value) <= bound:
+        raise ValueError(f"{what} must be a number within +-{bound:g}, got {value!r}")
+    return float(value)
+
+
+def _name(value: object, what: str) -> None:
+    if not isinstance(value, str) or not value.strip() or len(value) > MAX_NAME or not value.isprintable():
+        raise ValueError(f"{what} needs a printable name of at most {MAX_NAME} characters, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -92,13 +112,12 @@ class EntitySpec:
     wall: float = DEFAULT_WALL
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "size", _triple(self.size, "size"))
-        object.__setattr__(self, "position", _triple(self.position, "position"))
-        object.__setattr__(self, "yaw", float(self.yaw))
-        object.__setattr__(self, "mass", float(self.mass))
-        object.__setattr__(self, "wall", float(self.wall))
-        if not self.name or not self.name.strip():
-            raise ValueError("an entity needs a name")
+        object.__setattr__(self, "size", _triple(self.size, "size", MAX_EXTENT))
+        object.__setattr__(self, "position", _triple(self.position, "position", MAX_DISTANCE))
+        object.__setattr__(self, "yaw", _number(self.yaw, "yaw", MAX_DISTANCE))
+        object.__setattr__(self, "mass", _number(self.mass, "mass", MAX_MASS))
+        object.__setattr__(self, "wall", _number(self.wall, "wall", MAX_EXTENT))
+        _name(self.name, "an entity")
         if self.kind not in KINDS:
             raise ValueError(f"unknown entity kind {self.kind!r}; expected one of {KINDS}")
         if self.shape not in SHAPES:
@@ -162,11 +181,10 @@ class FixtureSpec:
     color: str = "gray"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "size", _triple(self.size, "size"))
-        object.__setattr__(self, "position", _triple(self.position, "position"))
-        object.__setattr__(self, "yaw", float(self.yaw))
-        if not self.name or not self.name.strip():
-            raise ValueError("a fixture needs a name")
+        object.__setattr__(self, "size", _triple(self.size, "size", MAX_EXTENT))
+        object.__setattr__(self, "position", _triple(self.position, "position", MAX_DISTANCE))
+        object.__setattr__(self, "yaw", _number(self.yaw, "yaw", MAX_DISTANCE))
+        _name(self.name, "a fixture")
         if min(self.size) <= 0:
             raise ValueError(f"fixture {self.name!r} needs a positive size")
         if self.color not in FIXTURE_RGBA:
@@ -197,6 +215,8 @@ class TableSpec:
     height: float = 0.45
 
     def __post_init__(self) -> None:
+        for name in ("x_min", "x_max", "y_half", "height"):
+            object.__setattr__(self, name, _number(getattr(self, name), f"table {name}", MAX_EXTENT))
         if not (self.x_max > self.x_min and self.y_half > 0 and self.height > 0):
             raise ValueError(f"invalid table {self}")
 
@@ -266,7 +286,7 @@ def open_box(
     wall: float = DEFAULT_WALL,
 ) -> EntitySpec:
     """An open-topped box container (a tray when shallow), resting at height ``on``."""
-    dims = _triple(size, "size")
+    dims = _triple(size, "size", MAX_EXTENT)
     return EntitySpec(
         name=name,
         kind="container",
@@ -352,7 +372,7 @@ def shelf(
 
     Placed over a container it blocks the top approach while leaving the sides open.
     """
-    sx, sy, sz = _triple(size, "size")
+    sx, sy, sz = _triple(size, "size", MAX_EXTENT)
     board = FixtureSpec(name, (sx, sy, sz), (at[0], at[1], clearance + sz / 2.0), color="wood")
     if not post:
         return (board,)

@@ -10,6 +10,8 @@ import numpy as np
 import pybullet as p
 from PIL import Image
 
+from llcps.outputs import write_error
+
 if TYPE_CHECKING:
     from llcps.sim.world import World
 
@@ -91,15 +93,21 @@ class GifRecorder:
         self.frames.append(capture(self.world, width=self.width, height=self.height, camera=self.camera))
 
     def save(self, path: str | Path, *, speedup: float = 1.0, hold_last: int = 6) -> Path:
-        """Write the frames as a looping GIF playing at ``speedup`` x real time."""
+        """Write the frames as a looping GIF playing at ``speedup`` x real time.
+
+        Raises:
+            LlcpsError: the file cannot be written (its directory is not created here).
+        """
         if not self.frames:
             raise ValueError("no frames recorded")
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         ms = max(20, int(round(1000 * self.every * self.world.time_step / speedup)))
         frames = [Image.fromarray(f) for f in self.frames] + [Image.fromarray(self.frames[-1])] * hold_last
         pal = [f.quantize(colors=128, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) for f in frames]
-        pal[0].save(path, save_all=True, append_images=pal[1:], duration=ms, loop=0, optimize=True)
+        try:
+            pal[0].save(path, format="GIF", save_all=True, append_images=pal[1:], duration=ms, loop=0, optimize=True)
+        except OSError as exc:
+            raise write_error(path, exc, what="GIF") from None
         return path
 
 

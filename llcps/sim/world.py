@@ -42,6 +42,9 @@ FLOOR = "floor"
 #: zlib level of serialized states (a scene's state shrinks from ~90 kB to ~40 kB in ~1 ms).
 STATE_COMPRESSION = 3
 
+#: Most entities and fixtures a scene may hold.
+MAX_SCENE_BODIES = 64
+
 #: Reference states (a freshly built scene, raw) by scene key, for checking stored states.
 _REFERENCES: dict[str, bytes] = {}
 _REFERENCE_CAPACITY = 32
@@ -99,19 +102,38 @@ class SceneSpec:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "SceneSpec":
+        """Rebuild a scene from :meth:`to_dict` output, checking it (it may come from a database).
+
+        Raises:
+            LlcpsError: not a scene description, or one beyond :data:`MAX_SCENE_BODIES` bodies
+                or the bounds of :mod:`llcps.sim.entities`.
+        """
         try:
+            if not isinstance(data, Mapping):
+                raise TypeError(f"expected a JSON object, got {type(data).__name__}")
+            entities, fixtures = data.get("entities", ()), data.get("fixtures", ())
+            if not isinstance(entities, list | tuple) or not isinstance(fixtures, list | tuple):
+                raise TypeError("entities and fixtures must be lists")
+            if len(entities) + len(fixtures) > MAX_SCENE_BODIES:
+                raise ValueError(f"more than {MAX_SCENE_BODIES} entities and fixtures")
             return cls(
-                entities=tuple(EntitySpec.from_dict(e) for e in data.get("entities", ())),
-                fixtures=tuple(FixtureSpec.from_dict(f) for f in data.get("fixtures", ())),
-                table=TableSpec.from_dict(data.get("table", {})),
-                name=str(data.get("name", "")),
+                entities=tuple(EntitySpec.from_dict(_object(e)) for e in entities),
+                fixtures=tuple(FixtureSpec.from_dict(_object(f)) for f in fixtures),
+                table=TableSpec.from_dict(_object(data.get("table", {}))),
+                name=str(data.get("name", ""))[:200],
             )
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, AttributeError, KeyError) as exc:
             raise LlcpsError(
                 f"not a valid scene description: {exc}", hint="scenes come from SceneSpec.to_dict()"
             ) from exc
 
 
+
+
+def _object(value: Any) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise TypeError(f"expected a JSON object, got {type(value).__name__}")
+    return value
 
 
 class World:
