@@ -10,8 +10,11 @@ must be one the writer knows.
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
+from typing import IO, Iterator
 
 from llcps.errors import LlcpsError
 
@@ -81,3 +84,33 @@ def _probe_directory(directory: Path, what: str) -> None:
 def write_error(path: str | Path, exc: OSError, *, what: str) -> LlcpsError:
     """An error for a write that failed after the checks passed (a full disk, /dev/full)."""
     return LlcpsError(f"{what}: writing {path} failed: {exc.strerror or exc}", hint=f"free some space or choose another {what}")
+
+
+@contextmanager
+def replaced_atomically(path: str | Path, *, what: str) -> Iterator[IO[str]]:
+    """A text file that becomes ``path`` only when the block succeeds.
+
+    A regular file is written beside ``path`` and renamed over it at the end, so a
+    failed export leaves no half-written file (and an existing one untouched). A
+    device or pipe (``/dev/stdout``, ``/dev/full``) is written directly.
+
+    Raises:
+        LlcpsError: writing failed (see :func:`write_error`).
+    """
+    path = Path(path)
+    try:
+        special = path.exists() and not stat.S_ISREG(path.stat().st_mode)
+        if special:
+            with path.open("w", newline="", encoding="utf-8") as fh:
+                yield fh
+            return
+        fd, tmp = tempfile.mkstemp(dir=path.absolute().parent, prefix=f".{path.name}.", suffix=".part")
+        try:
+            with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
+                yield fh
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    except OSError as exc:
+        raise write_error(path, exc, what=what) from None

@@ -13,7 +13,6 @@ import subprocess
 import sys
 from contextlib import closing
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 from store_writer import sample_trial
@@ -36,19 +35,36 @@ def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-@pytest.fixture
-def db(tmp_path: Path) -> Iterator[Path]:
-    """A store with pretraining and exploration trials on main."""
-    path = tmp_path / "llcps.db"
-    with Store.open(str(path), create=True) as store:
+def _fill(location: str) -> str:
+    with Store.open(location, create=True) as store:
         store.add_trials([sample_trial(i, scenario="scenario1" if i % 2 else None) for i in range(4)])
         store.add_trials([sample_trial(10 + i, source="exploration", scenario="scenario2", solved=i == 2) for i in range(3)])
-    yield path
+    return location
 
 
-def test_acceptance_flow(tmp_path: Path) -> None:
+@pytest.fixture
+def db(store_url: str) -> str:
+    """A store with pretraining and exploration trials on main (on each backend)."""
+    return _fill(store_url)
+
+
+@pytest.fixture
+def sqlite_db(tmp_path: Path) -> Path:
+    """The same store as a SQLite file, for tests that compare the file's bytes."""
+    return Path(_fill(str(tmp_path / "llcps.db")))
+
+
+def _contents(db: str | Path) -> object:
+    """What a store holds: the file's digest (SQLite), else its branches and trials."""
+    if "://" not in str(db):
+        return _digest(Path(db))
+    with Store.open(str(db)) as store:
+        return [(b.name, b.fork_point, [t.id for t in store.visible_trials(b.name)]) for b in store.list_branches()]
+
+
+def test_acceptance_flow(store_url: str) -> None:
     """Acceptance 2: init, branch, list --json, checkout, status."""
-    db = tmp_path / "new.db"
+    db = store_url
     result = llcps(db, "db", "init")
     assert result.exit_code == 0, result.output
     assert "schema 0002" in result.stderr and result.stdout == ""
@@ -67,7 +83,7 @@ def test_acceptance_flow(tmp_path: Path) -> None:
     assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and "0002" in text.stdout
 
 
-def test_inspect_trials_json_and_filters(db: Path) -> None:
+def test_inspect_trials_json_and_filters(db: str) -> None:
     trials = json.loads(llcps(db, "inspect", "trials", "--json", "--limit", "0").stdout)
     assert [t["id"] for t in trials] == list(range(1, 8))
     for key in ("id", "branch", "source", "action", "rate", "movement_magnitude", "orientation", "arguments", "features", "outcome", "solved", "sim_steps", "wall_seconds", "seed"):
@@ -91,7 +107,7 @@ def test_inspect_trials_json_and_filters(db: Path) -> None:
     assert table.exit_code == 0 and "trials visible on main (7 shown)" in table.stdout
 
 
-def test_branch_visibility_through_the_cli(db: Path) -> None:
+def test_branch_visibility_through_the_cli(db: str) -> None:
     assert llcps(db, "db", "branch", "fresh", "--at", "pretrain").exit_code == 0
     assert llcps(db, "db", "branch", "early", "--at", "2", "--json").exit_code == 0
     with Store.open(str(db)) as store:
@@ -104,15 +120,15 @@ def test_branch_visibility_through_the_cli(db: Path) -> None:
     assert (listed["fresh"]["fork_point"], listed["fresh"]["own_trials"], listed["fresh"]["visible_trials"]) == (4, 1, 5)
 
 
-def test_reset_and_delete_need_yes(db: Path) -> None:
+def test_reset_and_delete_need_yes(db: str) -> None:
     assert llcps(db, "db", "branch", "exp").exit_code == 0
     with Store.open(str(db)) as store:
         store.add_trial(sample_trial(50, branch="exp", source="exploration"))
-    before = _digest(db)
+    before = _contents(db)
     dry = llcps(db, "--branch", "exp", "db", "reset", "--to", "empty", "--json")
     assert dry.exit_code == 0 and json.loads(dry.stdout)["trials"] == 1 and json.loads(dry.stdout)["dry_run"] is True
     assert "would remove 1 trial(s)" in dry.stderr and "--yes" in dry.stderr
-    assert _digest(db) == before
+    assert _contents(db) == before
     done = llcps(db, "--branch", "exp", "db", "reset", "--to", "empty", "--yes", "--json")
     assert done.exit_code == 0 and json.loads(done.stdout)["dry_run"] is False
     refused = llcps(db, "db", "reset", "--yes")  # exp forked after main's exploration trials
@@ -126,7 +142,7 @@ def test_reset_and_delete_need_yes(db: Path) -> None:
     assert [t["source"] for t in json.loads(llcps(db, "inspect", "trials", "--json").stdout)] == ["pretrain"] * 4
 
 
-def test_export_csv_and_jsonl(db: Path, tmp_path: Path) -> None:
+def test_export_csv_and_jsonl(db: str, tmp_path: Path) -> None:
     result = llcps(db, "db", "export")
     assert result.exit_code == 0 and "exported 7 trial(s)" in result.stderr
     rows = list(csv.DictReader(io.StringIO(result.stdout)))
@@ -187,7 +203,8 @@ BAD_INPUT = {
 
 
 @pytest.mark.parametrize("case", list(BAD_INPUT))
-def test_bad_input_is_one_error_line_and_changes_nothing(db: Path, tmp_path: Path, case: str) -> None:
+def test_bad_input_is_one_error_line_and_changes_nothing(sqlite_db: Path, tmp_path: Path, case: str) -> None:
+    db = sqlite_db
     location, args, make = BAD_INPUT[case]
     assert llcps(db, "db", "branch", "exp").exit_code == 0
     target = Path(location.format(tmp=tmp_path, db=db))

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import pytest
+from conftest import BACKENDS, POSTGRES_SKIP, fresh_postgres_url, new_store_url
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
@@ -116,16 +117,10 @@ def _source_store(store: Store, new_trial) -> dict[str, Any]:
     return {"run": run, "episode": episode, "child_ids": child_ids}
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
+@pytest.fixture(params=BACKENDS)
 def dest_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
-    """A new, empty store's URL: a SQLite file, or a fresh PostgreSQL schema when one is configured."""
-    if request.param == "sqlite":
-        return str(tmp_path / "dest.db")
-    if not os.environ.get("LLCPS_TEST_POSTGRES_URL"):
-        pytest.skip("set LLCPS_TEST_POSTGRES_URL to test on PostgreSQL")
-    from test_store_postgres import _fresh_schema_url
-
-    return _fresh_schema_url()
+    """A new, empty store's URL: a SQLite file, or a fresh PostgreSQL schema."""
+    return new_store_url(request.param, tmp_path, "dest.db")
 
 
 def test_payload_round_trip_remaps_ids_and_dedups_snapshots(store: Store, dest_url: str, new_trial) -> None:
@@ -223,6 +218,19 @@ def test_results_are_identical_with_two_workers(reference: tuple[Store, Any], tm
         assert summary.status == "ok" and summary.workers == 2
         assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke"))
         assert store_signature(store) == store_signature(ref_store)
+
+
+@pytest.mark.postgresql
+@pytest.mark.skipif(POSTGRES_SKIP is not None, reason=POSTGRES_SKIP or "")
+def test_a_grid_run_into_postgresql_stores_what_sqlite_does(reference: tuple[Store, Any]) -> None:
+    """One seed of the smoke grid, two workers, imported into PostgreSQL: the SQLite run's rows."""
+    ref_store, _ = reference
+    with Store.open(fresh_postgres_url(), create=True) as store:
+        summary = run_experiment(store, preset="smoke", seeds=[0], workers=2)
+        assert summary.status == "ok"
+        expected = {k: v for k, v in store_signature(ref_store).items() if k.endswith("-s0") or "-s0-" in k}
+        assert store_signature(store) == expected
+        assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke", [0]))
 
 
 def test_ray_engine_gives_the_local_engine_results(reference: tuple[Store, Any], tmp_path: Path) -> None:

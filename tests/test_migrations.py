@@ -71,7 +71,8 @@ def test_old_store_upgrades_to_head_and_reads_and_writes(tmp_path: Path, revisio
         assert conn.execute("PRAGMA foreign_key_check").fetchall() == []
 
 
-def test_head_schema_matches_the_typed_models(store: Store) -> None:
+def test_head_schema_matches_the_typed_models(sqlite_store: Store) -> None:
+    store = sqlite_store
     with store.engine.connect() as conn:
         context = MigrationContext.configure(conn, opts={"version_table": VERSION_TABLE, "compare_type": True})
         assert compare_metadata(context, Base.metadata) == []

@@ -20,7 +20,7 @@ from llcps.cli._common import (
     selected_branch,
 )
 from llcps.domain import MAX_ID
-from llcps.outputs import check_output_file, write_error
+from llcps.outputs import check_output_file, replaced_atomically
 from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
 from llcps.store.export import EXPORT_FORMATS, export_trials
 from llcps.store.schema import MAX_BRANCH_NAME
@@ -227,9 +227,6 @@ def export_cli(
         if out is None:
             count = export_trials(store, branch, str(fmt.value), sys.stdout)  # type: ignore[attr-defined]
         else:
-            try:
-                with out.open("w", newline="", encoding="utf-8") as fh:
-                    count = export_trials(store, branch, str(fmt.value), fh)  # type: ignore[attr-defined]
-            except OSError as exc:
-                raise write_error(out, exc, what="--out") from None
+            with replaced_atomically(out, what="--out") as fh:
+                count = export_trials(store, branch, str(fmt.value), fh)  # type: ignore[attr-defined]
     message(f"exported {count} trial(s) of branch {branch}" + (f" to {out}" if out else ""))
