@@ -15,12 +15,13 @@ import pytest
 from llcps.cps.agent import solve
 from llcps.cps.episode import SolveConfig
 from llcps.cps.replay import replay
+from llcps.cps.candidates import candidate_space_size
 from llcps.pretrain import pretrain
 from llcps.scenarios import SCENARIOS
 from llcps.store import Store
 
 PRETRAIN_TRIALS = 30
-BUDGET = 467  # the whole candidate space: a novelty that can be resolved is
+BUDGET = candidate_space_size()  # the whole candidate space: a novelty that can be resolved is
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +40,7 @@ def test_novelty_is_resolved_then_reused(pretrained: Path, name: str) -> None:
         store.create_branch(f"life-{name}", from_branch="main", at="pretrain")
         first = solve(store, branch=f"life-{name}", config=SolveConfig(scenario=name, budget=BUDGET, seed=3))
         assert first.status == "solved", first.as_json()
+        assert first.candidates == candidate_space_size(name)  # the agent's space is the one the budget names
         explored = store.visible_trials(f"life-{name}", source="exploration")
         assert len([t for t in explored if t.episode_id == first.episode_id]) == first.exploration_trials > 0
         assert first.learned_operators

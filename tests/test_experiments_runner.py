@@ -80,7 +80,7 @@ def test_tasks_cover_the_grid_and_never_share_a_branch() -> None:
     for i, task in enumerate(tasks):
         if isinstance(task, SequenceTask):
             producer = next(j for j, t in enumerate(tasks) if task.pretrain_branch in t.branches)
-            assert producer < i and task.budget == preset.budget
+            assert producer < i and task.budget == preset.exploration_budget()
 
 
 def test_pretraining_subset_takes_one_trial_per_action_deterministically(store: Store, new_trial) -> None:

@@ -39,7 +39,8 @@ MAX_WORKERS = 1024
 EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 
 _PRESET_HELP = "Grid to run: " + "; ".join(
-    f"{p.name} ({len(p.cells())} cells, {p.default_seeds} seeds, budget {p.budget})" for p in PRESETS.values()
+    f"{p.name} ({len(p.cells())} cells, {p.default_seeds} seeds, budget {'the whole candidate space' if p.budget is None else p.budget})"
+    for p in PRESETS.values()
 ) + "."
 
 

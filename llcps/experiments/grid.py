@@ -10,7 +10,9 @@ re-run can tell which sequences are complete. The name encodes the whole cell, a
 :func:`parse_branch` reads it back: results are rebuilt from the store alone.
 
 Names of world models and measures are plain strings here; :func:`validate_preset`
-checks them against the registries in :mod:`llcps.models`, imported only when asked.
+checks them against the registries in :mod:`llcps.models`. The paper's models and
+measures, the longest branch name and the size of the candidate space each come from
+the one place that defines them.
 """
 
 from __future__ import annotations
@@ -20,20 +22,15 @@ from dataclasses import dataclass
 from typing import Iterable
 
 from llcps.errors import LlcpsError, UnknownNameError
+from llcps.models.measures import PAPER_MEASURES
+from llcps.models.registry import PAPER_MODELS
+from llcps.store.schema import MAX_BRANCH_NAME
 
 #: The order a sequence solves the scenarios in (the paper's order).
 SCENARIO_SEQUENCE: tuple[str, ...] = ("scenario1", "scenario2", "scenario3")
 #: ``update``: the world model keeps training across scenarios; ``reset``: the training
 #: data goes back to the pretraining set before each scenario (a branch from that point).
 EXPERIMENT_CONDITIONS: tuple[str, ...] = ("update", "reset")
-#: The paper's four measures, in the order its Figure 2 lists them.
-PAPER_MEASURES: tuple[str, ...] = (
-    "least-destructive",
-    "most-positive-changes",
-    "least-negative-changes",
-    "most-changes",
-)
-PAPER_MODELS: tuple[str, ...] = ("nn", "nb")
 #: 200 pretraining points ("Apriori Training") and 4 ("No Apriori Training").
 PAPER_PRETRAIN_SIZES: tuple[int, ...] = (200, 4)
 
@@ -41,8 +38,6 @@ PAPER_PRETRAIN_SIZES: tuple[int, ...] = (200, 4)
 BRANCH_PREFIX = "exp"
 #: Separator of the fields of a branch name ("/" is not allowed in branch names).
 SEP = "-"
-#: Longest branch name the store accepts (``llcps.store.schema.MAX_BRANCH_NAME``).
-MAX_BRANCH_NAME = 100
 
 # Preset and model names become single fields of a branch name, so they may not
 # contain the separator; measures may (they are parsed as "whatever is left").
@@ -204,8 +199,9 @@ class Preset:
     pretrain_sizes: tuple[int, ...]
     conditions: tuple[str, ...] = EXPERIMENT_CONDITIONS
     default_seeds: int = 20
-    #: Most exploration trials per episode (an unsolved episode records this many).
-    budget: int = 150
+    #: Most exploration trials per episode (an unsolved episode records this many);
+    #: None: the whole candidate space (:func:`llcps.cps.candidates.candidate_space_size`).
+    budget: int | None = 150
     #: Random interactions drawn per seed; every pretraining set of the seed is this pool
     #: or a subset of it (the paper's 4 points are one per action from its 200).
     pretrain_pool: int = 200
@@ -215,7 +211,7 @@ class Preset:
     def __post_init__(self) -> None:
         if isinstance(self.refit_every, bool) or not isinstance(self.refit_every, int) or self.refit_every < 1:
             raise LlcpsError(f"preset {self.name!r}: refit_every must be a positive integer, not {self.refit_every!r}")
-        if isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 0:
+        if self.budget is not None and (isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 0):
             raise LlcpsError(f"preset {self.name!r}: the budget must be a non-negative integer, not {self.budget!r}")
         if self.pretrain_sizes and self.pretrain_pool < max(self.pretrain_sizes):
             raise LlcpsError(
@@ -223,6 +219,14 @@ class Preset:
                 f"a pretraining set of {max(self.pretrain_sizes)}",
                 hint="make pretrain_pool at least the largest pretraining size",
             )
+
+    def exploration_budget(self) -> int:
+        """The budget as a number (None resolves to the size of the candidate space)."""
+        if self.budget is not None:
+            return self.budget
+        from llcps.cps.candidates import candidate_space_size  # builds the scenarios' scenes
+
+        return candidate_space_size()
 
     def cells(self) -> tuple[Cell, ...]:
         """Every cell, in a fixed order (model, measure, pretraining size, condition)."""
@@ -286,7 +290,7 @@ PRESETS: dict[str, Preset] = {
         (30,),
         conditions=("reset",),
         default_seeds=10,
-        budget=467,
+        budget=None,
         pretrain_pool=30,
     ),
     # The no-model baseline of the paper grid, at its budget: the random order uses no
