@@ -106,7 +106,7 @@ class LlcpsGroup(TyperGroup):
         except LlcpsError as exc:
             report_error(exc)
             return exc.exit_code
-        except (click_exceptions.Abort, KeyboardInterrupt):
+        except (typer.Abort, KeyboardInterrupt):
             typer.echo("error: interrupted", err=True)
             typer.echo("hint: completed work is kept; run the same command again to go on", err=True)
             return 130

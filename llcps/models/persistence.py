@@ -14,7 +14,7 @@ import logging
 from typing import TYPE_CHECKING, Sequence
 
 from llcps.domain import TrialRecord, check_seed
-from llcps.errors import LlcpsError
+from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import world_model_entry
 
@@ -46,7 +46,11 @@ def fit_or_load(
     entry = world_model_entry(name)
     check_seed(seed, "model seed")
     watermark = store.max_visible_trial_id(branch)
-    stored = store.latest_world_model(branch, name, seed)
+    try:
+        stored = store.latest_world_model(branch, name, seed)
+    except StoreError as exc:  # a damaged row: the model is derived data, so fit it again
+        logger.warning("stored world model %s is unusable, refitting: %s", name, exc.message)
+        stored = None
     if stored is not None and stored.watermark == watermark:
         try:
             return entry.load(stored.artifact, stored.meta, seed)

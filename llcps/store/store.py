@@ -315,7 +315,11 @@ class Store:
     # --------------------------------------------------------------- branches
 
     def _branches(self, conn: Connection) -> list[Any]:
-        return list(conn.execute(select(Branch.id, Branch.name, Branch.parent_id, Branch.fork_point, Branch.created_at).order_by(Branch.id)))
+        rows = list(conn.execute(select(Branch.id, Branch.name, Branch.parent_id, Branch.fork_point, Branch.created_at).order_by(Branch.id)))
+        for r in rows:
+            if not isinstance(r.name, str) or not isinstance(r.fork_point, int) or not isinstance(r.parent_id, int | None):
+                raise StoreError(f"branch row {r.id} is malformed (name {r.name!r}, parent {r.parent_id!r}, fork point {r.fork_point!r})", hint=_CHANGED)
+        return rows
 
     def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[Link]:
         rows = self._branches(conn) if rows is None else rows
@@ -899,6 +903,8 @@ class Store:
             ).first()
         if row is None:
             return None
+        if not isinstance(row.artifact, (bytes, bytearray, memoryview)) or not isinstance(row.meta, dict):
+            raise StoreError(f"stored world model {row.id} is malformed: its artifact is not bytes or its meta not an object", hint=_CHANGED)
         return ModelArtifact(
             id=row.id,
             branch=names[row.branch_id],
