@@ -26,11 +26,13 @@ run: setup
 	-$(BIN)/llcps --db $(DB) solve scenario3
 	$(BIN)/llcps --db $(DB) inspect runs
 
+# tests/services.sh runs the suite beside the services it needs (a throwaway PostgreSQL
+# server, installed first when missing and run as root) and stops them afterwards.
 test: setup
-	$(BIN)/python -m pytest
+	tests/services.sh $(BIN)/python -m pytest
 
 test-slow: setup
-	$(BIN)/python -m pytest -m slow
+	tests/services.sh $(BIN)/python -m pytest -m slow
 
 clean:
 	rm -rf $(VENV) *.egg-info

@@ -46,10 +46,10 @@ CreateFlag = Annotated[
 ]
 
 
-def report_error(exc: LlcpsError, *, command: str = "llcps") -> None:
+def report_error(exc: LlcpsError) -> None:
     """Print a project error the one way the CLI does: an ``error:`` and a ``hint:`` line."""
     typer.echo(f"error: {_one_line(exc.message)}", err=True)
-    typer.echo(f"hint: {_one_line(exc.hint or f'see `{command} --help`')}", err=True)
+    typer.echo(f"hint: {_one_line(exc.hint or 'see `llcps --help`')}", err=True)
 
 
 def _one_line(text: str) -> str:
@@ -120,7 +120,6 @@ class LlcpsGroup(TyperGroup):
                 )
             )
             return LlcpsError.exit_code
-
 
 
 #: Global options that may also follow the subcommand: ``llcps inspect trials --branch exp``.

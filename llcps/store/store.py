@@ -76,7 +76,7 @@ RESET_TARGETS: tuple[str, ...] = (PRETRAIN, "empty")
 #: Largest stored physics state read back (bytes, compressed); larger rows are refused unread.
 MAX_SNAPSHOT_BYTES = 8 * 2**20
 
-_CHANGED = "the row was changed outside llcps; use another trial, or restore the database from a copy"
+_CHANGED = "the row was changed outside llcps; restore the database from a copy (or delete the row)"
 
 _WHITESPACE = re.compile(r"\s")
 _INSERT_TRIAL = insert(Trial)
@@ -289,7 +289,7 @@ class Store:
                 yield conn
         except SQLAlchemyError as exc:
             raise _db_error(exc) from exc
-        except json.JSONDecodeError as exc:  # a JSON column's text, decoded as rows are read
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # a JSON column's text, decoded as rows are read
             raise StoreError(f"a stored JSON value is malformed ({exc})", hint=_CHANGED) from None
 
     @contextmanager
