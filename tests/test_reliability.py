@@ -319,3 +319,25 @@ def test_create_makes_the_store_on_purpose(tmp_path: Path) -> None:
     done = llcps(tmp_path / "new.db", "pretrain", "--n", "1", "--model", "nb", "--create", "--json")
     assert done.exit_code == 0, done.output
     assert json.loads(done.stdout)["trials"] == 1
+
+
+def test_every_numeric_option_has_a_range() -> None:
+    """An int or float option without bounds is how huge values reached the store before."""
+    import typing
+
+    from llcps.cli.docs import iter_commands
+
+    checked = 0
+    for command, ctx in iter_commands():
+        callback = getattr(command, "callback", None)
+        if callback is None:
+            continue
+        for name, hint in typing.get_type_hints(callback, include_extras=True).items():
+            if typing.get_origin(hint) is not typing.Annotated:
+                continue
+            base, *meta = typing.get_args(hint)
+            if {int, float} & ({base} | set(typing.get_args(base))) and bool not in {base}:
+                info = next(m for m in meta if hasattr(m, "min"))
+                assert info.min is not None and info.max is not None, f"{ctx.command_path} {name} has no range"
+                checked += 1
+    assert checked >= 12
