@@ -5,10 +5,11 @@ directory, an unreadable file, a file that is not SQLite, or a SQLite file that 
 not an llcps store all raise :class:`~llcps.errors.StoreError` and leave the file
 byte-identical. Only then does the engine (which switches SQLite to WAL) connect.
 
-A new SQLite store gets its ``application_id`` in its first transaction, before the
-file is switched to WAL, so the mark is in the file's own header from the first
-byte written (a store cut off by ``kill -9`` right after is still recognised), and
-concurrent creators serialize on that transaction instead of racing.
+A new SQLite store is made beside its path with its ``application_id`` in the header
+and then hard-linked into place, which fails if the path exists: the path never holds
+a half-made file (a creator killed by ``kill -9`` leaves at most a hidden
+``.NAME.*.new`` beside it), and of several creators at once one wins and the others
+open its store.
 
 SQLite connections get WAL journaling, a 30 s busy timeout, foreign keys and
 ``synchronous=NORMAL``: a committed transaction is in the WAL file before the
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import os
 import sqlite3
+import tempfile
 from contextlib import closing
 from pathlib import Path
 from typing import Any
@@ -86,71 +88,65 @@ def check_sqlite_file(path: Path, *, create: bool) -> bool:
         raise StoreError(f"{path} is a directory, not a database file", hint=f"pass a file path, e.g. --db {path / 'llcps.db'}")
     if not path.parent.is_dir():
         raise StoreError(f"directory {path.parent} does not exist", hint="create it first or choose another --db path")
-    missing_hint = f"create one with `llcps --db {path} db init` (or pass --create)"
     if not path.exists():
         if create:
             if not os.access(path.parent, os.W_OK):
                 raise StoreError(f"cannot create {path}: directory {path.parent} is not writable", hint="choose another --db path")
             return False
-        raise StoreError(f"no llcps database at {path}", hint=missing_hint)
+        raise StoreError(f"no llcps database at {path}", hint=f"create one with `llcps --db {path} db init` (or pass --create)")
     try:
         with path.open("rb") as fh:
             header = fh.read(100)
     except OSError as exc:
         raise StoreError(f"cannot read {path}: {exc.strerror or exc}", hint="check the file's permissions") from exc
-    if header == b"":  # SQLite's own empty database, e.g. a creator cut off before its first commit
-        if create:
-            return False
-        raise StoreError(f"no llcps store at {path} (the file is empty)", hint=missing_hint)
     if len(header) < 100 or not header.startswith(SQLITE_MAGIC):
         raise StoreError(f"{path} is not a SQLite database", hint="choose another --db path; the file was left untouched")
     if int.from_bytes(header[68:72], "big") == SQLITE_APPLICATION_ID:
         return True
-    application_id, tables = _read_marks(path)
-    if application_id == SQLITE_APPLICATION_ID:  # still in the write-ahead log (stores made before the header fix)
+    if _read_application_id(path) == SQLITE_APPLICATION_ID:  # still in the write-ahead log (older stores)
         return True
-    if application_id == 0 and tables == 0 and create:
-        return False
     raise StoreError(
         f"{path} is a SQLite database but not an llcps store",
         hint="choose another --db path (or a new file for `llcps db init`); the file was left untouched",
     )
 
 
-def _read_marks(path: Path) -> tuple[int, int]:
-    """The application id and table count SQLite reports, reading the file (and its WAL) only."""
+def _read_application_id(path: Path) -> int:
+    """The application id SQLite reports, reading the file (and its WAL) only."""
     try:
         with closing(sqlite3.connect(f"{path.as_uri()}?mode=ro", uri=True, timeout=BUSY_TIMEOUT_MS / 1000)) as conn:
-            application_id = conn.execute("PRAGMA application_id").fetchone()[0]
-            tables = conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
+            return int(conn.execute("PRAGMA application_id").fetchone()[0])
     except sqlite3.Error as exc:
         raise StoreError(f"cannot read {path}: {exc}", hint="check the file and its permissions; the file was left untouched") from exc
-    return int(application_id), int(tables)
 
 
 def create_sqlite_file(path: Path) -> None:
-    """Mark a new (absent or empty) SQLite file as an llcps store, atomically.
+    """Put a new, empty SQLite file marked as an llcps store at ``path``, atomically.
 
-    One exclusive transaction checks that the file is still empty (or already ours:
-    another creator won) and sets the application id, in rollback-journal mode, so
-    the mark is in the main file when the transaction commits.
+    The file is made under a temporary name in the same directory and hard-linked to
+    ``path``; if ``path`` exists by then (another creator won), that file is kept.
     """
     try:
-        with closing(sqlite3.connect(path, timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)) as conn:
-            conn.execute("BEGIN EXCLUSIVE")
-            application_id = conn.execute("PRAGMA application_id").fetchone()[0]
-            tables = conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
-            if application_id != SQLITE_APPLICATION_ID:
-                if application_id != 0 or tables:
-                    conn.execute("ROLLBACK")
-                    raise StoreError(
-                        f"{path} became a database that is not an llcps store meanwhile",
-                        hint="choose another --db path; the file was left untouched",
-                    )
-                conn.execute(f"PRAGMA application_id = {SQLITE_APPLICATION_ID}")
-            conn.execute("COMMIT")
-    except sqlite3.Error as exc:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".new")
+    except OSError as exc:
+        raise StoreError(f"cannot create {path}: {exc.strerror or exc}", hint="check that the directory is writable") from exc
+    os.close(fd)
+    try:
+        with closing(sqlite3.connect(tmp)) as conn:
+            conn.execute(f"PRAGMA application_id = {SQLITE_APPLICATION_ID}")
+            conn.commit()
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            pass  # another creator made it first: open that one
+        except OSError:  # a filesystem without hard links: a rename that checks first
+            if not path.exists():
+                os.rename(tmp, path)
+    except (OSError, sqlite3.Error) as exc:
         raise StoreError(f"cannot create {path}: {exc}", hint="check that the directory is writable") from exc
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def _on_sqlite_connect(foreign_keys: bool, file_backed: bool):  # noqa: ANN202 - event hook factory
