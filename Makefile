@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 DB ?= llcps.db
 
-.PHONY: setup run test test-slow clean
+.PHONY: setup run test test-fast test-slow clean
 
 $(BIN)/llcps: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,11 +26,16 @@ run: setup
 	-$(BIN)/llcps --db $(DB) solve scenario3
 	$(BIN)/llcps --db $(DB) inspect runs
 
+# The whole suite, slow tests included (what CI runs), on both cores.
 test: setup
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadfile
+
+# The inner loop: everything but the slow tests (sweeps, lifelong sequences in physics).
+test-fast: setup
+	$(BIN)/python -m pytest -m "not slow"
 
 test-slow: setup
-	$(BIN)/python -m pytest -m slow
+	$(BIN)/python -m pytest -n 2 --dist loadfile -m slow
 
 clean:
 	rm -rf $(VENV) *.egg-info

@@ -31,8 +31,8 @@ def _digest(path: Path) -> str:
 
 
 def test_revisions_are_a_line_from_0001() -> None:
-    assert migrations.known_revisions() == ["0001", "0002"]
-    assert migrations.head_revision() == "0002"
+    assert migrations.known_revisions() == ["0001", "0002", "0003"]
+    assert migrations.head_revision() == "0003"
     assert (migrations.migrations_dir() / "env.py").is_file()
 
 
@@ -66,6 +66,8 @@ def test_old_store_upgrades_to_head_and_reads_and_writes(tmp_path: Path, revisio
         store.add_operator(branch="main", name="op", pddl="(:action op)", definition={}, scenario=None, episode_id=None)
         assert store.count_visible_trials("after-upgrade") == 1
         assert [o.name for o in store.visible_operators("main")] == ["op"]
+        store.add_operator_execution(branch="main", operator="op", success=True, trial_id=new_id)
+        assert [(c.operator, c.successes, c.failures) for c in store.operator_experience("main")] == [("op", 1, 0)]
     with closing(sqlite3.connect(db)) as conn:
         assert conn.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
         assert conn.execute("PRAGMA foreign_key_check").fetchall() == []

@@ -10,7 +10,6 @@ from llcps.errors import LlcpsError, UnknownNameError
 from llcps.symbolic.knowledge import KnowledgeBase, Task, default_domain_pddl
 from llcps.symbolic.monitor import check_step
 from llcps.symbolic.operators import (
-    LEARNED_COST,
     LearnedOperator,
     learn_operator,
     operator_name,
@@ -257,13 +256,16 @@ def learned_push() -> LearnedOperator:
 
 def test_learned_operator_keeps_what_matters():
     op = learned_push()
-    assert op.name == "push_front_r0p2_m0p3" and op.cost == LEARNED_COST
+    assert op.name == "push_front_r0p2_m0p3"
     assert op.parameters == (("?c", "container"), ("?o", "item"))  # the ball had nothing to do with it
     assert op.arguments == ("?c",) and op.source_arguments == ("tray", "cube")
     assert op.add == {F("reachable", "?c"), F("reachable", "?o")}
     assert op.delete == frozenset()
     assert F("in", "?o", "?c") in op.preconditions and F("on", "?c", "table") in op.preconditions
-    assert not any("ball" in a for a in op.preconditions)
+    assert not any("ball" in a for a in op.preconditions | op.negative_preconditions)
+    # the context: what did not hold among the parameters holds no more where it applies
+    assert {F("reachable", "?c"), F("reachable", "?o"), F("on", "?o", "table")} <= op.negative_preconditions
+    assert not op.preconditions & op.negative_preconditions
     assert op.controller_spec(("bin", "ball")) == TrialSpec("push", ("bin",), PUSH_TRAY.params)
     assert op.controller_spec({"?c": "tray", "?o": "cube"}) == PUSH_TRAY
 
@@ -295,7 +297,7 @@ def test_learned_operator_round_trips_through_pddl_and_the_planner_prefers_it():
     (back,) = kb.learned
     assert back.same_knowledge(op) and back.source_arguments is None
     assert back.action == "push" and back.params == PUSH_TRAY.params and back.arguments == ("?c",)
-    # Goal: the cube within reach. The learned push (0.5) is the only way, and is used.
+    # Goal: the cube within reach. The learned push is the only way, and is used.
     task = Task(TRAY_OBJECTS, FAILURE_STATE, goal_pos=frozenset({F("reachable", "cube")}))
     assert plan(KB, task) is None
     assert planned(kb, task) == ["(push_front_r0p2_m0p3 tray cube)"]

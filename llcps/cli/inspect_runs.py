@@ -50,23 +50,49 @@ def runs_cli(
 
 @app.command("knowledge")
 def knowledge_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
-    """The branch's knowledge base K' in PDDL: the domain's actions and every learned operator."""
+    """The branch's knowledge base K' in PDDL, and what experience says of each operator.
+
+    Each operator's plan cost is its nominal cost divided by the Laplace-smoothed rate at
+    which its executions as plan steps on the branch achieved their effects, relative to
+    the rate 1/2 of an operator never executed (docs/knowledge.md). The PDDL shows these costs.
+    """
     from llcps.cps.knowledge import load_knowledge
 
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name
         kb = load_knowledge(store, branch)
         operators = store.visible_operators(branch)
+    learned = {op.name for op in kb.learned}
+    rows = [
+        {
+            "operator": op.name,
+            "learned": op.name in learned,
+            "successes": kb.counts(op.name)[0],
+            "failures": kb.counts(op.name)[1],
+            "nominal_cost": kb.nominal_cost(op.name),
+            "cost": round(kb.cost(op.name), 4),
+        }
+        for op in kb.operators()
+    ]
     if as_json:
         print_json(
             {
                 "branch": branch,
                 "domain": kb.to_pddl(),
+                "operators": rows,
                 "learned_operators": [op.as_json() for op in operators],
             }
         )
         return
     typer.echo(kb.to_pddl())
+    print_table(
+        f"operators of {branch}: executions as plan steps and plan cost",
+        ("operator", "learned", "successes", "failures", "nominal cost", "cost"),
+        [
+            (r["operator"], "yes" if r["learned"] else "no", r["successes"], r["failures"], f"{r['nominal_cost']:g}", f"{r['cost']:.3g}")
+            for r in rows
+        ],
+    )
 
 
 def _seconds(value: object) -> str:

@@ -1,17 +1,27 @@
-"""The lifelong CPS agent: plan, execute with monitoring, explore on failure, learn K'.
+"""The lifelong CPS agent: plan, execute with monitoring, repair the plan, explore on
+failure, learn K'.
 
 One call of :func:`solve` is one *episode*: a scenario in one condition, solved on
 one branch of the experience store. Every trial the robot executes is written to
 the store as it happens; the world model trains on every trial the branch can see
 (the lifelong training set) and is refit during exploration, as the paper's agent
 does within a scenario.
+
+Before it explores, the agent tries what it already knows: when a plan step fails, it
+re-plans from the perceived state without that ground action (the operator that failed
+is demoted by its failure, see :func:`llcps.symbolic.knowledge.experience_cost`),
+executes the repaired plan, and repeats up to :data:`MAX_PLAN_REPAIRS` times. Only when
+no repaired plan reaches the goal does creative problem solving start, for the first step
+that failed, a_f: the novelty is that a_f fails where K expected it to work, so
+exploration looks for an alternative to a_f from the state a_f was executed in (the
+snapshot stored before it), and a learned operator records that state as its context.
 """
 
 from __future__ import annotations
 
 import contextlib
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -19,7 +29,7 @@ import numpy as np
 
 from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.episode import SolveConfig, SolveResult
-from llcps.cps.knowledge import load_knowledge
+from llcps.cps.knowledge import load_experience, load_knowledge
 from llcps.cps.outcomes import desired_outcome
 from llcps.domain import ControllerParams, State, TrialRecord, TrialSpec, WorldModelInput
 from llcps.errors import LlcpsError
@@ -33,8 +43,9 @@ from llcps.sim.render import GifRecorder
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import World
 from llcps.store import Store
+from llcps.symbolic.experience import Context, Experience
 from llcps.symbolic.knowledge import KnowledgeBase, Task
-from llcps.symbolic.monitor import check_step
+from llcps.symbolic.monitor import StepFailure, check_step
 from llcps.symbolic.operators import learn_operator, refine_failed_action
 from llcps.symbolic.planner import GroundAction, plan
 
@@ -47,10 +58,35 @@ PUSH_DIRECTIONS = {k: v for k, v in PUSH_DIRECTION.items() if k != "top"}
 GIF_EVERY = 8
 #: Cap on steps of one settle/trial, as a safety net (240 Hz).
 SETTLE_STEPS = 480
+#: Re-plans after the first failed plan step before exploration starts.
+MAX_PLAN_REPAIRS = 3
 
 
 ProgressCallback = Callable[[str, int, int], None]
 """Called as ``progress(phase, done, total)``; phase is "plan" or "explore"."""
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A plan step that failed: the step a_f, what the monitor found missing, and the
+    state it was executed from: perceived, as physics (serialized) and as a stored
+    snapshot (None when the plan was not stored). Exploration looks for an alternative to
+    a_f from that state."""
+
+    step: GroundAction
+    monitor: StepFailure
+    state: State
+    physics: bytes
+    snapshot: int | None
+
+
+@dataclass(frozen=True)
+class PlanRun:
+    """How a plan execution ended: the state after the last executed step and, if a step
+    failed, the failure."""
+
+    state: State
+    failure: Failure | None = None
 
 
 class Agent:
@@ -82,6 +118,25 @@ class Agent:
         self._states: dict[int, bytes] = {}
         # End state of a trial answered by the memo, loaded when the world is next used.
         self._pending: bytes | None = None
+        # Operator executions as plan steps the branch sees, this episode's included.
+        self.experience: Experience = load_experience(store, branch)
+
+    def knowledge(self, kb: KnowledgeBase) -> KnowledgeBase:
+        """``kb`` costed by the experience the branch has, this episode's included."""
+        return kb.with_experience(self.experience)
+
+    def record_execution(self, operator: str, context: Context, success: bool, trial_id: int | None) -> None:
+        """Store one execution of ``operator`` as a plan step in ``context`` (see
+        :mod:`llcps.symbolic.experience`); the operator's cost follows from the counts."""
+        self.store.add_operator_execution(
+            branch=self.branch,
+            operator=operator,
+            success=success,
+            context=sorted(context),
+            episode_id=self.result.episode_id,
+            trial_id=trial_id,
+        )
+        self.experience = self.experience.added(operator, context, success)
 
     def filmed(self):
         """A context that records frames into the episode's GIF, if one was asked for."""
@@ -185,28 +240,41 @@ class Agent:
             self.world.restore_serialized(state)
 
     def run_plan(
-        self, kb: KnowledgeBase, steps: Sequence[GroundAction], *, store: bool = True
-    ) -> tuple[State, GroundAction | None, object]:
+        self, steps: Sequence[GroundAction], *, store: bool = True, record: KnowledgeBase | None = None
+    ) -> PlanRun:
         """Execute a plan step by step with the monitor; stop at the first failing step.
 
         The monitor checks the effects the plan relies on (causal links): those in the
         goal or needed by a later step's preconditions. A learned operator records every
         change it was seen to make; an incidental one (a neighbour nudged) need not
         recur for the plan to work. Reaching the goal ends the plan early.
+
+        Args:
+            steps: the plan.
+            store: store each step as a ``plan`` trial (False: a re-enactment for a GIF).
+            record: the knowledge base the plan was made with: count each step as an
+                execution of its operator in its context (success or failure), which sets
+                the operator's cost by experience. None: count nothing.
         """
         self.sync()
         state = perceive(self.world)
         for index, step in enumerate(steps):
             spec = self.controller_call(step)
             stored = self.snapshot() if store else None
-            trial, _ = self.execute(spec, source="plan", snapshot_id=stored)
-            state = trial.after
-            if self.scenario.goal_reached(state):
-                return state, None, None
-            failure = check_step(_relied_on(step, steps[index + 1 :], self.scenario), state)
+            self.sync()
+            physics = self._states[stored] if stored is not None else self.world.serialize_state()
+            trial, record_ = self.execute(spec, source="plan", snapshot_id=stored)
+            reached = self.scenario.goal_reached(trial.after)
+            failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], self.scenario), trial.after)
+            if record is not None and store:
+                context = record.context(step, trial.before)
+                self.record_execution(step.name, context, failure is None, record_.id if record_ is not None else None)
+            if reached:
+                return PlanRun(trial.after)
             if failure is not None:
-                return state, step, failure
-        return state, None, None
+                return PlanRun(trial.after, Failure(step, failure, trial.before, physics, stored))
+            state = trial.after
+        return PlanRun(state)
 
 
 def _relied_on(step: GroundAction, later: Sequence[GroundAction], scenario: Scenario) -> GroundAction:
@@ -304,36 +372,78 @@ def solve(
 
 
 def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progress) -> None:
-    """Plan with K, execute with the monitor; at the first failure, explore (as the paper does)."""
+    """Plan with K and repair the plan; only if no plan reaches the goal, explore."""
     state = perceive(agent.world)
     if agent.scenario.goal_reached(state):
         result.status = "solved"
         return
-    steps = plan(kb, agent.task(state))
-    if steps is None:
+    with agent.filmed():
+        failure = _plan_and_repair(agent, kb, state, result, progress)
+    if result.status == "solved":
+        return
+    if failure is None:
         result.status = "no_plan"
         return
-    result.plan = [step.label for step in steps]
-    with agent.filmed():
-        state, failed_step, failure = agent.run_plan(kb, steps)
-    if failed_step is None:
-        result.status = "solved" if agent.scenario.goal_reached(state) else "no_plan"
-        return
-    result.failed_action = failed_step.label
-    result.missing_effects = failure.describe()
-    _explore(agent, kb, model, failed_step, failure, state, result, progress)
+    _explore(agent, kb, model, failure, result, progress)
 
 
-def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failure_state: State, result, progress):
+def _plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult, progress) -> Failure | None:
+    """Execute K's plan; on a failed step re-plan without it, up to MAX_PLAN_REPAIRS times.
+
+    Every executed step is a stored ``plan`` trial and counts as an execution of its
+    operator, so a step that fails is demoted before the re-plan. Sets ``result.plan``
+    (K's first plan), ``result.plan_repairs`` and, when a plan reaches the goal,
+    ``result.status``.
+
+    Returns:
+        The first failure, or None when no step failed. Exploration looks for an
+        alternative to its step a_f from the state a_f was executed in.
+    """
+    first: Failure | None = None
+    excluded: set[tuple[str, tuple[str, ...]]] = set()
+    for attempt in range(1 + MAX_PLAN_REPAIRS):
+        if progress is not None:
+            progress("plan" if attempt == 0 else "re-plan", attempt, 1 + MAX_PLAN_REPAIRS)
+        known = agent.knowledge(kb)
+        steps = plan(known, agent.task(state), exclude=excluded)
+        if steps is None:
+            break
+        labels = [step.label for step in steps]
+        if attempt == 0:
+            result.plan = labels
+        run = agent.run_plan(steps, record=known)
+        state, failure = run.state, run.failure
+        if attempt > 0:
+            result.plan_repairs.append(
+                {
+                    "plan": labels,
+                    "failed_action": failure.step.label if failure is not None else None,
+                    "missing_effects": failure.monitor.describe() if failure is not None else None,
+                }
+            )
+        if failure is None:
+            if agent.scenario.goal_reached(state):
+                result.status = "solved"
+            return first
+        if first is None:
+            result.failed_action = failure.step.label
+            result.missing_effects = failure.monitor.describe()
+            first = failure
+        excluded.add((failure.step.name, failure.step.args))
+    return first
+
+
+def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: SolveResult, progress) -> None:
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
     world, config = agent.world, agent.config
-    snapshot = agent.snapshot()
+    snapshot, failed_step, failure_state = failure.snapshot, failure.step, failure.state
+    agent.restore(snapshot)
     failed_spec = agent.controller_call(failed_step)
     candidates = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
     result.candidates = len(candidates)
     features = {name: entity_features(world, name) for name in agent.kinds}
     inputs = [WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in candidates]
-    desired = desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del)
+    desired = desired_outcome(missing_add=failure.monitor.missing_add, missing_del=failure.monitor.missing_del)
     remaining = list(range(len(candidates)))
     order = _rank(model, inputs, remaining, config, desired)
     tried = 0
@@ -345,39 +455,58 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
         tried += 1
         if progress is not None:
             progress("explore", result.exploration_trials, min(config.budget, len(candidates)))
-        resolved, needed_plan = _resolves(agent, kb, trial, failed_step, failure_state)
+        resolved, needed_plan = _resolves(agent, kb, trial, failure)
         if resolved:
-            learned = learn_operator(
-                spec=spec,
-                before=failure_state,
-                after=trial.after,
-                objects=agent.task(failure_state).objects,
-                focus=failed_step.args,
-            )
-            definition = {"operator": learned.to_json(), "refinement": None}
-            new_kb = kb.with_operator(learned)
-            if needed_plan:
-                new_kb = refine_failed_action(new_kb, failed_step, learned, failure_state)
-                definition["refinement"] = new_kb.refinement_of(failed_step.name)
-            agent.store.add_operator(
-                branch=agent.branch,
-                name=learned.name,
-                pddl=learned.to_pddl(),
-                definition=definition,
-                scenario=agent.scenario.name,
-                episode_id=result.episode_id,
-            )
-            result.learned_operators.append(learned.to_pddl())
-            result.resolving_trial_id = record.id
-            result.status = "solved"
+            _learn(agent, kb, spec, trial, failure, needed_plan, record, result)
             if agent.recorder is not None:
                 _film_resolution(agent, kb, spec, snapshot)
-            return new_kb
+            return
         if tried % config.refit_every == 0 and remaining:
             model.update(agent.records)
             order = _rank(model, inputs, remaining, config, desired)
     result.status = "budget_exhausted"
-    return kb
+
+
+def _learn(
+    agent: Agent,
+    kb: KnowledgeBase,
+    spec: TrialSpec,
+    trial: TrialResult,
+    failure: Failure,
+    needed_plan: bool,
+    record: TrialRecord | None,
+    result: SolveResult,
+) -> None:
+    """K -> K': store the operator the resolving trial teaches (and a_f's refinement)."""
+    learned = learn_operator(
+        spec=spec,
+        before=failure.state,
+        after=trial.after,
+        objects=agent.task(failure.state).objects,
+        predicates=kb.predicates,
+        focus=failure.step.args,
+        replaces=failure.step.name,
+    )
+    definition = {"operator": learned.to_json(), "refinement": None}
+    new_kb = kb.with_operator(learned)
+    if needed_plan:
+        new_kb = refine_failed_action(new_kb, failure.step, learned, failure.state)
+        definition["refinement"] = new_kb.refinement_of(failure.step.name)
+    agent.store.add_operator(
+        branch=agent.branch,
+        name=learned.name,
+        pddl=learned.to_pddl(cost=kb.nominal_cost(failure.step.name)),
+        definition=definition,
+        scenario=agent.scenario.name,
+        episode_id=result.episode_id,
+    )
+    known = new_kb.skill(learned)
+    step = new_kb.operator(known.name).ground(learned.source_arguments or ())
+    context = new_kb.context(step, failure.state) if step is not None else frozenset()
+    agent.record_execution(known.name, context, True, record.id if record is not None else None)
+    result.learned_operators.append(learned.to_pddl(cost=agent.knowledge(new_kb).cost(known.name)))
+    result.resolving_trial_id = record.id if record is not None else None
+    result.status = "solved"
 
 
 def _film_resolution(agent: Agent, kb: KnowledgeBase, spec: TrialSpec, snapshot: int) -> None:
@@ -389,8 +518,8 @@ def _film_resolution(agent: Agent, kb: KnowledgeBase, spec: TrialSpec, snapshot:
     with agent.filmed():
         trial, _ = agent.execute(spec, source="exploration", snapshot_id=None)
         if not agent.scenario.goal_reached(trial.after):
-            steps = plan(kb, agent.task(trial.after)) or ()
-            agent.run_plan(kb, steps, store=False)
+            steps = plan(agent.knowledge(kb), agent.task(trial.after)) or ()
+            agent.run_plan(steps, store=False)
 
 
 def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> list[int]:
@@ -399,31 +528,27 @@ def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> 
     return [remaining[i] for i in order]
 
 
-def _resolves(
-    agent: Agent,
-    kb: KnowledgeBase,
-    trial: TrialResult,
-    failed_step: GroundAction,
-    failure_state: State,
-    *,
-    store: bool = True,
-) -> tuple[bool, bool]:
+def _resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> tuple[bool, bool]:
     """Did this trial resolve the novelty? Returns (resolved, through a re-plan).
 
-    The novelty is that a_f fails. A trial resolves it if the goal now holds, or if
-    it made a_f work: K plans from the new state through a_f, and that plan, executed,
-    reaches the goal. (A plan around a_f with K's other actions is not a resolution:
-    it would not need the trial.) A trial that changed no fluent is not re-planned.
+    A trial resolves it if the goal now holds, or if K (costed by experience) plans from
+    the new state and that plan, executed, reaches the goal: a plan K made from the
+    failure point itself started with a_f, which failed there, so a plan that works now
+    works because of the trial. Only a trial that changed a fact about an entity of a_f
+    or of the goal is followed by a re-plan: other changes cannot have made a plan work
+    that did not before.
     """
     if agent.scenario.goal_reached(trial.after):
         return True, False
-    if trial.after == failure_state:
+    focus = set(failure.step.args) | {t for atom in agent.scenario.goal_pos | agent.scenario.goal_neg for t in atom[1:]}
+    changed = trial.after ^ failure.state
+    if not any(focus.intersection(atom[1:]) for atom in changed):
         return False, False
-    steps = plan(kb, agent.task(trial.after))
-    if not steps or not any(s.name == failed_step.name and s.args == failed_step.args for s in steps):
+    steps = plan(agent.knowledge(kb), agent.task(trial.after))
+    if not steps:
         return False, False
-    state, failed, _ = agent.run_plan(kb, steps, store=store)
-    return failed is None and agent.scenario.goal_reached(state), True
+    run = agent.run_plan(steps)
+    return run.failure is None and agent.scenario.goal_reached(run.state), True
 
 
 def _config_json(config: SolveConfig) -> dict[str, object]:

@@ -58,6 +58,7 @@ class SolveResult:
     branch: str
     status: str = "running"
     plan: list[str] = field(default_factory=list)
+    plan_repairs: list[dict[str, object]] = field(default_factory=list)
     failed_action: str | None = None
     missing_effects: str | None = None
     exploration_trials: int = 0
@@ -86,6 +87,7 @@ class SolveResult:
             "solved": self.solved,
             "status": self.status,
             "plan": self.plan,
+            "plan_repairs": self.plan_repairs,
             "failed_action": self.failed_action,
             "missing_effects": self.missing_effects,
             "exploration_trials": self.exploration_trials,

@@ -141,8 +141,8 @@ def failure_point(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
         steps = plan(kb, agent.task(perceive(world)))
         if not steps:
             raise LlcpsError(f"the knowledge base of {branch!r} has no plan for {spec.name}'s novelty condition")
-        _, failed_step, failure = agent.run_plan(kb, steps, store=False)
-        if failed_step is None:
+        run = agent.run_plan(steps, store=False)
+        if run.failure is None:
             learned = bool(store.visible_operators(branch))
             raise LlcpsError(
                 f"the plan for {spec.name}'s novelty condition succeeds on {branch!r}: no failure state to rank",
@@ -150,6 +150,8 @@ def failure_point(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
                 if learned
                 else "the novelty does not make the nominal plan fail (see docs/scenarios.md)",
             )
+        failed_step, failure = run.failure.step, run.failure.monitor
+        world.restore_serialized(run.failure.physics)  # candidates start where a_f did
         failed_spec = agent.controller_call(failed_step)
         specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
         features = {name: entity_features(world, name) for name in agent.kinds}

@@ -129,6 +129,20 @@ class OperatorRecord:
 
 
 @dataclass(frozen=True)
+class ExecutionCounts:
+    """How often an operator, executed as a plan step in one context, worked or failed.
+
+    Attributes:
+        context: lifted atoms (tuples of strings) that held of the step's arguments.
+    """
+
+    operator: str
+    context: tuple[tuple[str, ...], ...]
+    successes: int
+    failures: int
+
+
+@dataclass(frozen=True)
 class ModelArtifact:
     """A fitted world model's bytes (npz / state_dict / JSON, never a pickle).
 

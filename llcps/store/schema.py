@@ -184,6 +184,33 @@ class Operator(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
+class OperatorExecution(Base):
+    """One execution of an operator of K or K' as a plan step, whether it worked, and its
+    context: the facts over the step's arguments before it ran, lifted to the operator's
+    variables (a JSON list of atoms, each a list of strings).
+
+    The counts of these rows set an operator's plan cost on a branch (operators costed
+    by experience); like operators they carry the watermark of the branch when written,
+    so a branch forked earlier does not see later executions.
+    """
+
+    __tablename__ = "operator_executions"
+    __table_args__ = (
+        Index("ix_operator_executions_branch_id_id", "branch_id", "id"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    branch_id: Mapped[int] = mapped_column(ForeignKey("branches.id"))
+    operator: Mapped[str] = mapped_column(String(200))
+    success: Mapped[bool] = mapped_column(Boolean)
+    context: Mapped[list[Any]]
+    episode_id: Mapped[int | None] = mapped_column(ForeignKey("episodes.id"))
+    trial_id: Mapped[int | None] = mapped_column(ForeignKey("trials.id"))
+    watermark: Mapped[int] = mapped_column(BigInteger)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
 class WorldModel(Base):
     """A fitted world model as bytes in a format that cannot run code when loaded."""
 

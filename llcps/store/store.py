@@ -43,6 +43,7 @@ from llcps.store.records import (
     BranchChange,
     BranchInfo,
     EpisodeRecord,
+    ExecutionCounts,
     ModelArtifact,
     OperatorRecord,
     RunRecord,
@@ -54,6 +55,7 @@ from llcps.store.schema import (
     Branch,
     Episode,
     Operator,
+    OperatorExecution,
     Run,
     Setting,
     Snapshot,
@@ -133,6 +135,23 @@ def _visible(chain: Sequence[_Link], branch_col: Any, id_col: Any) -> ColumnElem
             for link in chain
         )
     )
+
+
+def _context_atoms(row_id: int, context: Any) -> tuple[tuple[str, ...], ...]:
+    """A stored execution context, checked: a list of atoms, each a list of 2 to 4 strings."""
+    if isinstance(context, str):
+        try:
+            context = json.loads(context)
+        except ValueError:
+            context = None
+    if not isinstance(context, list) or not all(
+        isinstance(atom, list) and 2 <= len(atom) <= 4 and all(isinstance(t, str) for t in atom) for atom in context
+    ):
+        raise StoreError(
+            f"operator execution {row_id} has a malformed context",
+            hint="the row was not written by llcps; delete it or restore the store from a backup",
+        )
+    return tuple(sorted(tuple(atom) for atom in context))
 
 
 class Store:
@@ -456,10 +475,12 @@ class Store:
             keep = self._max_visible(conn, chain, Trial.source == PRETRAIN)
             trial_clause = and_(Trial.branch_id == bid, Trial.id > keep)
             op_clause = and_(Operator.branch_id == bid, Operator.watermark > keep)
+            execution_clause = and_(OperatorExecution.branch_id == bid, OperatorExecution.watermark > keep)
             model_clause = and_(WorldModel.branch_id == bid, WorldModel.watermark > keep)
         else:  # everything the branch owns, whatever its watermark
             trial_clause = Trial.branch_id == bid
             op_clause = Operator.branch_id == bid
+            execution_clause = OperatorExecution.branch_id == bid
             model_clause = WorldModel.branch_id == bid
         if to != PRETRAIN:
             episode_clause = Episode.branch_id == bid
@@ -478,6 +499,7 @@ class Store:
                 for v in (
                     conn.scalar(select(func.min(Trial.id)).where(trial_clause)),
                     conn.scalar(select(func.min(Operator.watermark)).where(op_clause)),
+                    conn.scalar(select(func.min(OperatorExecution.watermark)).where(execution_clause)),
                     conn.scalar(select(func.min(WorldModel.watermark)).where(model_clause)),
                 )
                 if v is not None
@@ -501,12 +523,22 @@ class Store:
             episodes=conn.scalar(select(func.count()).select_from(Episode).where(episode_clause)) or 0,
             kept_until=keep if action == "reset" else None,
         )
-        clauses = {"trial": trial_clause, "operator": op_clause, "model": model_clause, "episode": episode_clause, "branch_id": bid}
+        clauses = {"trial": trial_clause, "operator": op_clause, "execution": execution_clause, "model": model_clause, "episode": episode_clause, "branch_id": bid}
         return change, clauses
 
     def _apply_removal(self, conn: Connection, clauses: Mapping[str, Any]) -> None:
         episode_ids = select(Episode.id).where(clauses["episode"])
         conn.execute(delete(Operator).where(or_(clauses["operator"], Operator.episode_id.in_(episode_ids))))
+        trial_ids = select(Trial.id).where(clauses["trial"])
+        conn.execute(
+            delete(OperatorExecution).where(
+                or_(
+                    clauses["execution"],
+                    OperatorExecution.episode_id.in_(episode_ids),
+                    OperatorExecution.trial_id.in_(trial_ids),
+                )
+            )
+        )
         conn.execute(delete(WorldModel).where(clauses["model"]))
         conn.execute(delete(Trial).where(clauses["trial"]))
         conn.execute(delete(Episode).where(clauses["episode"]))
@@ -861,6 +893,57 @@ class Store:
                 )
                 for r in conn.execute(stmt)
             ]
+
+    def add_operator_execution(
+        self,
+        *,
+        branch: str,
+        operator: str,
+        success: bool,
+        context: Sequence[Sequence[str]] = (),
+        episode_id: int | None = None,
+        trial_id: int | None = None,
+    ) -> int:
+        """Record that ``operator`` ran as a plan step on ``branch``, whether its effects
+        held, and its context (the lifted facts over its arguments before it ran).
+
+        Stamped with the branch's watermark, so that it is seen by the branch and by
+        branches forked from it later, like the trial it followed.
+        """
+        atoms = sorted([str(term) for term in atom] for atom in context)
+        with self._write() as conn:
+            chain = self._chain(conn, branch)
+            return conn.execute(
+                insert(OperatorExecution).values(
+                    branch_id=chain[0].branch_id,
+                    operator=operator,
+                    success=bool(success),
+                    context=atoms,
+                    episode_id=episode_id,
+                    trial_id=trial_id,
+                    watermark=self._max_visible(conn, chain),
+                    created_at=_now(),
+                )
+            ).inserted_primary_key[0]
+
+    def operator_experience(self, branch: str | None) -> list[ExecutionCounts]:
+        """Successes and failures of every operator per context, over what ``branch`` sees.
+
+        Raises:
+            StoreError: a stored context is not a list of atoms (lists of strings).
+        """
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            stmt = (
+                select(OperatorExecution.id, OperatorExecution.operator, OperatorExecution.context, OperatorExecution.success)
+                .where(_visible(chain, OperatorExecution.branch_id, OperatorExecution.watermark))
+                .order_by(OperatorExecution.id)
+            )
+            counts: dict[tuple[str, tuple[tuple[str, ...], ...]], list[int]] = {}
+            for row_id, name, context, success in conn.execute(stmt):
+                key = (str(name), _context_atoms(row_id, context))
+                counts.setdefault(key, [0, 0])[0 if success else 1] += 1
+        return [ExecutionCounts(name, context, s, f) for (name, context), (s, f) in sorted(counts.items())]
 
     # ----------------------------------------------------------- world models
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+from typing import Collection
 
 from llcps.errors import LlcpsError
 from llcps.symbolic.knowledge import KnowledgeBase, Task
@@ -49,12 +50,20 @@ def ground(kb: KnowledgeBase, task: Task) -> list[GroundAction]:
     return actions
 
 
-def plan(kb: KnowledgeBase, task: Task, *, max_expansions: int = MAX_EXPANSIONS) -> Plan | None:
+def plan(
+    kb: KnowledgeBase,
+    task: Task,
+    *,
+    exclude: Collection[tuple[str, tuple[str, ...]]] = (),
+    max_expansions: int = MAX_EXPANSIONS,
+) -> Plan | None:
     """The cheapest plan from the task's initial state to its goal.
 
     Args:
         kb: the knowledge base K.
         task: objects, initial state and goal.
+        exclude: ground actions ``(operator name, args)`` the plan may not use, e.g.
+            a step that just failed (plan repair).
         max_expansions: how many states the search may expand before giving up.
 
     Returns:
@@ -66,7 +75,8 @@ def plan(kb: KnowledgeBase, task: Task, *, max_expansions: int = MAX_EXPANSIONS)
         PlanningLimitError: the budget ran out first.
     """
     task.check(kb)
-    actions = ground(kb, task)
+    banned = {(name.lower(), tuple(args)) for name, args in exclude}
+    actions = [a for a in ground(kb, task) if (a.name.lower(), a.args) not in banned]
     start = task.init
     # (cost, steps, insertion order, state); the insertion order makes ties deterministic.
     counter = itertools.count()
@@ -94,7 +104,7 @@ def plan(kb: KnowledgeBase, task: Task, *, max_expansions: int = MAX_EXPANSIONS)
             successor = action.apply(state)
             if successor in closed:
                 continue
-            key = (cost + action.cost, steps + 1)
+            key = (cost + kb.step_cost(action, state), steps + 1)
             if key < best.get(successor, (float("inf"), 0)):
                 best[successor] = key
                 parent[successor] = (state, action)
@@ -113,5 +123,6 @@ def _extract(parent: dict[frozenset, tuple[frozenset, GroundAction] | None], sta
 
 
 def plan_cost(steps: Plan) -> float:
-    """The metric value of a plan: the sum of its steps' costs."""
+    """The metric value of a plan in PDDL: the sum of its steps' costs by their operators'
+    experience in every context (the cost a PDDL validator adds up)."""
     return sum(step.cost for step in steps)
