@@ -46,7 +46,7 @@ from llcps.store import Store
 from llcps.symbolic.experience import Context, Experience
 from llcps.symbolic.knowledge import KnowledgeBase, Task
 from llcps.symbolic.monitor import StepFailure, check_step
-from llcps.symbolic.operators import learn_operator, refine_failed_action
+from llcps.symbolic.operators import learn_operator
 from llcps.symbolic.planner import GroundAction, plan
 
 #: Controller settings of K's own actions: the robot's nominal way of doing each.
@@ -455,9 +455,9 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
         tried += 1
         if progress is not None:
             progress("explore", result.exploration_trials, min(config.budget, len(candidates)))
-        resolved, needed_plan = _resolves(agent, kb, trial, failure)
+        resolved = _resolves(agent, kb, trial, failure)
         if resolved:
-            _learn(agent, kb, spec, trial, failure, needed_plan, record, result)
+            _learn(agent, kb, spec, trial, failure, record, result)
             if agent.recorder is not None:
                 _film_resolution(agent, kb, spec, snapshot)
             return
@@ -473,11 +473,15 @@ def _learn(
     spec: TrialSpec,
     trial: TrialResult,
     failure: Failure,
-    needed_plan: bool,
     record: TrialRecord | None,
     result: SolveResult,
 ) -> None:
-    """K -> K': store the operator the resolving trial teaches (and a_f's refinement)."""
+    """K -> K': store the operator the resolving trial teaches.
+
+    Where a_f failed needs no lesson of its own: the failure, counted in a_f's context,
+    keeps the planner from a_f there (:meth:`KnowledgeBase.allowed`), so it reaches for the
+    learned operator, followed by the plan it enabled when the trial needed one.
+    """
     learned = learn_operator(
         spec=spec,
         before=failure.state,
@@ -489,9 +493,6 @@ def _learn(
     )
     definition = {"operator": learned.to_json(), "refinement": None}
     new_kb = kb.with_operator(learned)
-    if needed_plan:
-        new_kb = refine_failed_action(new_kb, failure.step, learned, failure.state)
-        definition["refinement"] = new_kb.refinement_of(failure.step.name)
     agent.store.add_operator(
         branch=agent.branch,
         name=learned.name,
@@ -528,8 +529,8 @@ def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> 
     return [remaining[i] for i in order]
 
 
-def _resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> tuple[bool, bool]:
-    """Did this trial resolve the novelty? Returns (resolved, through a re-plan).
+def _resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
+    """Did this trial resolve the novelty?
 
     A trial resolves it if the goal now holds, or if K (costed by experience) plans from
     the new state and that plan, executed, reaches the goal: a plan K made from the
@@ -539,16 +540,16 @@ def _resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Fail
     that did not before.
     """
     if agent.scenario.goal_reached(trial.after):
-        return True, False
+        return True
     focus = set(failure.step.args) | {t for atom in agent.scenario.goal_pos | agent.scenario.goal_neg for t in atom[1:]}
     changed = trial.after ^ failure.state
     if not any(focus.intersection(atom[1:]) for atom in changed):
-        return False, False
+        return False
     steps = plan(agent.knowledge(kb), agent.task(trial.after))
     if not steps:
-        return False, False
+        return False
     run = agent.run_plan(steps)
-    return run.failure is None and agent.scenario.goal_reached(run.state), True
+    return run.failure is None and agent.scenario.goal_reached(run.state)
 
 
 def _config_json(config: SolveConfig) -> dict[str, object]:

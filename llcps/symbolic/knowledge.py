@@ -201,24 +201,12 @@ class KnowledgeBase:
         )
         return replace(self, learned=learned)
 
-    def refinement_of(self, action: str) -> dict[str, object] | None:
-        """What K' learned about a domain action beyond the naive K, as JSON for the store.
-
-        Returns:
-            ``{"action": name, "preconditions": [[predicate, term, ...], ...]}`` or None
-            when the action needs nothing beyond its preconditions in the default K.
-        """
-        op = self.operator(action)
-        naive = {a.name: a for a in KnowledgeBase.default().actions}.get(op.name)
-        if naive is None:
-            return None
-        extra = op.preconditions - naive.preconditions
-        if not extra:
-            return None
-        return {"action": op.name, "preconditions": [list(a) for a in sort_fluents(extra)]}
-
     def apply_learned(self, definition: Mapping[str, object]) -> KnowledgeBase:
-        """Replay one stored expansion: ``{"operator": LearnedOperator.to_json(), "refinement": refinement_of(...) or None}``.
+        """Replay one stored expansion: ``{"operator": LearnedOperator.to_json(), "refinement": ...}``.
+
+        A refinement (extra preconditions of a domain action, ``{"action": name,
+        "preconditions": [[predicate, term, ...], ...]}``) is written by no current llcps;
+        stores from versions that learned them keep them.
 
         Raises:
             LlcpsError: the record is malformed.
@@ -230,7 +218,7 @@ class KnowledgeBase:
                 action = str(refinement["action"])  # type: ignore[index]
                 extra = [tuple(map(str, a)) for a in refinement["preconditions"]]  # type: ignore[index]
             except (KeyError, TypeError) as exc:
-                raise LlcpsError(f"malformed refinement record: {exc}", hint="the record must come from KnowledgeBase.refinement_of()") from exc
+                raise LlcpsError(f"malformed refinement record: {exc}", hint="a refinement is {\"action\": name, \"preconditions\": [[predicate, term, ...], ...]}") from exc
             kb = kb.with_refinement(action, extra)
         return kb
 
@@ -295,6 +283,14 @@ class KnowledgeBase:
         if variables is None:
             raise UnknownNameError("operator", step.name, [op.name for op in self.operators()])
         return step_context(variables, step.args, state, self.constants)
+
+    def allowed(self, step: GroundAction, state: State) -> bool:
+        """Whether experience allows ``step`` in ``state``: not where its operator has failed
+        in the same context and never worked there (the planner then looks elsewhere)."""
+        if not self.experience.entries:
+            return True
+        successes, failures = self.experience.counts(step.name, self.context(step, state))
+        return successes > 0 or failures == 0
 
     def step_cost(self, step: GroundAction, state: State) -> float:
         """The plan cost of ``step`` taken in ``state``: by its operator's experience in that

@@ -8,8 +8,9 @@ seen. The planner uses it like any action of K at a cost set by experience
 (:mod:`llcps.symbolic.knowledge`), and the executor maps it back to the controller
 settings that produced it.
 
-:func:`refine_failed_action` teaches K why the failed action a_f failed: effects of the
-learned operator that a_f needed but lacked become preconditions of a_f.
+Where a_f itself failed is remembered by experience (:mod:`llcps.symbolic.experience`):
+a step is not planned again in a context where its operator has failed and never
+worked, so the planner reaches for what was learned there instead.
 """
 
 from __future__ import annotations
@@ -17,23 +18,18 @@ from __future__ import annotations
 import itertools
 import re
 from dataclasses import fields, dataclass, replace
-from typing import TYPE_CHECKING, Collection, Mapping, Sequence
+from typing import Collection, Mapping, Sequence
 
 from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, TrialSpec, fluent
 from llcps.errors import LlcpsError
 from llcps.symbolic.schema import (
     EQUALITY,
     Controller,
-    GroundAction,
     Operator,
-    is_variable,
     operator_to_pddl,
     sort_fluents,
     substitute,
 )
-
-if TYPE_CHECKING:
-    from llcps.symbolic.knowledge import KnowledgeBase
 
 #: Predicates left out of a learned operator's context: the hand holds nothing between trials.
 CONTEXT_IGNORED: frozenset[str] = frozenset({"holding"})
@@ -417,46 +413,3 @@ def _context_atoms(entities: Sequence[str], constants: Sequence[str], predicates
             if len(set(terms)) == len(terms) and any(t in entities for t in terms):
                 atoms.add(fluent(predicate, *terms))
     return atoms
-
-
-def refine_failed_action(kb: KnowledgeBase, failed: GroundAction, learned: LearnedOperator, failure_state: State) -> KnowledgeBase:
-    """K': add the learned operator and teach the failed action a_f what it lacked.
-
-    Each positive effect of the learned operator (as observed, on the objects it was
-    learned from) that mentions only a_f's arguments, was false in the failure state and
-    is not something a_f achieves itself becomes an extra precondition of a_f's operator.
-    Where the learned effect already holds the planner still plans a_f alone; where it
-    does not, it chains the learned operator before a_f.
-
-    Args:
-        kb: the knowledge base a_f was planned with.
-        failed: the step that failed (from the monitor).
-        learned: the operator learned while resolving the failure.
-        failure_state: the perceived state in which a_f failed.
-
-    Returns:
-        K' holding ``learned`` and the refined a_f (unchanged a_f when nothing applies).
-
-    Raises:
-        ValueError: ``learned`` does not record the objects it was learned from.
-    """
-    if learned.source_arguments is None:
-        raise ValueError(f"{learned.name} does not record the objects it was learned from; cannot relate it to {failed}")
-    kb = kb.with_operator(learned)
-    op = kb.operator(failed.name)
-    constants = set(kb.constants)
-    source = dict(zip(learned.variables, learned.source_arguments))
-    failed_vars: dict[str, str] = {}
-    for var, obj in zip(op.variables, failed.args):
-        failed_vars.setdefault(obj, var)
-    extra: set[Fluent] = set()
-    for atom in sort_fluents(substitute(a, source) for a in learned.add):
-        if atom in failure_state:
-            continue
-        if not all(t in failed_vars or (t in constants and not is_variable(t)) for t in atom[1:]):
-            continue
-        lifted = substitute(atom, failed_vars)
-        if lifted in op.add or lifted in op.preconditions or lifted in op.negative_preconditions:
-            continue
-        extra.add(lifted)
-    return kb.with_refinement(failed.name, extra) if extra else kb

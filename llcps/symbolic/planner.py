@@ -6,6 +6,10 @@ uniform-cost search on the ground problem. Maintained pure-Python planners do no
 pyperplan handles STRIPS only (no negative preconditions, no action costs), and
 unified-planning would need a compilation step and a heavy dependency for this size.
 
+Steps are costed by K's experience in the context they would run in, and a step is
+left out where its operator has failed in that context and never worked there
+(:meth:`KnowledgeBase.step_cost`, :meth:`KnowledgeBase.allowed`).
+
 Ties between plans of equal cost are broken deterministically: fewer steps first, then
 the order in which operators and their arguments sort.
 """
@@ -99,7 +103,7 @@ def plan(
                 hint="raise max_expansions or give the task fewer objects",
             )
         for action in actions:
-            if not action.applicable(state):
+            if not action.applicable(state) or not kb.allowed(action, state):
                 continue
             successor = action.apply(state)
             if successor in closed:
