@@ -1,13 +1,11 @@
 """The lifelong agent gets better and never worse, in real physics on a real store:
-what it learns in a novelty solves the next novelty without exploring, does not break
-the original condition, and no episode of a life explores more than the same episode
-would on a fresh branch. Operators are costed by experience, on branches."""
+what it learns in a novelty solves the next novelty without exploring and does not break
+the original condition. Operators are costed by experience, on branches."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from llcps.cps.agent import solve
@@ -70,21 +68,6 @@ def test_novelty_then_original_then_novelty(pretrained: Path, fresh: dict[str, i
         assert again.status == "solved" and again.exploration_trials == 0, again.as_json()
         names = {record.name for record in learned}
         assert any(step[1:].split()[0] in names for step in again.plan + [r for p in again.plan_repairs for r in p["plan"]])
-
-
-@pytest.mark.slow
-def test_a_life_never_explores_more_than_a_fresh_branch(pretrained: Path, fresh: dict[str, int]) -> None:
-    episodes = [(name, condition) for name in NAMES for condition in ("original", "novelty")]
-    rng = np.random.default_rng(7)
-    episodes += [episodes[i] for i in rng.choice(len(episodes), size=3, replace=False)]
-    order = [episodes[i] for i in rng.permutation(len(episodes))]
-    with Store.open(str(pretrained)) as store:
-        store.create_branch("life", from_branch="main", at="pretrain")
-        for name, condition in order:
-            result = solve(store, branch="life", config=_config(name, condition))
-            assert result.status == "solved", (name, condition, result.as_json())
-            ceiling = 0 if condition == "original" else fresh[name]
-            assert result.exploration_trials <= ceiling, (name, condition, result.exploration_trials, ceiling)
 
 
 # ----------------------------------------------------------------- costs by experience

@@ -9,15 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from llcps.cps.agent import Agent, solve
-from llcps.cps.candidates import enumerate_candidates
-from llcps.cps.episode import SolveConfig, SolveResult
+from llcps.cps.agent import solve
+from llcps.cps.episode import SolveConfig
+from llcps.cps.sweep import sweep
 from llcps.scenarios import SCENARIOS, get_scenario
-from llcps.sim.perception import perceive
-from llcps.sim.world import World
 from llcps.store import Store
-from llcps.symbolic.knowledge import KnowledgeBase
-from llcps.symbolic.planner import plan
 
 SCENARIO_NAMES = tuple(SCENARIOS)
 
@@ -55,30 +51,10 @@ def test_novelty_defeats_the_plan_and_every_plan_repair(tmp_path: Path, name: st
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", SCENARIO_NAMES)
-def test_sweep_finds_a_resolving_candidate_after_the_first(tmp_path: Path, name: str) -> None:
+def test_sweep_finds_a_resolving_candidate_after_the_first(name: str) -> None:
     """Candidates from the state a_f was executed in, in the default order, until one resolves."""
-    store = Store.open(str(tmp_path / "s.db"), create=True)
-    scenario = get_scenario(name)
-    world = World.from_scene(scenario.scene("novelty"))
-    world.settle(max_steps=480)
-    config = SolveConfig(scenario=name)
-    result = SolveResult(scenario=name, condition="novelty", model="-", measure="-", seed=0, branch="-")
-    agent = Agent(store=store, branch="main", world=world, scenario=scenario, config=config, result=result, records=[])
-    steps = plan(KnowledgeBase.default(), agent.task(perceive(world)))
-    assert steps and len(steps) == 1, "the sweep assumes K's plan is a single step"
-    start = world.snapshot()
-    failure = agent.run_plan(steps, store=False).failure
-    assert failure is not None
-    candidates = enumerate_candidates(failed=agent.controller_call(failure.step), entities=agent.kinds)
-    first = None
-    for index, spec in enumerate(candidates):
-        world.restore(start)
-        trial, _ = agent.execute(spec, source="exploration", snapshot_id=None)
-        if scenario.goal_reached(trial.after):
-            first = index
-            break
-    world.close()
-    store.close()
-    assert first is not None, "no candidate resolves the novelty"
-    assert first > 0, "the first candidate of the default order resolves the novelty: ranking would not matter"
-
+    found = sweep(get_scenario(name), stop_at_first=True)
+    assert found.failed_action is not None
+    assert found.resolving, "no candidate resolves the novelty"
+    assert found.first_position > 1, "the first candidate of the default order resolves the novelty: ranking would not matter"
+    assert found.tried == found.first_position < found.candidates

@@ -378,7 +378,7 @@ def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progre
         result.status = "solved"
         return
     with agent.filmed():
-        failure = _plan_and_repair(agent, kb, state, result, progress)
+        failure = plan_and_repair(agent, kb, state, result, progress)
     if result.status == "solved":
         return
     if failure is None:
@@ -387,7 +387,9 @@ def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progre
     _explore(agent, kb, model, failure, result, progress)
 
 
-def _plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult, progress) -> Failure | None:
+def plan_and_repair(
+    agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult, progress: ProgressCallback | None
+) -> Failure | None:
     """Execute K's plan; on a failed step re-plan without it, up to MAX_PLAN_REPAIRS times.
 
     Every executed step is a stored ``plan`` trial and counts as an execution of its
@@ -455,7 +457,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
         tried += 1
         if progress is not None:
             progress("explore", result.exploration_trials, min(config.budget, len(candidates)))
-        resolved = _resolves(agent, kb, trial, failure)
+        resolved = resolves(agent, kb, trial, failure)
         if resolved:
             _learn(agent, kb, spec, trial, failure, record, result)
             if agent.recorder is not None:
@@ -529,7 +531,7 @@ def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> 
     return [remaining[i] for i in order]
 
 
-def _resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
+def resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
     """Did this trial resolve the novelty?
 
     A trial resolves it if the goal now holds, or if K (costed by experience) plans from
