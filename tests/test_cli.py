@@ -7,7 +7,6 @@ import hashlib
 import io
 import json
 import os
-import shutil
 import sqlite3
 import subprocess
 import sys
@@ -16,15 +15,16 @@ from pathlib import Path
 from typing import Iterator
 
 import pytest
+from make_store_fixtures import make as make_store
 from store_writer import sample_trial
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
 from llcps.domain import OUTCOME_NAMES
-from llcps.store import Store
+from llcps.store import Store, migrations
 from llcps.store.schema import VERSION_TABLE
 
-FIXTURES = Path(__file__).parent / "fixtures"
+
 runner = CliRunner()
 
 
@@ -139,14 +139,13 @@ def test_export_csv_and_jsonl(db: Path, tmp_path: Path) -> None:
 
 
 def test_upgrade_command_on_an_old_store(tmp_path: Path) -> None:
-    db = tmp_path / "old.db"
-    shutil.copy(FIXTURES / "store_0001.db", db)
+    db = make_store("0001", tmp_path)
     refused = llcps(db, "inspect", "trials")
     assert refused.exit_code == 2 and "llcps db upgrade" in refused.stderr
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
     assert (status["revision"], status["up_to_date"], status["visible_trials"]) == ("0001", False, 2)
     upgraded = llcps(db, "db", "upgrade", "--json")
-    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": "0002", "changed": True}
+    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": migrations.head_revision(), "changed": True}
     assert len(json.loads(llcps(db, "inspect", "trials", "--json").stdout)) == 2
 
 

@@ -31,6 +31,16 @@ from llcps.errors import LlcpsError
 from llcps.store.schema import Trial
 
 
+#: Typed feature columns per argument slot (``arg0_*``, ``arg1_*``), in EntityFeatures' field order.
+FEATURE_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(EntityFeatures))
+FEATURE_SLOTS = 2
+
+
+def feature_column_names(slot: int) -> tuple[str, ...]:
+    """The columns holding the features of argument ``slot``."""
+    return tuple(f"arg{slot}_{name}" for name in FEATURE_FIELDS)
+
+
 def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> dict[str, Any]:
     """The column values of a new trial, after checking what the domain types cannot."""
     if trial.source not in TRIAL_SOURCES:
@@ -41,6 +51,8 @@ def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> di
             f"{len(trial.features)} feature set(s)",
             hint="pass features in argument order",
         )
+    if len(trial.features) > FEATURE_SLOTS:  # pragma: no cover - no action takes more arguments
+        raise LlcpsError(f"a trial has at most {FEATURE_SLOTS} arguments, not {len(trial.features)}")
     params = trial.spec.params
     row: dict[str, Any] = {
         "branch_id": branch_id,
@@ -53,15 +65,21 @@ def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> di
         "rate": float(params.rate),
         "movement_magnitude": float(params.movement_magnitude),
         "orientation": params.orientation,
-        "features": [f.as_dict() for f in trial.features],
         "solved": bool(trial.solved),
         "sim_steps": int(trial.sim_steps),
         "wall_seconds": float(trial.wall_seconds),
+        "cache_hit": bool(trial.cache_hit),
+        "simulation_wall_seconds": None if trial.simulation_wall_seconds is None else float(trial.simulation_wall_seconds),
         "seed": int(trial.seed),
         "snapshot_id": trial.snapshot_id,
         "created_at": created_at,
         "extra": dict(trial.extra),
     }
+    for slot in range(FEATURE_SLOTS):
+        entity = trial.features[slot] if slot < len(trial.features) else None
+        for name, column in zip(FEATURE_FIELDS, feature_column_names(slot)):
+            value = None if entity is None else getattr(entity, name)
+            row[column] = value if value is None or isinstance(value, str) else float(value)
     row.update(trial.outcome.as_dict())
     return row
 
@@ -79,7 +97,6 @@ TRIAL_COLUMNS = (
     Trial.rate,
     Trial.movement_magnitude,
     Trial.orientation,
-    type_coerce(Trial.features, Text),
     *(getattr(Trial, name) for name in OUTCOME_NAMES),
     Trial.solved,
     Trial.sim_steps,
@@ -88,7 +105,12 @@ TRIAL_COLUMNS = (
     Trial.snapshot_id,
     type_coerce(Trial.created_at, String),
     type_coerce(Trial.extra, Text),
+    Trial.cache_hit,
+    Trial.simulation_wall_seconds,
+    *(getattr(Trial, name) for slot in range(FEATURE_SLOTS) for name in feature_column_names(slot)),
 )
+#: Where the feature columns start in a row of :data:`TRIAL_COLUMNS`.
+_FEATURES_AT = len(TRIAL_COLUMNS) - FEATURE_SLOTS * len(FEATURE_FIELDS)
 
 
 def _json(value: Any) -> Any:
@@ -127,7 +149,6 @@ def gc_paused() -> Iterator[None]:
 
 
 _TRIAL_RECORD_FIELDS = frozenset(f.name for f in fields(TrialRecord))
-_ENTITY_FEATURE_FIELDS = frozenset(f.name for f in fields(EntityFeatures))
 
 
 def _frozen(cls: type[Any], values: dict[str, Any]) -> Any:
@@ -151,7 +172,8 @@ class TrialDecoder:
     def __init__(self, branch_names: Mapping[int, str]) -> None:
         self._names = branch_names
         self._specs: dict[tuple[Any, ...], TrialSpec] = {}
-        self._features: dict[Any, tuple[EntityFeatures, ...]] = {}
+        self._features: dict[tuple[Any, ...], tuple[EntityFeatures, ...]] = {}
+        self._entities: dict[tuple[Any, ...], EntityFeatures] = {}
         self._outcomes: dict[tuple[int, ...], Outcome] = {}
 
     def _spec(self, action: str, arguments: Any, rate: float, magnitude: float, orientation: str) -> TrialSpec:
@@ -164,16 +186,24 @@ class TrialDecoder:
             self._specs[key] = spec
         return spec
 
-    def _feature_tuple(self, features: Any) -> tuple[EntityFeatures, ...]:
-        key = _key(features)
-        found = self._features.get(key)
+    def _feature_tuple(self, values: tuple[Any, ...]) -> tuple[EntityFeatures, ...]:
+        found = self._features.get(values)
         if found is None:
-            decoded = _json(features)
-            for entity in decoded:
-                if entity.keys() != _ENTITY_FEATURE_FIELDS:
-                    raise LlcpsError(f"stored features have fields {sorted(entity)}", hint="upgrade llcps")
-            found = tuple(_frozen(EntityFeatures, entity) for entity in decoded)
-            self._features[key] = found
+            width = len(FEATURE_FIELDS)
+            entities = []
+            for slot in range(FEATURE_SLOTS):
+                part = values[slot * width : (slot + 1) * width]
+                if part[0] is None:
+                    break
+                if not (isinstance(part[0], str) and isinstance(part[2], str)):
+                    raise LlcpsError("stored trial features are malformed", hint="the store may be damaged")
+                entity = self._entities.get(part)
+                if entity is None:
+                    entity = _frozen(EntityFeatures, dict(zip(FEATURE_FIELDS, part)))
+                    self._entities[part] = entity
+                entities.append(entity)
+            found = tuple(entities)
+            self._features[values] = found
         return found
 
     def _outcome(self, bits: tuple[int, ...]) -> Outcome:
@@ -190,19 +220,22 @@ class TrialDecoder:
         features_cache, features_of = self._features, self._feature_tuple
         outcomes, outcome_of = self._outcomes, self._outcome
         new, record_cls = object.__new__, TrialRecord
+        at = _FEATURES_AT
         out: list[TrialRecord] = []
         append = out.append
-        for (
-            id_, branch_id, run_id, episode_id, source, scenario, action, arguments, rate, magnitude,
-            orientation, features, b0, b1, b2, b3, b4, b5, solved, sim_steps, wall_seconds, seed,
-            snapshot_id, created_at, extra,
-        ) in rows:
+        for row in rows:
+            (
+                id_, branch_id, run_id, episode_id, source, scenario, action, arguments, rate, magnitude,
+                orientation, b0, b1, b2, b3, b4, b5, solved, sim_steps, wall_seconds, seed,
+                snapshot_id, created_at, extra, cache_hit, simulation_wall_seconds,
+            ) = row[:at]
             spec = specs.get((action, arguments, rate, magnitude, orientation)) if isinstance(arguments, str) else None
             if spec is None:
                 spec = spec_of(action, arguments, rate, magnitude, orientation)
-            entity_features = features_cache.get(features) if isinstance(features, str) else None
+            values = tuple(row[at:])
+            entity_features = features_cache.get(values)
             if entity_features is None:
-                entity_features = features_of(features)
+                entity_features = features_of(values)
             bits = (b0, b1, b2, b3, b4, b5)
             outcome = outcomes.get(bits) or outcome_of(bits)
             record = new(record_cls)  # see _frozen: complete, valid values only
@@ -224,6 +257,8 @@ class TrialDecoder:
                     "scenario": scenario,
                     "created_at": created_at if created_at is None or isinstance(created_at, str) else iso_timestamp(created_at),
                     "extra": {} if extra in ("{}", None) else _json(extra),
+                    "cache_hit": bool(cache_hit),
+                    "simulation_wall_seconds": simulation_wall_seconds,
                 }
             )
             append(record)
@@ -233,7 +268,7 @@ class TrialDecoder:
 # The fast constructor must fill every field of the records it builds.
 _DECODED_FIELDS = frozenset(
     {"id", "branch", "source", "spec", "features", "outcome", "solved", "sim_steps", "wall_seconds", "seed",
-     "run_id", "episode_id", "snapshot_id", "scenario", "created_at", "extra"}
+     "run_id", "episode_id", "snapshot_id", "scenario", "created_at", "extra", "cache_hit", "simulation_wall_seconds"}
 )
 if _DECODED_FIELDS != _TRIAL_RECORD_FIELDS:  # pragma: no cover - guards a change in llcps.domain
     raise ImportError(f"llcps.store.trials decodes {sorted(_DECODED_FIELDS)} but TrialRecord has {sorted(_TRIAL_RECORD_FIELDS)}")
