@@ -149,22 +149,10 @@ class Trial(Base):
     rate: Mapped[float] = mapped_column(Float)
     movement_magnitude: Mapped[float] = mapped_column(Float)
     orientation: Mapped[str] = mapped_column(String(16))
-    # Table-1 features of the first and second argument (the second is NULL for
-    # one-argument actions): typed columns, so loading a training set decodes no JSON.
-    arg0_shape: Mapped[str] = mapped_column(String(32))
-    arg0_volume: Mapped[float] = mapped_column(Float)
-    arg0_color: Mapped[str] = mapped_column(String(32))
-    arg0_vector_magnitude: Mapped[float] = mapped_column(Float)
-    arg0_unit_x: Mapped[float] = mapped_column(Float)
-    arg0_unit_y: Mapped[float] = mapped_column(Float)
-    arg0_unit_z: Mapped[float] = mapped_column(Float)
-    arg1_shape: Mapped[str | None] = mapped_column(String(32))
-    arg1_volume: Mapped[float | None] = mapped_column(Float)
-    arg1_color: Mapped[str | None] = mapped_column(String(32))
-    arg1_vector_magnitude: Mapped[float | None] = mapped_column(Float)
-    arg1_unit_x: Mapped[float | None] = mapped_column(Float)
-    arg1_unit_y: Mapped[float | None] = mapped_column(Float)
-    arg1_unit_z: Mapped[float | None] = mapped_column(Float)
+    # Table-1 features of the arguments, packed (llcps.store.trials.pack_features):
+    # one value per trial, so loading a training set neither decodes JSON nor
+    # fetches fourteen columns per row.
+    features: Mapped[bytes] = mapped_column(LargeBinary)
     positive_visibility: Mapped[int] = mapped_column(SmallInteger)
     negative_visibility: Mapped[int] = mapped_column(SmallInteger)
     positive_reachability: Mapped[int] = mapped_column(SmallInteger)

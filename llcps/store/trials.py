@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import gc
 import json
+import struct
 from contextlib import contextmanager
 from dataclasses import fields
 from datetime import datetime
 from typing import Any, Iterable, Iterator, Mapping, Sequence
 
-from sqlalchemy import String, Text, type_coerce
+from sqlalchemy import Integer, String, Text, cast, type_coerce
 
 from llcps.domain import (
     ACTIONS,
@@ -31,14 +32,52 @@ from llcps.errors import LlcpsError
 from llcps.store.schema import Trial
 
 
-#: Typed feature columns per argument slot (``arg0_*``, ``arg1_*``), in EntityFeatures' field order.
-FEATURE_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(EntityFeatures))
-FEATURE_SLOTS = 2
+#: Packed features: a layout byte, the entity count, per entity five little-endian doubles
+#: (volume, vector_magnitude, unit_x, unit_y, unit_z), then the shapes and colours as UTF-8
+#: text, each entity's "shape<US>colour", joined by US (0x1f).
+FEATURES_LAYOUT = 1
+_NUMBERS = ("volume", "vector_magnitude", "unit_x", "unit_y", "unit_z")
+_SEPARATOR = "\x1f"
+#: Most arguments a trial has.
+MAX_ARGUMENTS = 2
+_DOUBLES = [struct.Struct(f"<{5 * n}d") for n in range(MAX_ARGUMENTS + 1)]
 
 
-def feature_column_names(slot: int) -> tuple[str, ...]:
-    """The columns holding the features of argument ``slot``."""
-    return tuple(f"arg{slot}_{name}" for name in FEATURE_FIELDS)
+def pack_features(features: Sequence[EntityFeatures]) -> bytes:
+    """The stored form of a trial's Table-1 features (see :data:`FEATURES_LAYOUT`)."""
+    if len(features) > MAX_ARGUMENTS:
+        raise LlcpsError(f"a trial has at most {MAX_ARGUMENTS} arguments, not {len(features)}")
+    names = []
+    for f in features:
+        if _SEPARATOR in f.shape or _SEPARATOR in f.color:
+            raise LlcpsError(f"an entity's shape or colour cannot hold control characters: {f.shape!r}, {f.color!r}")
+        names += [f.shape, f.color]
+    numbers = [float(getattr(f, name)) for f in features for name in _NUMBERS]
+    return bytes((FEATURES_LAYOUT, len(features))) + _DOUBLES[len(features)].pack(*numbers) + _SEPARATOR.join(names).encode()
+
+
+def unpack_features(data: bytes) -> tuple[EntityFeatures, ...]:
+    """Read :func:`pack_features`'s bytes back, checking their layout (they come from a database)."""
+    try:
+        n = data[1] if data[0] == FEATURES_LAYOUT else -1
+        doubles = _DOUBLES[n]
+        numbers = doubles.unpack_from(data, 2)
+        names = data[2 + doubles.size :].decode().split(_SEPARATOR) if n else []
+    except (IndexError, TypeError, struct.error, UnicodeDecodeError):
+        names = None
+    if names is None or len(names) != 2 * n or not all(names):
+        raise LlcpsError("stored trial features are malformed", hint="the store may be damaged; `llcps db status`")
+    new = object.__new__
+    out = []
+    for i in range(n):  # see _frozen: complete, valid values only
+        entity = new(EntityFeatures)
+        k = 5 * i
+        entity.__dict__.update(
+            shape=names[2 * i], volume=numbers[k], color=names[2 * i + 1], vector_magnitude=numbers[k + 1],
+            unit_x=numbers[k + 2], unit_y=numbers[k + 3], unit_z=numbers[k + 4],
+        )  # fmt: skip
+        out.append(entity)
+    return tuple(out)
 
 
 def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> dict[str, Any]:
@@ -51,8 +90,6 @@ def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> di
             f"{len(trial.features)} feature set(s)",
             hint="pass features in argument order",
         )
-    if len(trial.features) > FEATURE_SLOTS:  # pragma: no cover - no action takes more arguments
-        raise LlcpsError(f"a trial has at most {FEATURE_SLOTS} arguments, not {len(trial.features)}")
     params = trial.spec.params
     row: dict[str, Any] = {
         "branch_id": branch_id,
@@ -65,6 +102,7 @@ def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> di
         "rate": float(params.rate),
         "movement_magnitude": float(params.movement_magnitude),
         "orientation": params.orientation,
+        "features": pack_features(trial.features),
         "solved": bool(trial.solved),
         "sim_steps": int(trial.sim_steps),
         "wall_seconds": float(trial.wall_seconds),
@@ -75,13 +113,21 @@ def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> di
         "created_at": created_at,
         "extra": dict(trial.extra),
     }
-    for slot in range(FEATURE_SLOTS):
-        entity = trial.features[slot] if slot < len(trial.features) else None
-        for name, column in zip(FEATURE_FIELDS, feature_column_names(slot)):
-            value = None if entity is None else getattr(entity, name)
-            row[column] = value if value is None or isinstance(value, str) else float(value)
     row.update(trial.outcome.as_dict())
     return row
+
+
+def _flags() -> Any:
+    """The six outcome bits, ``solved`` and ``cache_hit`` as one integer, computed by the database.
+
+    Bit i (0..5) is Omega's i-th bit, bit 6 ``solved``, bit 7 ``cache_hit``: one value
+    per row instead of eight, which is most of what fetching a row costs.
+    """
+    parts = [getattr(Trial, name) for name in OUTCOME_NAMES] + [Trial.solved, Trial.cache_hit]
+    flags = cast(parts[0], Integer)
+    for bit, column in enumerate(parts[1:], start=1):
+        flags = flags.op("|")(cast(column, Integer).op("<<")(bit))
+    return flags
 
 
 #: Columns read for a TrialRecord, in the order :class:`TrialDecoder` unpacks them.
@@ -97,20 +143,16 @@ TRIAL_COLUMNS = (
     Trial.rate,
     Trial.movement_magnitude,
     Trial.orientation,
-    *(getattr(Trial, name) for name in OUTCOME_NAMES),
-    Trial.solved,
+    Trial.features,
+    _flags(),
     Trial.sim_steps,
     Trial.wall_seconds,
     Trial.seed,
     Trial.snapshot_id,
     type_coerce(Trial.created_at, String),
     type_coerce(Trial.extra, Text),
-    Trial.cache_hit,
     Trial.simulation_wall_seconds,
-    *(getattr(Trial, name) for slot in range(FEATURE_SLOTS) for name in feature_column_names(slot)),
 )
-#: Where the feature columns start in a row of :data:`TRIAL_COLUMNS`.
-_FEATURES_AT = len(TRIAL_COLUMNS) - FEATURE_SLOTS * len(FEATURE_FIELDS)
 
 
 def _json(value: Any) -> Any:
@@ -172,9 +214,8 @@ class TrialDecoder:
     def __init__(self, branch_names: Mapping[int, str]) -> None:
         self._names = branch_names
         self._specs: dict[tuple[Any, ...], TrialSpec] = {}
-        self._features: dict[tuple[Any, ...], tuple[EntityFeatures, ...]] = {}
-        self._entities: dict[tuple[Any, ...], EntityFeatures] = {}
-        self._outcomes: dict[tuple[int, ...], Outcome] = {}
+        self._features: dict[bytes, tuple[EntityFeatures, ...]] = {}
+        self._outcomes: dict[int, Outcome] = {}  # by the flags' low six bits
 
     def _spec(self, action: str, arguments: Any, rate: float, magnitude: float, orientation: str) -> TrialSpec:
         key = (action, _key(arguments), rate, magnitude, orientation)
@@ -186,31 +227,18 @@ class TrialDecoder:
             self._specs[key] = spec
         return spec
 
-    def _feature_tuple(self, values: tuple[Any, ...]) -> tuple[EntityFeatures, ...]:
-        found = self._features.get(values)
+    def _feature_tuple(self, data: bytes) -> tuple[EntityFeatures, ...]:
+        found = self._features.get(data)
         if found is None:
-            width = len(FEATURE_FIELDS)
-            entities = []
-            for slot in range(FEATURE_SLOTS):
-                part = values[slot * width : (slot + 1) * width]
-                if part[0] is None:
-                    break
-                if not (isinstance(part[0], str) and isinstance(part[2], str)):
-                    raise LlcpsError("stored trial features are malformed", hint="the store may be damaged")
-                entity = self._entities.get(part)
-                if entity is None:
-                    entity = _frozen(EntityFeatures, dict(zip(FEATURE_FIELDS, part)))
-                    self._entities[part] = entity
-                entities.append(entity)
-            found = tuple(entities)
-            self._features[values] = found
+            found = unpack_features(data)
+            self._features[bytes(data)] = found
         return found
 
-    def _outcome(self, bits: tuple[int, ...]) -> Outcome:
-        found = self._outcomes.get(bits)
+    def _outcome(self, flags: int) -> Outcome:
+        found = self._outcomes.get(flags)
         if found is None:
-            found = Outcome.from_bits(bits)
-            self._outcomes[bits] = found
+            found = Outcome.from_bits([(flags >> bit) & 1 for bit in range(len(OUTCOME_NAMES))])
+            self._outcomes[flags] = found
         return found
 
     def decode(self, rows: Iterable[Sequence[Any]]) -> list[TrialRecord]:
@@ -220,23 +248,20 @@ class TrialDecoder:
         features_cache, features_of = self._features, self._feature_tuple
         outcomes, outcome_of = self._outcomes, self._outcome
         new, record_cls = object.__new__, TrialRecord
-        at = _FEATURES_AT
         out: list[TrialRecord] = []
         append = out.append
-        for row in rows:
-            (
-                id_, branch_id, run_id, episode_id, source, scenario, action, arguments, rate, magnitude,
-                orientation, b0, b1, b2, b3, b4, b5, solved, sim_steps, wall_seconds, seed,
-                snapshot_id, created_at, extra, cache_hit, simulation_wall_seconds,
-            ) = row[:at]
+        for (
+            id_, branch_id, run_id, episode_id, source, scenario, action, arguments, rate, magnitude,
+            orientation, features, flags, sim_steps, wall_seconds, seed, snapshot_id, created_at, extra,
+            simulation_wall_seconds,
+        ) in rows:
             spec = specs.get((action, arguments, rate, magnitude, orientation)) if isinstance(arguments, str) else None
             if spec is None:
                 spec = spec_of(action, arguments, rate, magnitude, orientation)
-            values = tuple(row[at:])
-            entity_features = features_cache.get(values)
+            entity_features = features_cache.get(features)
             if entity_features is None:
-                entity_features = features_of(values)
-            bits = (b0, b1, b2, b3, b4, b5)
+                entity_features = features_of(features)
+            bits = flags & 63
             outcome = outcomes.get(bits) or outcome_of(bits)
             record = new(record_cls)  # see _frozen: complete, valid values only
             record.__dict__.update(
@@ -247,7 +272,7 @@ class TrialDecoder:
                     "spec": spec,
                     "features": entity_features,
                     "outcome": outcome,
-                    "solved": bool(solved),
+                    "solved": flags & 64 != 0,
                     "sim_steps": sim_steps,
                     "wall_seconds": wall_seconds,
                     "seed": seed,
@@ -257,7 +282,7 @@ class TrialDecoder:
                     "scenario": scenario,
                     "created_at": created_at if created_at is None or isinstance(created_at, str) else iso_timestamp(created_at),
                     "extra": {} if extra in ("{}", None) else _json(extra),
-                    "cache_hit": bool(cache_hit),
+                    "cache_hit": flags & 128 != 0,
                     "simulation_wall_seconds": simulation_wall_seconds,
                 }
             )
@@ -272,3 +297,5 @@ _DECODED_FIELDS = frozenset(
 )
 if _DECODED_FIELDS != _TRIAL_RECORD_FIELDS:  # pragma: no cover - guards a change in llcps.domain
     raise ImportError(f"llcps.store.trials decodes {sorted(_DECODED_FIELDS)} but TrialRecord has {sorted(_TRIAL_RECORD_FIELDS)}")
+if frozenset(f.name for f in fields(EntityFeatures)) != {"shape", "color", *_NUMBERS}:  # pragma: no cover
+    raise ImportError("llcps.store.trials packs fields that EntityFeatures does not have")

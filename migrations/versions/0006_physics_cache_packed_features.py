@@ -1,8 +1,9 @@
-"""The physics cache, trials answered from it, and typed feature columns.
+"""The physics cache, trials answered from it, and packed feature values.
 
-A trial's Table-1 features move from a JSON list into typed columns (``arg0_*``
-for the first argument, ``arg1_*`` for the second, NULL for one-argument
-actions), so loading a training set decodes no JSON. Trials gain ``cache_hit`` and
+A trial's Table-1 features move from a JSON list of objects into one binary value
+of fixed layout (``llcps.store.trials.pack_features``: per entity five doubles,
+then the shapes and colours as text), so loading a training set decodes no JSON
+and fetches one value per trial for them. Trials gain ``cache_hit`` and
 ``simulation_wall_seconds`` (the wall time of the simulation that computed a
 cached result; this run's own time stays in ``wall_seconds``). The new
 ``physics_cache`` table holds simulated trials by a digest of their inputs.
@@ -15,6 +16,7 @@ Create Date: 2026-11-22
 from __future__ import annotations
 
 import json
+import struct
 from typing import Any
 
 import sqlalchemy as sa
@@ -25,22 +27,29 @@ down_revision = "0002"
 branch_labels = None
 depends_on = None
 
-FEATURES = ("shape", "volume", "color", "vector_magnitude", "unit_x", "unit_y", "unit_z")
-TEXT_FEATURES = ("shape", "color")
-SLOTS = (0, 1)
+NUMBERS = ("volume", "vector_magnitude", "unit_x", "unit_y", "unit_z")
+SEPARATOR = "\x1f"
+LAYOUT = 1
 BATCH = 5_000
 
 
-def _feature_columns(nullable_first: bool) -> list[sa.Column]:
+def _pack(entities: list[dict[str, Any]]) -> bytes:
+    """The layout of ``llcps.store.trials.pack_features`` at this revision (kept here: a
+    revision must not change when the library does)."""
+    numbers = [float(e[name]) for e in entities for name in NUMBERS]
+    names = SEPARATOR.join(str(e[k]) for e in entities for k in ("shape", "color"))
+    return bytes((LAYOUT, len(entities))) + struct.pack(f"<{len(numbers)}d", *numbers) + names.encode()
+
+
+def _unpack(data: bytes) -> list[dict[str, Any]]:
+    n = data[1]
+    numbers = struct.unpack_from(f"<{5 * n}d", data, 2)
+    names = data[2 + 40 * n :].decode().split(SEPARATOR) if n else []
     return [
-        sa.Column(
-            f"arg{slot}_{name}",
-            sa.String(length=32) if name in TEXT_FEATURES else sa.Float(),
-            nullable=nullable_first or slot > 0,
-        )
-        for slot in SLOTS
-        for name in FEATURES
-    ]
+        {"shape": names[2 * i], "volume": numbers[5 * i], "color": names[2 * i + 1],
+         **dict(zip(NUMBERS[1:], numbers[5 * i + 1 : 5 * i + 5]))}
+        for i in range(n)
+    ]  # fmt: skip
 
 
 def _sqlite_sequence(conn: sa.Connection) -> int | None:
@@ -58,7 +67,25 @@ def _restore_sequence(conn: sa.Connection, seq: int | None) -> None:
 
 
 def _decode(value: Any) -> list[dict[str, Any]]:
+    """A JSON column's value (drivers may hand it over decoded)."""
     return json.loads(value) if isinstance(value, (str, bytes)) else list(value or [])
+
+
+def _convert(conn: sa.Connection, source: str, target: str, convert: Any) -> None:
+    """Fill column ``target`` of every trial from column ``source``, in batches."""
+    trials = sa.table("trials", sa.column("id", sa.Integer()), sa.column(source), sa.column(target))
+    last = 0
+    while True:
+        rows = conn.execute(
+            sa.select(trials.c.id, trials.c[source]).where(trials.c.id > last).order_by(trials.c.id).limit(BATCH)
+        ).all()
+        if not rows:
+            return
+        conn.execute(
+            trials.update().where(trials.c.id == sa.bindparam("trial_id")).values({target: sa.bindparam("value")}),
+            [{"trial_id": trial_id, "value": convert(value)} for trial_id, value in rows],
+        )
+        last = rows[-1][0]
 
 
 def upgrade() -> None:
@@ -78,42 +105,13 @@ def upgrade() -> None:
     )
     op.create_index("ix_physics_cache_last_used", "physics_cache", ["last_used"])
     with op.batch_alter_table("trials", table_kwargs={"sqlite_autoincrement": True}) as batch:
-        for column in _feature_columns(nullable_first=True):
-            batch.add_column(column)
+        batch.add_column(sa.Column("packed_features", sa.LargeBinary(), nullable=True))
         batch.add_column(sa.Column("cache_hit", sa.Boolean(), nullable=False, server_default=sa.false()))
         batch.add_column(sa.Column("simulation_wall_seconds", sa.Float(), nullable=True))
-
-    trials = sa.table("trials", sa.column("id", sa.Integer()), sa.column("features", sa.Text()),
-                      *(sa.column(c.name) for c in _feature_columns(nullable_first=True)))  # fmt: skip
-    last = 0
-    while True:
-        rows = conn.execute(
-            sa.select(trials.c.id, trials.c.features).where(trials.c.id > last).order_by(trials.c.id).limit(BATCH)
-        ).all()
-        if not rows:
-            break
-        updates = []
-        for trial_id, features in rows:
-            values: dict[str, Any] = {"trial_id": trial_id}
-            decoded = _decode(features)
-            for slot in SLOTS:
-                entity = decoded[slot] if slot < len(decoded) else {}
-                for name in FEATURES:
-                    values[f"arg{slot}_{name}"] = entity.get(name)
-            updates.append(values)
-        conn.execute(
-            trials.update()
-            .where(trials.c.id == sa.bindparam("trial_id"))
-            .values({c.name: sa.bindparam(c.name) for c in _feature_columns(nullable_first=True)}),
-            updates,
-        )
-        last = rows[-1][0]
-
+    _convert(conn, "features", "packed_features", lambda value: _pack(_decode(value)))
     with op.batch_alter_table("trials", table_kwargs={"sqlite_autoincrement": True}) as batch:
-        for column in _feature_columns(nullable_first=False):
-            if not column.nullable:
-                batch.alter_column(column.name, existing_type=column.type, nullable=False)
         batch.drop_column("features")
+        batch.alter_column("packed_features", new_column_name="features", existing_type=sa.LargeBinary(), nullable=False)
     _restore_sequence(conn, seq)
 
 
@@ -121,23 +119,13 @@ def downgrade() -> None:
     conn = op.get_bind()
     seq = _sqlite_sequence(conn)
     with op.batch_alter_table("trials", table_kwargs={"sqlite_autoincrement": True}) as batch:
-        batch.add_column(sa.Column("features", sa.JSON(), nullable=True))
-    columns = [c.name for c in _feature_columns(nullable_first=True)]
-    trials = sa.table("trials", sa.column("id", sa.Integer()), sa.column("features", sa.JSON()), *(sa.column(c) for c in columns))
-    rows = conn.execute(sa.select(trials.c.id, *(trials.c[c] for c in columns))).all()
-    for row in rows:
-        features = []
-        for slot in SLOTS:
-            entity = {name: row._mapping[f"arg{slot}_{name}"] for name in FEATURES}
-            if entity["shape"] is not None:
-                features.append(entity)
-        conn.execute(trials.update().where(trials.c.id == row.id).values(features=features))
+        batch.add_column(sa.Column("json_features", sa.Text(), nullable=True))
+    _convert(conn, "features", "json_features", lambda value: json.dumps(_unpack(bytes(value))))
     with op.batch_alter_table("trials", table_kwargs={"sqlite_autoincrement": True}) as batch:
-        batch.alter_column("features", existing_type=sa.JSON(), nullable=False)
-        for name in columns:
-            batch.drop_column(name)
+        batch.drop_column("features")
         batch.drop_column("cache_hit")
         batch.drop_column("simulation_wall_seconds")
+        batch.alter_column("json_features", new_column_name="features", type_=sa.JSON(), existing_type=sa.Text(), nullable=False)
     _restore_sequence(conn, seq)
     op.drop_index("ix_physics_cache_last_used", table_name="physics_cache")
     op.drop_table("physics_cache")
