@@ -56,26 +56,42 @@ def pack_features(features: Sequence[EntityFeatures]) -> bytes:
     return bytes((FEATURES_LAYOUT, len(features))) + _DOUBLES[len(features)].pack(*numbers) + _SEPARATOR.join(names).encode()
 
 
+_names: dict[bytes, list[str]] = {}  # the text part of packed features, decoded once per process
+
+
+def _decode_names(data: bytes) -> list[str] | None:
+    try:
+        names = data.decode().split(_SEPARATOR) if data else []
+    except UnicodeDecodeError:
+        return None
+    if len(_names) < 10_000:
+        _names[data] = names
+    return names
+
+
 def unpack_features(data: bytes) -> tuple[EntityFeatures, ...]:
     """Read :func:`pack_features`'s bytes back, checking their layout (they come from a database)."""
     try:
         n = data[1] if data[0] == FEATURES_LAYOUT else -1
         doubles = _DOUBLES[n]
         numbers = doubles.unpack_from(data, 2)
-        names = data[2 + doubles.size :].decode().split(_SEPARATOR) if n else []
-    except (IndexError, TypeError, struct.error, UnicodeDecodeError):
-        names = None
-    if names is None or len(names) != 2 * n or not all(names):
+    except (IndexError, TypeError, struct.error):
+        n, numbers = -1, ()
+    tail = data[2 + 40 * n :] if n >= 0 else b""
+    names = _names.get(tail) or _decode_names(tail)
+    if n < 0 or names is None or len(names) != 2 * n or not all(names):
         raise LlcpsError("stored trial features are malformed", hint="the store may be damaged; `llcps db status`")
-    new = object.__new__
-    out = []
-    for i in range(n):  # see _frozen: complete, valid values only
+    new, set_dict = object.__new__, object.__setattr__
+    if n == 1:  # the common case, unrolled; see _frozen: complete, valid values only
         entity = new(EntityFeatures)
-        k = 5 * i
-        entity.__dict__.update(
-            shape=names[2 * i], volume=numbers[k], color=names[2 * i + 1], vector_magnitude=numbers[k + 1],
-            unit_x=numbers[k + 2], unit_y=numbers[k + 3], unit_z=numbers[k + 4],
-        )  # fmt: skip
+        v, m, x, y, z = numbers
+        set_dict(entity, "__dict__", {"shape": names[0], "volume": v, "color": names[1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
+        return (entity,)
+    out = []
+    for i in range(n):
+        entity = new(EntityFeatures)
+        v, m, x, y, z = numbers[5 * i : 5 * i + 5]
+        set_dict(entity, "__dict__", {"shape": names[2 * i], "volume": v, "color": names[2 * i + 1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
         out.append(entity)
     return tuple(out)
 
@@ -247,7 +263,7 @@ class TrialDecoder:
         specs, spec_of = self._specs, self._spec
         features_cache, features_of = self._features, self._feature_tuple
         outcomes, outcome_of = self._outcomes, self._outcome
-        new, record_cls = object.__new__, TrialRecord
+        new, record_cls, set_dict = object.__new__, TrialRecord, object.__setattr__
         out: list[TrialRecord] = []
         append = out.append
         for (
@@ -264,7 +280,9 @@ class TrialDecoder:
             bits = flags & 63
             outcome = outcomes.get(bits) or outcome_of(bits)
             record = new(record_cls)  # see _frozen: complete, valid values only
-            record.__dict__.update(
+            set_dict(
+                record,
+                "__dict__",
                 {
                     "id": id_,
                     "branch": names[branch_id],
@@ -284,7 +302,7 @@ class TrialDecoder:
                     "extra": {} if extra in ("{}", None) else _json(extra),
                     "cache_hit": flags & 128 != 0,
                     "simulation_wall_seconds": simulation_wall_seconds,
-                }
+                },
             )
             append(record)
         return out
