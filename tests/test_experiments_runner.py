@@ -422,3 +422,39 @@ def test_ray_engine_without_ray_names_the_extra(monkeypatch: pytest.MonkeyPatch)
     with pytest.raises(LlcpsError) as info:
         make_engine("ray", 2)
     assert info.value.hint == "pip install 'llcps[ray]'" and "not installed" in info.value.message
+
+
+class _RecordingEngine:
+    """Finishes every task at once with an error; remembers the order tasks were submitted in."""
+
+    name, workers = "recording", 2
+
+    def __init__(self) -> None:
+        self.submitted: list[str] = []
+
+    def submit(self, task: Any) -> str:
+        self.submitted.append(task.label)
+        return task.label
+
+    def wait(self, handles: Any, timeout: float) -> list[str]:
+        return list(handles)[:1]
+
+    def result(self, handle: str) -> Any:
+        raise RuntimeError("not run")
+
+    def close(self, *, abort: bool, pending: Any = ()) -> None:
+        pass
+
+
+def test_the_scheduler_keeps_twins_apart(store: Store) -> None:
+    from llcps.experiments.scheduler import RunSummary, schedule
+
+    tasks = [t for t in plan_tasks(SMOKE, 2) if isinstance(t, SequenceTask)]  # s0 update, s0 reset, s1 update, s1 reset
+    for name in {t.pretrain_branch for t in tasks}:
+        store.create_branch(name, from_branch="main", at=0)
+    engine = _RecordingEngine()
+    summary = RunSummary(preset="smoke", seeds=(0, 1), engine="recording", workers=2)
+    schedule(store, engine, tasks, {b.name for b in store.list_branches()}, summary, {}, None)
+    # the two sequences of seed 0 would simulate scenario 1 side by side: seed 1's goes second
+    assert engine.submitted[:2] == [tasks[0].label, tasks[2].label]
+    assert sorted(engine.submitted) == sorted(t.label for t in tasks) and len(summary.failed) == 4

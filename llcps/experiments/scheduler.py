@@ -97,6 +97,14 @@ def check_partial(tasks: Iterable[Task], existing: set[str]) -> None:
         )
 
 
+def twin_key(task: Task) -> tuple[object, ...] | None:
+    """What a sequence shares with its other-condition twin: both start scenario 1 alike."""
+    if not isinstance(task, SequenceTask):
+        return None
+    cell = task.sequence.cell
+    return (task.sequence.preset, task.sequence.seed, cell.model, cell.measure, cell.pretrain_size)
+
+
 def schedule(
     store: Store,
     runner: Engine,
@@ -106,7 +114,10 @@ def schedule(
     in_flight: dict[Any, Task],
     progress: ProgressCallback | None,
 ) -> None:
-    """Keep every worker busy with the first ready task; import results as they arrive."""
+    """Keep every worker busy with the first ready task; import results as they arrive.
+
+    Of the ready tasks, one whose twin is not in flight goes first (see :func:`twin_key`).
+    """
     pending = list(todo)
     bases: dict[str, Payload] = {}
     failed_pretraining: set[str] = set()
@@ -123,7 +134,12 @@ def schedule(
             summary.blocked += 1
             pending.remove(task)
         while len(in_flight) < runner.workers:
-            task = next((t for t in pending if ready(t)), None)
+            candidates = [t for t in pending if ready(t)]
+            busy = {twin_key(t) for t in in_flight.values()} - {None}
+            # A sequence whose twin (same seed and cell, other condition) is running would
+            # simulate the same first scenario at the same time; run something else first,
+            # and the twin's trials come from the physics cache when it starts.
+            task = next((t for t in candidates if twin_key(t) not in busy), None) or next(iter(candidates), None)
             if task is None:
                 return
             pending.remove(task)
