@@ -313,6 +313,8 @@ def solve(
         result.sim_seconds = result.sim_steps * (world.time_step if world is not None else 1 / 240)
         if world is not None:
             world.close()
+        if cache is not None:
+            cache.flush()
         if result.status == "running":
             result.status = "error"
         store.finish_episode(result.episode_id, status=result.status, summary=result.as_json())

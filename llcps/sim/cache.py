@@ -88,6 +88,9 @@ class PhysicsCache(Protocol):
     def put(self, key: str, result: TrialResult, end_state: bytes) -> None:
         """Keep a simulated trial; a key already present is left as it is."""
 
+    def flush(self) -> None:
+        """Write back any bookkeeping held in memory (an episode ends)."""
+
 
 # ----------------------------------------------------------------------------- encoding
 def encode_result(result: TrialResult) -> bytes:
