@@ -165,3 +165,10 @@ def test_episodes_record_the_same_trials_without_the_cache_from_a_cold_one_and_f
         assert first.simulation_wall_seconds == first.wall_seconds
         assert again.simulation_wall_seconds == pytest.approx(first.wall_seconds, rel=1e-9)
         assert again.wall_seconds != again.simulation_wall_seconds
+
+
+def test_workers_on_a_cluster_share_no_sqlite_file(store: Store) -> None:
+    from llcps.experiments.runner import cache_url
+
+    assert cache_url(store) == str(store.engine.url) and cache_url(store).startswith("sqlite:///")
+    assert cache_url(store, remote_workers=True) is None  # the file is on this machine only

@@ -24,9 +24,16 @@ from llcps.store import MAIN_BRANCH, Store
 from llcps.store import physics_cache
 
 
-def cache_url(store: Store) -> str:
-    """The URL workers open to share ``store``'s physics cache (with its credentials)."""
-    return store.engine.url.render_as_string(hide_password=False)
+def cache_url(store: Store, *, remote_workers: bool = False) -> str | None:
+    """The URL workers open to share ``store``'s physics cache (with its credentials).
+
+    None when the workers cannot reach it: a SQLite file is on this machine only, so
+    workers on a Ray cluster run without the cache (a PostgreSQL store serves them all).
+    """
+    url = store.engine.url
+    if remote_workers and url.get_backend_name() == "sqlite":
+        return None
+    return url.render_as_string(hide_password=False)
 
 
 def run_experiment(
@@ -53,7 +60,8 @@ def run_experiment(
         cache: let workers answer trials simulated before (by this run or an earlier
             one on the store) from the store's physics cache
             (:mod:`llcps.store.physics_cache`); the results are the same either way.
-            The cache is pruned back to its bound when the run ends.
+            The cache is pruned back to its bound when the run ends. Workers on a Ray
+            cluster share it only through a PostgreSQL store.
 
     Returns:
         What ran; on Ctrl-C the tasks imported so far stay and ``status`` is ``interrupted``.
@@ -66,7 +74,8 @@ def run_experiment(
         raise LlcpsError("--ray-address needs --engine ray")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise LlcpsError(f"workers must be at least 1, not {workers!r}", hint="pass --workers 1 or more")
-    tasks = plan_tasks(grid, seeds, cache_url=cache_url(store) if cache else None)
+    shared = cache_url(store, remote_workers=ray_address is not None) if cache else None
+    tasks = plan_tasks(grid, seeds, cache_url=shared)
     seed_list = tuple(dict.fromkeys(task_seed(t) for t in tasks))
     summary = RunSummary(preset=grid.name, seeds=seed_list, engine=engine, workers=workers, tasks=len(tasks))
     existing = existing_branches(store)
