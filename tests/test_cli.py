@@ -7,7 +7,6 @@ import hashlib
 import io
 import json
 import os
-import shutil
 import sqlite3
 import subprocess
 import sys
@@ -16,6 +15,7 @@ from pathlib import Path
 from typing import Iterator
 
 import pytest
+from make_store_fixtures import make as make_store
 from store_writer import sample_trial
 from typer.testing import CliRunner
 
@@ -24,9 +24,7 @@ from llcps.domain import OUTCOME_NAMES
 from llcps.store import Store, migrations
 from llcps.store.schema import VERSION_TABLE
 
-HEAD = migrations.head_revision()
 
-FIXTURES = Path(__file__).parent / "fixtures"
 runner = CliRunner()
 
 
@@ -53,7 +51,7 @@ def test_acceptance_flow(tmp_path: Path) -> None:
     db = tmp_path / "new.db"
     result = llcps(db, "db", "init")
     assert result.exit_code == 0, result.output
-    assert f"schema {HEAD}" in result.stderr and result.stdout == ""
+    assert f"schema {migrations.head_revision()}" in result.stderr and result.stdout == ""
     assert llcps(db, "db", "init").exit_code == 0  # idempotent
     result = llcps(db, "db", "branch", "exp", "--from", "main")
     assert result.exit_code == 0 and "created branch exp from main" in result.stderr
@@ -64,9 +62,9 @@ def test_acceptance_flow(tmp_path: Path) -> None:
     ]
     assert llcps(db, "db", "checkout", "exp").exit_code == 0
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
-    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", HEAD, True)
+    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", migrations.head_revision(), True)
     text = llcps(db, "db", "status")
-    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and HEAD in text.stdout
+    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and migrations.head_revision() in text.stdout
 
 
 def test_inspect_trials_json_and_filters(db: Path) -> None:
@@ -141,14 +139,13 @@ def test_export_csv_and_jsonl(db: Path, tmp_path: Path) -> None:
 
 
 def test_upgrade_command_on_an_old_store(tmp_path: Path) -> None:
-    db = tmp_path / "old.db"
-    shutil.copy(FIXTURES / "store_0001.db", db)
+    db = make_store("0001", tmp_path)
     refused = llcps(db, "inspect", "trials")
     assert refused.exit_code == 2 and "llcps db upgrade" in refused.stderr
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
     assert (status["revision"], status["up_to_date"], status["visible_trials"]) == ("0001", False, 2)
     upgraded = llcps(db, "db", "upgrade", "--json")
-    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": HEAD, "changed": True}
+    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": migrations.head_revision(), "changed": True}
     assert len(json.loads(llcps(db, "inspect", "trials", "--json").stdout)) == 2
 
 

@@ -61,11 +61,11 @@ def run_cli(
         Optional[Path],
         typer.Option("--out", metavar="DIR", help="Report directory (default: results/<preset>).", show_default=False, file_okay=False),
     ] = None,
-    memo: Annotated[
+    cache: Annotated[
         bool,
         typer.Option(
-            "--memo/--no-memo",
-            help="Answer a trial a worker already simulated (same scene, state and call) from that simulation; results are identical either way.",
+            "--cache/--no-cache",
+            help="Answer a trial simulated before (same physics settings, scene, state, call and step cap) from the store's physics cache, shared by all workers and later runs; results are identical either way.",
         ),
     ] = True,
     as_json: JsonFlag = False,
@@ -96,7 +96,7 @@ def run_cli(
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
                     progress=report,
-                    memo=memo,
+                    cache=cache,
                 )
             if summary.status == "interrupted":
                 message(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
@@ -199,9 +199,11 @@ def _progress() -> Progress:
 def show_run(summary: RunSummary, out_dir: Path) -> None:
     """What the run did, for people (stderr)."""
     failed = f", {len(summary.failed)} failed" if summary.failed else ""
+    rate = summary.cache_hit_rate
+    cache = "" if rate is None else f", physics cache answered {summary.cache.get('hits', 0)} trial(s) ({rate:.0%})"  # type: ignore[union-attr]
     message(
         f"{summary.preset}: {summary.done} task(s) run, {summary.skipped} already stored{failed} "
-        f"({summary.workers} {summary.engine} worker(s), {summary.wall_seconds:.1f} s); report in {out_dir / 'report.md'}"
+        f"({summary.workers} {summary.engine} worker(s), {summary.wall_seconds:.1f} s{cache}); report in {out_dir / 'report.md'}"
     )
 
 

@@ -16,7 +16,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import bench, db, experiment, inspect, inspect_model, inspect_runs, pretrain, replay, solve  # noqa: F401 - inspect_* add `inspect` subcommands
+from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, pretrain, replay, solve  # noqa: F401 - inspect_* add `inspect` subcommands
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
 
 app = new_app(
@@ -52,6 +52,7 @@ app.command("pretrain")(pretrain.pretrain_cli)
 app.command("replay")(replay.replay_cli)
 app.command("bench")(bench.bench_cli)
 app.add_typer(experiment.app, name="experiment")
+app.add_typer(cache.app, name="cache")
 
 
 def main() -> None:

@@ -37,7 +37,7 @@ from llcps.models.measures import rank
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
 from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
-from llcps.sim.memo import TrialMemo, memo_key
+from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
 from llcps.sim.perception import entity_features, perceive
 from llcps.sim.render import GifRecorder
 from llcps.sim.trial import TrialResult, run_trial
@@ -102,7 +102,8 @@ class Agent:
         config: SolveConfig,
         result: SolveResult,
         records: list[TrialRecord],
-        memo: TrialMemo | None = None,
+        cache: PhysicsCache | None = None,
+        max_steps: int = DEFAULT_MAX_STEPS,
     ) -> None:
         self.store = store
         self.branch = branch
@@ -113,10 +114,13 @@ class Agent:
         self.records = records
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
         self.recorder: GifRecorder | None = None
-        self.memo = memo
+        self.cache = cache
+        #: The step cap of every trial: the one the physics runs under and the cache keys by.
+        self.max_steps = max_steps
         # Physics state of each stored snapshot this episode took, by snapshot id.
         self._states: dict[int, bytes] = {}
-        # End state of a trial answered by the memo, loaded when the world is next used.
+        # The serialized end state of the last stored trial: the world continues from
+        # exactly these bytes, loaded when it is next used (unless a restore comes first).
         self._pending: bytes | None = None
         # Operator executions as plan steps the branch sees, this episode's included.
         self.experience: Experience = load_experience(store, branch)
@@ -150,6 +154,7 @@ class Agent:
 
     def controller_call(self, step: GroundAction) -> TrialSpec:
         """Map a plan step to its controller call: learned settings, or K's nominal ones."""
+        self.sync()  # a push's direction is read from the world
         call = step.controller
         if call is None:
             raise LlcpsError(f"plan step {step.label} has no controller")
@@ -175,26 +180,32 @@ class Agent:
         world's current state, which must then be the state of ``snapshot_id``. With
         ``snapshot_id=None`` the trial is a re-enactment for a GIF: it is not stored.
         A stored trial leaves the world in its serialized end state, so what follows
-        is the same whether the trial was simulated or answered by the memo.
+        is the same whether the trial was simulated or answered by the physics cache;
+        a cached answer is recorded as such, with this run's wall seconds.
         """
-        trial: TrialResult | None = None
-        key: bytes | None = None
-        if snapshot_id is not None and self.memo is not None and self.recorder is None:
-            key = memo_key(self.world.scene.to_dict(), self._states[snapshot_id], spec, DEFAULT_MAX_STEPS)
-            cached = self.memo.get(key)
-            if cached is not None:
-                trial, self._pending = cached
-        if trial is None:
+        started = time.perf_counter()
+        cached: CachedTrial | None = None
+        key: str | None = None
+        if snapshot_id is not None and self.cache is not None and self.recorder is None:
+            key = trial_key(self.world.settings, self.world.scene.to_dict(), self._states[snapshot_id], spec, self.max_steps)
+            cached = self.cache.get(key)
+            if cached is not None and cached.result.spec != spec:  # a damaged entry: simulate instead
+                cached = None
+        if cached is not None:
+            trial, self._pending = cached.result, cached.end_state
+        else:
             if start is not None:
                 self.restore(start)
             else:
                 self.sync()
-            trial = run_trial(self.world, spec)
+            trial = run_trial(self.world, spec, max_steps=self.max_steps)
             if snapshot_id is None:
                 return trial, None
-            end = self.world.serialize_state()
+            # Continue from exactly the stored bytes; the restore waits until the world is
+            # used again, and is skipped when a restore of another state comes first.
+            self._pending = self.world.save_state()
             if key is not None:
-                self.memo.put(key, trial, end)
+                self.cache.put(key, trial, self._pending)
         new = TrialRecord(
             branch=self.branch,
             source=source,
@@ -203,7 +214,9 @@ class Agent:
             outcome=trial.outcome,
             solved=self.scenario.goal_reached(trial.after),
             sim_steps=trial.sim_steps,
-            wall_seconds=trial.wall_seconds,
+            wall_seconds=trial.wall_seconds if cached is None else time.perf_counter() - started,
+            cache_hit=cached is not None,
+            simulation_wall_seconds=trial.wall_seconds,
             seed=self.config.seed,
             run_id=self.result.run_id,
             episode_id=self.result.episode_id,
@@ -214,6 +227,8 @@ class Agent:
         record = replace(new, id=trial_id)
         self.records.append(record)
         self.result.sim_steps += trial.sim_steps
+        if cached is not None:
+            self.result.cache_hits += 1
         if source == "plan":
             self.result.plan_trials += 1
         elif source == "exploration":
@@ -234,7 +249,7 @@ class Agent:
         self.world.restore_serialized(self._states[snapshot_id])
 
     def sync(self) -> None:
-        """Bring the world to the end state of the last trial, if the memo answered it."""
+        """Bring the world to the serialized end state of the last stored trial, if not done yet."""
         if self._pending is not None:
             state, self._pending = self._pending, None
             self.world.restore_serialized(state)
@@ -293,7 +308,7 @@ def solve(
     gui: bool = False,
     gif: str | Path | None = None,
     progress: ProgressCallback | None = None,
-    memo: TrialMemo | None = None,
+    cache: PhysicsCache | None = None,
 ) -> SolveResult:
     """Solve one scenario on one branch; see the module docstring.
 
@@ -305,8 +320,10 @@ def solve(
         gui: open a PyBullet GUI window (needs a display).
         gif: write the plan's execution and the resolving trial to this GIF.
         progress: optional callback for progress bars.
-        memo: trials already simulated (:mod:`llcps.sim.memo`), to answer repeats without
-            stepping the engine; what the episode records is the same with or without it.
+        cache: the physics cache (:mod:`llcps.store.physics_cache`), to answer trials
+            simulated before without stepping the engine; what the episode records is
+            the same with or without it, but for the trials marked ``cache_hit`` and
+            their wall seconds.
 
     Returns:
         The episode summary; ``status`` is ``solved``, ``budget_exhausted``,
@@ -350,7 +367,7 @@ def solve(
             config=config,
             result=result,
             records=records,
-            memo=memo,
+            cache=cache,
         )
         if gif is not None:
             agent.recorder = GifRecorder(world, every=GIF_EVERY)
@@ -364,6 +381,8 @@ def solve(
         result.sim_seconds = result.sim_steps * (world.time_step if world is not None else 1 / 240)
         if world is not None:
             world.close()
+        if cache is not None:
+            cache.flush()
         if result.status == "running":
             result.status = "error"
         store.finish_episode(result.episode_id, status=result.status, summary=result.as_json())

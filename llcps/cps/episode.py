@@ -63,6 +63,8 @@ class SolveResult:
     missing_effects: str | None = None
     exploration_trials: int = 0
     plan_trials: int = 0
+    #: Trials answered from the physics cache instead of simulated.
+    cache_hits: int = 0
     candidates: int = 0
     sim_steps: int = 0
     sim_seconds: float = 0.0
@@ -92,6 +94,7 @@ class SolveResult:
             "missing_effects": self.missing_effects,
             "exploration_trials": self.exploration_trials,
             "plan_trials": self.plan_trials,
+            "cache_hits": self.cache_hits,
             "candidates": self.candidates,
             "sim_steps": self.sim_steps,
             "sim_seconds": round(self.sim_seconds, 4),

@@ -32,6 +32,7 @@ from llcps.experiments.stats import (
     CumulativePoint,
     Figure2Row,
 )
+from llcps.experiments.survival import SurvivalCurve
 
 #: Colours of the two conditions, used by every plot.
 CONDITION_COLORS = {"update": "#1f77b4", "reset": "#ff7f0e"}
@@ -258,3 +259,52 @@ def cumulative_plot(
         "cumulative exploration over the scenario sequence (mean, 95% bootstrap CI)", fontsize=10, y=1 - 0.1 / height
     )
     return save(fig, stem)
+
+
+def survival_plot(curves: Sequence[SurvivalCurve], stem: str | Path, *, scenario: str) -> tuple[Path, ...]:
+    """Kaplan–Meier curves of trials to resolution in one scenario: one panel per condition,
+    one step line per model x measure x pretraining size, with 95% bands.
+
+    An unsolved episode is censored at its budget (a tick on its line), so a curve that
+    ends above 0 says how many episodes the budget did not resolve.
+    """
+    mine = [c for c in curves if c.scenario == scenario]
+    conditions = sorted({c.condition for c in mine}, key=condition_rank) or ["update"]
+    cells = _cell_order((c.model, c.measure, c.pretrain_size) for c in mine)
+    colors = matplotlib.colormaps["tab20"].resampled(max(len(cells), 1))
+    fig = Figure(figsize=(4.2 * len(conditions) + 1.6, 3.6))
+    axes = fig.subplots(1, len(conditions), sharey=True, squeeze=False)[0]
+    fig.subplots_adjust(wspace=0.08, right=0.72 if cells else 0.95)
+    for ax, condition in zip(axes, conditions):
+        for k, cell in enumerate(cells):
+            curve = next((c for c in mine if (c.model, c.measure, c.pretrain_size, c.condition) == (*cell, condition)), None)
+            if curve is None:
+                continue
+            km = curve.estimate
+            x = np.concatenate(([0.0], km.times, [km.tau])) if km.times else np.array([0.0, km.tau])
+            y = np.concatenate(([1.0], km.survival, [km.survival[-1] if km.survival else 1.0]))
+            low = np.concatenate(([1.0], km.ci_low, [km.ci_low[-1] if km.ci_low else 1.0]))
+            high = np.concatenate(([1.0], km.ci_high, [km.ci_high[-1] if km.ci_high else 1.0]))
+            color = colors(k)
+            label = f"{cell[0]} / {cell[1]} / p{cell[2]}"
+            ax.step(x, y, where="post", color=color, linewidth=1.2, label=label)
+            ax.fill_between(x, low, high, step="post", color=color, alpha=0.12, linewidth=0)
+            if km.events < km.n:  # censored at the budget
+                ax.plot([km.tau], [km.survival[-1] if km.survival else 1.0], marker="|", ms=9, color=color)
+        ax.set_title(f"{scenario}, {condition}", fontsize=10)
+        ax.set_xlabel("exploration trials", fontsize=8)
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+    axes[0].set_ylabel("P(not yet resolved)", fontsize=8)
+    if cells:
+        axes[-1].legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
+    fig.suptitle("Kaplan–Meier estimate of trials to resolution (95% band; | censored at the budget)", fontsize=10)
+    return save(fig, stem)
+
+
+def survival_plots(curves: Sequence[SurvivalCurve], directory: str | Path) -> dict[str, tuple[Path, ...]]:
+    """:func:`survival_plot` for every scenario of ``curves``, as ``survival_<scenario>`` in ``directory``."""
+    scenarios = [s for s in SCENARIO_SEQUENCE if any(c.scenario == s for c in curves)]
+    scenarios += sorted({c.scenario for c in curves} - set(scenarios))
+    return {s: survival_plot(curves, Path(directory) / f"survival_{s}", scenario=s) for s in scenarios}

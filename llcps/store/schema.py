@@ -28,6 +28,7 @@ from sqlalchemy import (
     SmallInteger,
     String,
     Text,
+    false,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
@@ -148,7 +149,10 @@ class Trial(Base):
     rate: Mapped[float] = mapped_column(Float)
     movement_magnitude: Mapped[float] = mapped_column(Float)
     orientation: Mapped[str] = mapped_column(String(16))
-    features: Mapped[list[Any]]
+    # Table-1 features of the arguments, packed (llcps.store.trials.pack_features):
+    # one value per trial, so loading a training set neither decodes JSON nor
+    # fetches fourteen columns per row.
+    features: Mapped[bytes] = mapped_column(LargeBinary)
     positive_visibility: Mapped[int] = mapped_column(SmallInteger)
     negative_visibility: Mapped[int] = mapped_column(SmallInteger)
     positive_reachability: Mapped[int] = mapped_column(SmallInteger)
@@ -158,6 +162,10 @@ class Trial(Base):
     solved: Mapped[bool] = mapped_column(Boolean)
     sim_steps: Mapped[int] = mapped_column(Integer)
     wall_seconds: Mapped[float] = mapped_column(Float)
+    # Answered from the physics cache: wall_seconds is then this run's lookup, and
+    # simulation_wall_seconds the wall time of the simulation that computed it.
+    cache_hit: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
+    simulation_wall_seconds: Mapped[float | None] = mapped_column(Float)
     seed: Mapped[int] = mapped_column(BigInteger)
     snapshot_id: Mapped[int | None] = mapped_column(ForeignKey("snapshots.id"))
     created_at: Mapped[datetime] = mapped_column(DateTime)
@@ -230,3 +238,24 @@ class WorldModel(Base):
     meta: Mapped[dict[str, Any]]
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
+
+
+class PhysicsCacheEntry(Base):
+    """A simulated trial's result and end state, keyed by everything its physics depends on.
+
+    See :mod:`llcps.store.physics_cache`. Not experience: pruning it changes no
+    branch, only how much physics later runs must compute again.
+    """
+
+    __tablename__ = "physics_cache"
+    __table_args__ = (Index("ix_physics_cache_last_used", "last_used"),)
+
+    key: Mapped[str] = mapped_column(String(64), primary_key=True)
+    result: Mapped[bytes] = mapped_column(LargeBinary)
+    end_state: Mapped[bytes] = mapped_column(LargeBinary)
+    # sha256 of result, a NUL and end_state: checked before either is decoded.
+    sha256: Mapped[str] = mapped_column(String(64))
+    size: Mapped[int] = mapped_column(Integer)
+    hits: Mapped[int] = mapped_column(Integer, default=0)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    last_used: Mapped[datetime] = mapped_column(DateTime)
