@@ -24,7 +24,7 @@ run: setup
 	-$(BIN)/llcps --db $(DB) solve scenario1
 	-$(BIN)/llcps --db $(DB) solve scenario2
 	-$(BIN)/llcps --db $(DB) solve scenario3
-	$(BIN)/llcps --db $(DB) inspect runs
+	$(BIN)/llcps --db $(DB) inspect episodes
 
 test: setup
 	$(BIN)/python -m pytest

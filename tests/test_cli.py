@@ -21,11 +21,12 @@ from typer.testing import CliRunner
 
 from llcps.cli.main import app
 from llcps.domain import OUTCOME_NAMES
-from llcps.store import Store
+from llcps.store import Store, migrations
 from llcps.store.schema import VERSION_TABLE
 
 FIXTURES = Path(__file__).parent / "fixtures"
 runner = CliRunner()
+HEAD = migrations.head_revision()
 
 
 def llcps(db: Path | str, *args: str, env: dict[str, str] | None = None):  # noqa: ANN201 - click Result
@@ -51,7 +52,7 @@ def test_acceptance_flow(tmp_path: Path) -> None:
     db = tmp_path / "new.db"
     result = llcps(db, "db", "init")
     assert result.exit_code == 0, result.output
-    assert "schema 0002" in result.stderr and result.stdout == ""
+    assert f"schema {HEAD}" in result.stderr and result.stdout == ""
     assert llcps(db, "db", "init").exit_code == 0  # idempotent
     result = llcps(db, "db", "branch", "exp", "--from", "main")
     assert result.exit_code == 0 and "created branch exp from main" in result.stderr
@@ -62,9 +63,9 @@ def test_acceptance_flow(tmp_path: Path) -> None:
     ]
     assert llcps(db, "db", "checkout", "exp").exit_code == 0
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
-    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", "0002", True)
+    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", HEAD, True)
     text = llcps(db, "db", "status")
-    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and "0002" in text.stdout
+    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and HEAD in text.stdout
 
 
 def test_inspect_trials_json_and_filters(db: Path) -> None:
@@ -146,7 +147,7 @@ def test_upgrade_command_on_an_old_store(tmp_path: Path) -> None:
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
     assert (status["revision"], status["up_to_date"], status["visible_trials"]) == ("0001", False, 2)
     upgraded = llcps(db, "db", "upgrade", "--json")
-    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": "0002", "changed": True}
+    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": HEAD, "changed": True}
     assert len(json.loads(llcps(db, "inspect", "trials", "--json").stdout)) == 2
 
 
