@@ -73,9 +73,9 @@ def _global_options(
 # Command registry: one line per module.
 app.add_typer(db.app, name="db")
 app.add_typer(inspect.app, name="inspect")
-app.command("solve")(solve.solve_cli)
-app.command("pretrain")(pretrain.pretrain_cli)
-app.command("replay")(replay.replay_cli)
+app.command("solve", epilog=solve.EXAMPLES)(solve.solve_cli)
+app.command("pretrain", epilog=pretrain.EXAMPLES)(pretrain.pretrain_cli)
+app.command("replay", epilog=replay.EXAMPLES)(replay.replay_cli)
 app.command("bench")(bench.bench_cli)
 app.add_typer(experiment.app, name="experiment")
 

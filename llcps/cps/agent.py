@@ -9,7 +9,6 @@ does within a scenario.
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -29,7 +28,6 @@ from llcps.scenarios.base import Scenario
 from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
 from llcps.sim.memo import TrialMemo, memo_key
 from llcps.sim.perception import entity_features, perceive
-from llcps.sim.render import GifRecorder
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import World
 from llcps.store import Store
@@ -43,14 +41,14 @@ NOMINAL_RATE = 0.4
 NOMINAL_MAGNITUDE = 0.15
 #: Push directions K may use to move an object toward a target ("top" tips it instead).
 PUSH_DIRECTIONS = {k: v for k, v in PUSH_DIRECTION.items() if k != "top"}
-#: Simulation steps between GIF frames (240 Hz / 8 = 30 frames per simulated second).
-GIF_EVERY = 8
 #: Cap on steps of one settle/trial, as a safety net (240 Hz).
 SETTLE_STEPS = 480
 
 
 ProgressCallback = Callable[[str, int, int], None]
-"""Called as ``progress(phase, done, total)``; phase is "plan" or "explore"."""
+"""Called as ``progress(phase, done, total)``: phase is "fit world model NAME", "plan",
+"explore", "re-plan" or "render"; done and total count exploration trials (total 0: not
+known yet), or frames while rendering."""
 
 
 class Agent:
@@ -67,6 +65,7 @@ class Agent:
         result: SolveResult,
         records: list[TrialRecord],
         memo: TrialMemo | None = None,
+        progress: ProgressCallback | None = None,
     ) -> None:
         self.store = store
         self.branch = branch
@@ -76,16 +75,20 @@ class Agent:
         self.result = result
         self.records = records
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
-        self.recorder: GifRecorder | None = None
         self.memo = memo
+        self.progress = progress
+        self._explore_total = 0
         # Physics state of each stored snapshot this episode took, by snapshot id.
         self._states: dict[int, bytes] = {}
         # End state of a trial answered by the memo, loaded when the world is next used.
         self._pending: bytes | None = None
 
-    def filmed(self):
-        """A context that records frames into the episode's GIF, if one was asked for."""
-        return self.recorder if self.recorder is not None else contextlib.nullcontext()
+    def report(self, phase: str, *, total: int | None = None) -> None:
+        """Tell the progress callback the phase and the exploration trials done so far."""
+        if total is not None:
+            self._explore_total = total
+        if self.progress is not None:
+            self.progress(phase, self.result.exploration_trials, self._explore_total)
 
     # -- symbolic glue -------------------------------------------------------
     def task(self, state: State) -> Task:
@@ -124,7 +127,7 @@ class Agent:
         """
         trial: TrialResult | None = None
         key: bytes | None = None
-        if snapshot_id is not None and self.memo is not None and self.recorder is None:
+        if snapshot_id is not None and self.memo is not None:
             key = memo_key(self.world.scene.to_dict(), self._states[snapshot_id], spec, DEFAULT_MAX_STEPS)
             cached = self.memo.get(key)
             if cached is not None:
@@ -235,8 +238,9 @@ def solve(
         config: scenario, condition, world model, measure, seed, budget.
         command: the command line recorded with the run.
         gui: open a PyBullet GUI window (needs a display).
-        gif: write the plan's execution and the resolving trial to this GIF.
-        progress: optional callback for progress bars.
+        gif: film the episode to this GIF afterwards (:func:`llcps.cps.film.film_episode`);
+            the episode's stored wall time does not include it.
+        progress: optional callback for progress bars (see :data:`ProgressCallback`).
         memo: trials already simulated (:mod:`llcps.sim.memo`), to answer repeats without
             stepping the engine; what the episode records is the same with or without it.
 
@@ -269,8 +273,10 @@ def solve(
     )
     world: World | None = None
     try:
+        if progress is not None:
+            progress(f"fit world model {config.model}", 0, 0)
         records = list(store.visible_trials(branch_name))
-        model = fit_or_load(store, branch_name, config.model, config.seed, records=records)
+        model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records)
         kb = load_knowledge(store, branch_name)
         world = World.from_scene(scenario.scene(config.condition), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
@@ -283,12 +289,9 @@ def solve(
             result=result,
             records=records,
             memo=memo,
+            progress=progress,
         )
-        if gif is not None:
-            agent.recorder = GifRecorder(world, every=GIF_EVERY)
-        _episode(agent, kb, model, result, progress)
-        if agent.recorder is not None and agent.recorder.frames:
-            agent.recorder.save(gif, speedup=2.0)
+        _episode(agent, kb, model, result)
     except KeyboardInterrupt:
         result.status = "interrupted"
     finally:
@@ -300,11 +303,16 @@ def solve(
             result.status = "error"
         store.finish_episode(result.episode_id, status=result.status, summary=result.as_json())
         store.finish_run(result.run_id, status=result.status)
+    if gif is not None and result.status != "interrupted":
+        from llcps.cps.film import film_episode
+
+        film_episode(store, result.episode_id, gif, progress=progress)
     return result
 
 
-def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progress) -> None:
+def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult) -> None:
     """Plan with K, execute with the monitor; at the first failure, explore (as the paper does)."""
+    agent.report("plan")
     state = perceive(agent.world)
     if agent.scenario.goal_reached(state):
         result.status = "solved"
@@ -314,17 +322,16 @@ def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progre
         result.status = "no_plan"
         return
     result.plan = [step.label for step in steps]
-    with agent.filmed():
-        state, failed_step, failure = agent.run_plan(kb, steps)
+    state, failed_step, failure = agent.run_plan(kb, steps)
     if failed_step is None:
         result.status = "solved" if agent.scenario.goal_reached(state) else "no_plan"
         return
     result.failed_action = failed_step.label
     result.missing_effects = failure.describe()
-    _explore(agent, kb, model, failed_step, failure, state, result, progress)
+    _explore(agent, kb, model, failed_step, failure, state, result)
 
 
-def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failure_state: State, result, progress):
+def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failure_state: State, result):
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
     world, config = agent.world, agent.config
     snapshot = agent.snapshot()
@@ -336,6 +343,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
     desired = desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del)
     remaining = list(range(len(candidates)))
     order = _rank(model, inputs, remaining, config, desired)
+    agent.report("explore", total=min(config.budget, len(candidates)))
     tried = 0
     while order and result.exploration_trials < config.budget:
         index = order.pop(0)
@@ -343,8 +351,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
         spec = candidates[index]
         trial, record = agent.execute(spec, source="exploration", snapshot_id=snapshot, start=snapshot)
         tried += 1
-        if progress is not None:
-            progress("explore", result.exploration_trials, min(config.budget, len(candidates)))
+        agent.report("explore")
         resolved, needed_plan = _resolves(agent, kb, trial, failed_step, failure_state)
         if resolved:
             learned = learn_operator(
@@ -370,27 +377,12 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
             result.learned_operators.append(learned.to_pddl())
             result.resolving_trial_id = record.id
             result.status = "solved"
-            if agent.recorder is not None:
-                _film_resolution(agent, kb, spec, snapshot)
             return new_kb
         if tried % config.refit_every == 0 and remaining:
             model.update(agent.records)
             order = _rank(model, inputs, remaining, config, desired)
     result.status = "budget_exhausted"
     return kb
-
-
-def _film_resolution(agent: Agent, kb: KnowledgeBase, spec: TrialSpec, snapshot: int) -> None:
-    """Re-enact the resolving trial (and the plan it enabled) for the GIF; nothing is stored.
-
-    Physics is deterministic from the snapshot, so the film shows what was recorded.
-    """
-    agent.restore(snapshot)
-    with agent.filmed():
-        trial, _ = agent.execute(spec, source="exploration", snapshot_id=None)
-        if not agent.scenario.goal_reached(trial.after):
-            steps = plan(kb, agent.task(trial.after)) or ()
-            agent.run_plan(kb, steps, store=False)
 
 
 def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> list[int]:
@@ -422,6 +414,7 @@ def _resolves(
     steps = plan(kb, agent.task(trial.after))
     if not steps or not any(s.name == failed_step.name and s.args == failed_step.args for s in steps):
         return False, False
+    agent.report("re-plan")
     state, failed, _ = agent.run_plan(kb, steps, store=store)
     return failed is None and agent.scenario.goal_reached(state), True
 
@@ -433,6 +426,7 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
         "model": config.model,
         "measure": config.measure,
         "seed": config.seed,
+        "model_seed": config.fit_seed,
         "budget": config.budget,
         "refit_every": config.refit_every,
     }

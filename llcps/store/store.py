@@ -151,6 +151,24 @@ def run_record(row: Any) -> RunRecord:
     )
 
 
+def _episode_record(row: Any) -> EpisodeRecord:
+    """An ``episodes`` row joined with its branch name, as an :class:`EpisodeRecord`."""
+    return EpisodeRecord(
+        id=row.id,
+        run_id=row.run_id,
+        branch=row.branch_name,
+        scenario=row.scenario,
+        condition=row.condition,
+        model=row.model,
+        measure=row.measure,
+        seed=row.seed,
+        status=row.status,
+        summary=row.summary if isinstance(row.summary, Mapping) else {},
+        started_at=iso_timestamp(row.started_at) or "",
+        finished_at=iso_timestamp(row.finished_at),
+    )
+
+
 @dataclass(frozen=True)
 class _Link:
     """One branch of a visibility chain and the largest id visible from it (None: all)."""
@@ -718,23 +736,20 @@ class Store:
         if scenario is not None:
             stmt = stmt.where(Episode.scenario == scenario)
         with self._read() as conn:
-            return [
-                EpisodeRecord(
-                    id=r.id,
-                    run_id=r.run_id,
-                    branch=r.branch_name,
-                    scenario=r.scenario,
-                    condition=r.condition,
-                    model=r.model,
-                    measure=r.measure,
-                    seed=r.seed,
-                    status=r.status,
-                    summary=r.summary,
-                    started_at=iso_timestamp(r.started_at) or "",
-                    finished_at=iso_timestamp(r.finished_at),
-                )
-                for r in conn.execute(stmt)
-            ]
+            return [_episode_record(r) for r in conn.execute(stmt)]
+
+    def get_episode(self, episode_id: int) -> EpisodeRecord:
+        """One episode by id, on whatever branch it ran."""
+        stmt = (
+            select(Episode, Branch.name.label("branch_name"))
+            .join(Branch, Branch.id == Episode.branch_id)
+            .where(Episode.id == episode_id)
+        )
+        with self._read() as conn:
+            row = conn.execute(stmt).first()
+        if row is None:
+            raise LlcpsError(f"unknown episode {episode_id}", hint="see `llcps inspect episodes` for episode ids")
+        return _episode_record(row)
 
     # -------------------------------------------------------------- snapshots
 
