@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-import click
+import typer
 from typer.core import TyperGroup
 
 #: Old spelling -> new spelling, per command path (without ``llcps``).
@@ -56,7 +56,7 @@ def example_lines(epilog: str | None) -> list[str]:
     return lines
 
 
-def command_key(ctx: click.Context, name: str) -> str:
+def command_key(ctx: Any, name: str) -> str:
     """``"experiment run"`` for the command ``name`` under ``ctx`` (the program name dropped)."""
     return " ".join([*ctx.command_path.split()[1:], name])
 
@@ -76,7 +76,7 @@ def rewrite_renamed(key: str, args: list[str], *, warn: bool = True) -> list[str
             out.append(arg)
             continue
         if warn:
-            click.echo(
+            typer.echo(
                 f"warning: `llcps {key} {name}` is deprecated, use {new} (the old spelling goes in the next release)",
                 err=True,
             )
@@ -87,8 +87,8 @@ def rewrite_renamed(key: str, args: list[str], *, warn: bool = True) -> list[str
 class ConventionGroup(TyperGroup):
     """A command group that accepts the deprecated spellings of its commands' options."""
 
-    def resolve_command(self, ctx: click.Context, args: list[str]) -> tuple[str | None, Any, list[str]]:
+    def resolve_command(self, ctx: Any, args: list[str]) -> tuple[str | None, Any, list[str]]:
         name, command, rest = super().resolve_command(ctx, args)
-        if name is not None and command is not None and not isinstance(command, click.Group):
+        if name is not None and command is not None and not isinstance(command, TyperGroup):
             rest = rewrite_renamed(command_key(ctx, name), rest, warn=not ctx.resilient_parsing)
         return name, command, rest

@@ -20,6 +20,7 @@ from llcps.cli._common import (
     selected_branch,
 )
 from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
 from llcps.errors import LlcpsError
 from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
 from llcps.domain import TRIAL_SOURCES
@@ -248,8 +249,8 @@ def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_js
 )
 def upgrade_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Migrate the store to the newest schema revision this llcps knows."""
-    with open_store(ctx, allow_outdated=True) as store:
-        before, after = store.upgrade()
+    with open_store(ctx, allow_outdated=True) as store, progress_display("db upgrade", "checking the schema") as progress:
+        before, after = store.upgrade(progress=lambda revision, done, total: progress(f"migrating to schema {revision}", done, total))
     if as_json:
         print_json({"from": before, "to": after, "changed": before != after})
     message(f"upgraded from schema {before} to {after}" if before != after else f"already at schema {after}")

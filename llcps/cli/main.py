@@ -76,7 +76,7 @@ app.add_typer(inspect.app, name="inspect")
 app.command("solve", epilog=solve.EXAMPLES)(solve.solve_cli)
 app.command("pretrain", epilog=pretrain.EXAMPLES)(pretrain.pretrain_cli)
 app.command("replay", epilog=replay.EXAMPLES)(replay.replay_cli)
-app.command("bench")(bench.bench_cli)
+app.command("bench", epilog=bench.EXAMPLES)(bench.bench_cli)
 app.add_typer(experiment.app, name="experiment")
 
 

@@ -23,7 +23,7 @@ def pretrain_cli(
     trials: Annotated[
         int, typer.Option("--trials", metavar="N", min=0, help="Number of random interactions (trials) to run.")
     ] = 200,
-    seed: Annotated[int, typer.Option("--seed", help="Run seed; trial i gets its own seed derived from it.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", help="Run seed: trial i gets its own seed derived from it.")] = 0,
     model: Annotated[
         Optional[list[ModelName]],  # type: ignore[valid-type]
         typer.Option(

@@ -16,7 +16,7 @@ import re
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from sqlalchemy import (
     URL,
@@ -307,8 +307,11 @@ class Store:
         """The newest schema revision this llcps knows."""
         return migrations.head_revision()
 
-    def upgrade(self) -> tuple[str | None, str]:
-        """Migrate the schema to the newest revision.
+    def upgrade(self, *, progress: Callable[[str, int, int], None] | None = None) -> tuple[str | None, str]:
+        """Migrate the schema to the newest revision, one revision at a time, in one transaction.
+
+        Args:
+            progress: called as ``progress(revision, done, total)`` before each revision.
 
         Returns:
             (revision before, revision after).
@@ -317,6 +320,8 @@ class Store:
         head = migrations.head_revision()
         if before == head:
             return before, head
+        known = migrations.known_revisions()
+        pending = known[known.index(before) + 1 :] if before in known else [head]
         file_backed = engines.sqlite_path(self._url) is not None
         # SQLite needs foreign keys off while batch operations rebuild tables.
         engine = engines.make_engine(self._url, foreign_keys=False, pooled=False) if file_backed else self._engine
@@ -324,7 +329,10 @@ class Store:
             with engine.connect() as conn:
                 conn.execution_options(**{engines.WRITE_OPTION: True})
                 with conn.begin():
-                    migrations.upgrade(conn)
+                    for done, revision in enumerate(pending):
+                        if progress is not None:
+                            progress(revision, done, len(pending))
+                        migrations.upgrade(conn, revision)
         except SQLAlchemyError as exc:
             raise _db_error(exc) from exc
         finally:
