@@ -27,6 +27,7 @@ run: setup
 	$(BIN)/llcps --db $(DB) inspect episodes
 
 test: setup
+	bash .ci/services.sh
 	$(BIN)/python -m pytest
 
 test-slow: setup
