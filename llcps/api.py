@@ -26,7 +26,7 @@ import pandas as pd
 from llcps.errors import LlcpsError
 from llcps.provenance import FIELDS as PROVENANCE_FIELDS
 from llcps.store import Store
-from llcps.store.flat import Column, flat_rows, trial_columns
+from llcps.store.flat import KINDS, Column, flat_rows, trial_columns
 
 if TYPE_CHECKING:
     from llcps.cps.episode import SolveResult
@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from llcps.models.persistence import FittedModel
     from llcps.pretrain import PretrainSummary
 
-#: Columns of :meth:`Workbench.episodes`: name -> (kind, meaning); kinds as in llcps.store.flat.
+#: Columns of :meth:`Workbench.episodes`: name -> (kind, meaning); kinds are keys of llcps.store.flat.KINDS.
 EPISODE_COLUMNS: Mapping[str, tuple[str, str]] = {
     "id": ("int", "episode id"),
     "run_id": ("nullable_int", "the run it belongs to"),
@@ -93,17 +93,6 @@ OPERATOR_COLUMNS: Mapping[str, tuple[str, str]] = {
     "pddl": ("string", "the operator in PDDL"),
 }
 
-_DTYPES = {
-    "int": "int64",
-    "nullable_int": "Int64",
-    "float": "float64",
-    "bool": "bool",
-    "nullable_bool": "boolean",
-    "string": "string",
-    "timestamp": "datetime64[ns]",
-}
-
-
 def _convert(series: pd.Series, kind: str, categories: Sequence[str] = ()) -> pd.Series:
     """One column to its documented dtype (values read from the database are untrusted)."""
     if kind == "category":
@@ -115,7 +104,7 @@ def _convert(series: pd.Series, kind: str, categories: Sequence[str] = ()) -> pd
         return pd.to_numeric(series, errors="coerce").astype("float64")
     if kind == "bool":
         return series.fillna(False).astype(bool)
-    return series.astype(_DTYPES[kind])
+    return series.astype(KINDS[kind])
 
 
 def _frame(rows: list[dict[str, Any]], columns: Iterable[tuple[str, str, Sequence[str]]]) -> pd.DataFrame:

@@ -52,6 +52,7 @@ def _arrow_schema(columns: Sequence[Column]) -> Any:
         "nullable_int": pa.int64(),
         "float": pa.float64(),
         "bool": pa.bool_(),
+        "nullable_bool": pa.bool_(),
         "string": pa.string(),
         "category": pa.dictionary(pa.int32(), pa.string()),
         "timestamp": pa.timestamp("us"),

@@ -27,6 +27,7 @@ KINDS: Mapping[str, str] = {
     "nullable_int": "Int64",
     "float": "float64",
     "bool": "bool",
+    "nullable_bool": "boolean",
     "string": "string",
     "category": "category",
     "timestamp": "datetime64[ns]",
