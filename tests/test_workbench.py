@@ -133,6 +133,7 @@ def test_inspect_runs_and_episodes_show_what_ran_where(episode: dict[str, object
     assert [r["command"] for r in runs] == ["pretrain", "solve"]
     assert runs[1]["provenance"]["host"] == socket.gethostname() and runs[1]["provenance"]["llcps_version"] == llcps.__version__
     assert runs[1]["activity"]["episodes"] == 1 and runs[0]["activity"]["pretrain"] == 3
+    assert runs[1]["config"]["model_seed"] == runs[1]["config"]["seed"] == 0  # --model-seed defaults to --seed
     table = runner.invoke(app, ["--db", db, "inspect", "runs"]).stdout
     assert "host" in table and socket.gethostname() in table and "pretrain" in table
     episodes = json.loads(runner.invoke(app, ["--db", db, "inspect", "episodes", "--json"]).stdout)

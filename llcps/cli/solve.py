@@ -81,6 +81,8 @@ def solve_cli(
         print_json(result.as_json())
     else:
         show(result)
+    if gif is not None and result.status != "interrupted":
+        message(f"film written to {gif}")
     raise typer.Exit(_exit_code(result))
 
 

@@ -71,8 +71,10 @@ def render_html(
     plots: Mapping[str, tuple[str, Path]],
     films: Mapping[str, Path],
     provenance: Sequence[str],
+    unfilmed: Sequence[str] = (),
 ) -> str:
-    """The page. ``plots`` maps a plot name to (caption, PNG path); ``films`` a scenario to its GIF."""
+    """The page. ``plots`` maps a plot name to (caption, PNG path); ``films`` a scenario to its
+    GIF; ``unfilmed`` names the scenarios without a film (no solved episode to show)."""
     parts = [
         "<!doctype html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -100,9 +102,6 @@ def render_html(
         '<p class="note">* p &lt; 0.05 (paired Wilcoxon over seeds, uncorrected); ** also after Holm\'s correction. '
         "Shaded columns are the paper's numbers (4 runs per cell, no intervals).</p></section>"
     )
-    parts.append('<section id="plots"><h2>Plots</h2>')
-    parts += [_figure(path, caption, name) for name, (caption, path) in plots.items()]
-    parts.append("</section>")
     parts.append('<section id="films"><h2>A resolving trial per scenario</h2>')
     if films:
         parts.append('<div class="films">')
@@ -110,7 +109,13 @@ def render_html(
         parts.append("</div>")
     else:
         parts.append('<p class="note">No films: no solved episode in these results, or the report was built without the store.</p>')
-    parts += ["</section>", f'<p class="note">Bootstrap: {analysis.resamples} resamples, seed {analysis.seed}. Every table, for every cell: report.md beside this page.</p>', "</body></html>"]
+    if films and unfilmed:
+        parts.append(f'<p class="note">No film of {_e(", ".join(unfilmed))}: no episode there resolved its novelty within the budget.</p>')
+    parts.append("</section>")
+    parts.append('<section id="plots"><h2>Plots</h2>')
+    parts += [_figure(path, caption, name) for name, (caption, path) in plots.items()]
+    parts.append("</section>")
+    parts += [f'<p class="note">Bootstrap: {analysis.resamples} resamples, seed {analysis.seed}. Every table, for every cell: report.md beside this page.</p>', "</body></html>"]
     return "\n".join(parts) + "\n"
 
 

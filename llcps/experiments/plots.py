@@ -145,7 +145,8 @@ def figure2_heatmap(rows: Iterable[Figure2Row], stem: str | Path, *, with_paper:
     row_names = [f"{m} / {me}" for m, me in pairs]
     col_names = [f"{s.replace('scenario', 'S')}\np{size}" for size, s in cols]
     width = 1.6 + 0.9 * len(cols)
-    fig = Figure(figsize=(width * (2 if show_paper else 1) + 1.5, 1.2 + 0.42 * len(pairs)), layout="constrained")
+    # At least 2.6 in tall: with one or two rows the colour bar's labels need the room.
+    fig = Figure(figsize=(width * (2 if show_paper else 1) + 1.5, max(2.6, 1.2 + 0.42 * len(pairs))), layout="constrained")
     axes = fig.subplots(1, 2 if show_paper else 1, squeeze=False)[0]
     n = max((r.n_seeds for r in shown), default=0)
     image = _heatmap_panel(fig, axes[0], ours, ours_text, row_names, col_names, f"ours (n <= {n} seeds per cell)")

@@ -635,6 +635,7 @@ def build_report(
                 plots=pngs,
                 films=film_paths,
                 provenance=environments,
+                unfilmed=[s for s in SCENARIO_SEQUENCE if s in table.unique("scenario") and s not in film_paths],
             ),
             encoding="utf-8",
         )
