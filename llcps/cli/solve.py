@@ -72,6 +72,7 @@ def solve_cli(
         refit_every=refit_every,
     )
     config.validate()
+    before = _mtime(gif)
     with progress_display("solve", "loading the simulator") as progress:
         from llcps.cps.agent import solve  # the simulator loads only when a command needs it
 
@@ -82,7 +83,7 @@ def solve_cli(
     else:
         show(result)
     if gif is not None and result.status != "interrupted":
-        message(f"film written to {gif}")
+        message(f"film written to {gif}" if _mtime(gif) != before else "no film: the episode executed no trial")
     raise typer.Exit(_exit_code(result))
 
 
@@ -92,6 +93,10 @@ EXAMPLES = examples(
     "llcps solve bucket --model nn --measure most-changes --budget 50 --json",
     "llcps solve scenario1 --gif scenario1.gif              # then film it",
 )
+
+
+def _mtime(path: Path | None) -> int | None:
+    return path.stat().st_mtime_ns if path is not None and path.exists() else None
 
 
 def _exit_code(result: "SolveResult") -> int:

@@ -64,8 +64,6 @@ def episode_shots(store: Store, episode_id: int) -> list[Shot]:
     plan it enabled (or the whole plan when no exploration was needed)."""
     episode = store.get_episode(episode_id)
     trials = store.visible_trials(episode.branch, episode=episode_id)
-    if not trials:
-        raise LlcpsError(f"episode {episode_id} has no stored trials to film")
     first_exploration = next((i for i, t in enumerate(trials) if t.source == "exploration"), len(trials))
     shots = [Shot(t, "plan") for t in trials[:first_exploration] if t.source == "plan"]
     resolving = episode.summary.get("resolving_trial_id")
@@ -147,9 +145,15 @@ def reenact(
     return out
 
 
-def film_episode(store: Store, episode_id: int, gif: str | Path, *, progress: ProgressCallback | None = None) -> Path:
-    """Film an episode (see :func:`episode_shots`) to ``gif``; returns the path."""
-    reenact(store, episode_shots(store, episode_id), gif=gif, progress=progress)
+def film_episode(
+    store: Store, episode_id: int, gif: str | Path, *, progress: ProgressCallback | None = None
+) -> Path | None:
+    """Film an episode (see :func:`episode_shots`) to ``gif``; returns the path, or None when
+    the episode executed no trial (its goal held from the start, or it had no plan)."""
+    shots = episode_shots(store, episode_id)
+    if not shots:
+        return None
+    reenact(store, shots, gif=gif, progress=progress)
     return Path(gif)
 
 
