@@ -164,5 +164,8 @@ def test_experiment_report_prints_and_keeps_the_provenance(tmp_path: Path) -> No
     line = next(ln for ln in done.stderr.splitlines() if ln.startswith("provenance: "))
     assert f"llcps {llcps.__version__}" in line and socket.gethostname() in line and "6 run(s)" in line
     assert "## Where it ran" in (out / "report.md").read_text() and (out / "provenance.json").is_file()
+    results = (out / "results.csv").read_text().splitlines()
+    solved = results[0].split(",").index("solved")
+    assert {line.split(",")[solved] for line in results[1:]} == {"false"}  # booleans as every export writes them
     again = runner.invoke(app, ["experiment", "report", str(out), "--json"])  # from the directory alone
     assert again.exit_code == 0 and json.loads(again.stdout)["provenance"][0]["runs"] == 6

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
 from llcps.errors import LlcpsError
+from llcps.tabular import csv_value
 from llcps.experiments import plots
 from llcps.experiments.grid import SCENARIO_SEQUENCE, condition_rank, measure_rank, model_rank
 from llcps.experiments.results import METRICS, ResultsTable
@@ -196,7 +197,7 @@ def _write_rows_csv(path: Path, rows: Iterable[Any], columns: Iterable[str]) -> 
         writer.writeheader()
         for row in rows:
             record = asdict(row)
-            writer.writerow({k: "" if record[k] is None else record[k] for k in columns})
+            writer.writerow({k: csv_value(record[k]) for k in columns})
     return path
 
 

@@ -17,19 +17,11 @@ from typing import Any, Iterator, Sequence, TextIO
 from llcps.errors import LlcpsError
 from llcps.store.flat import Column, flat_rows, trial_columns
 from llcps.store.store import Store
+from llcps.tabular import csv_value
 
 EXPORT_FORMATS: tuple[str, ...] = ("csv", "jsonl", "parquet")
 #: Formats that are bytes, written to a file only.
 BINARY_FORMATS: tuple[str, ...] = ("parquet",)
-
-
-def csv_value(value: Any) -> Any:
-    """A flat value as CSV text: booleans ``true``/``false``, absent values empty."""
-    if value is None:
-        return ""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return value
 
 
 def _batches(
