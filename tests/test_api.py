@@ -171,3 +171,21 @@ def test_the_api_guide_example_runs(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "exploration_per_scenario.png").stat().st_size > 5_000
     assert "scenario2" in done.stdout
+
+
+def test_the_main_jobs_run_from_python(tmp_path: Path) -> None:
+    """pretrain, solve and replay through the Workbench, in real physics."""
+    from llcps.errors import LlcpsError
+
+    with llcps.open(tmp_path / "jobs.db", create=True) as wb:
+        summary, fitted = wb.pretrain(trials=2, seed=3, models=["random"])
+        assert summary.trials == 2 and [(f.name, f.trials) for f in fitted] == [("random", 2)]
+        result = wb.solve("scenario3", model="random", budget=1, seed=2)
+        assert result.status in ("solved", "budget_exhausted") and result.exploration_trials <= 1
+        trials = wb.trials()
+        assert trials["source"].tolist()[:2] == ["pretrain", "pretrain"] and (trials["episode_id"] == result.episode_id).sum() >= 1
+        last = int(trials["id"].iloc[-1])
+        assert wb.replay(last).matches
+        assert wb.episodes()["id"].tolist() == [result.episode_id]
+        with pytest.raises(LlcpsError, match="bad solve setting"):
+            wb.solve("scenario3", budgets=3)
