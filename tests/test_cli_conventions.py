@@ -158,3 +158,13 @@ def test_shell_completion_completes_commands() -> None:
     assert {"trials", "runs", "episodes", "model", "knowledge"} <= set(done.stdout.split())
     shown = runner.invoke(app, ["--help"]).stdout
     assert "--install-completion" in shown
+
+
+def test_the_first_line_names_the_command() -> None:
+    """On a terminal the console script says `llcps <command>: starting` before loading anything."""
+    from llcps.cli.entry import _command_words
+
+    assert _command_words(["--db", "x.db", "--branch", "exp", "solve", "scenario2", "--budget", "5"]) == "solve scenario2"
+    assert _command_words(["inspect", "model", "--scenario", "s"]) == "inspect model"
+    assert _command_words(["--db=x.db", "pretrain", "--trials", "3"]) == "pretrain"
+    assert _command_words([]) == ""
