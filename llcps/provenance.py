@@ -80,7 +80,8 @@ def _version(distribution: str) -> str | None:
         return None
 
 
-def _cpu_count() -> int:
+def cpu_count() -> int:
+    """CPUs this process may run on (its affinity where the OS tells, else all)."""
     if hasattr(os, "sched_getaffinity"):
         return len(os.sched_getaffinity(0))
     return os.cpu_count() or 1
@@ -132,7 +133,7 @@ def current() -> Provenance:
         python_version=platform.python_version(),
         **{field: _version(dist) for field, dist in LIBRARIES.items()},
         host=socket.gethostname(),
-        cpu_count=_cpu_count(),
+        cpu_count=cpu_count(),
     )
 
 

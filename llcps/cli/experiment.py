@@ -13,6 +13,7 @@ from llcps.cli._common import JsonFlag, choice_enum, message, new_app, open_stor
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.errors import LlcpsError
+from llcps.provenance import cpu_count
 from llcps.experiments.grid import PRESETS
 from llcps.experiments.runner import (
     ENGINES,
@@ -101,7 +102,7 @@ def run_cli(
     either engine. Exit code 1 when a task failed.
     """
     name = str(preset.value)  # type: ignore[attr-defined]
-    n_workers = workers if workers is not None else _cpu_count()
+    n_workers = workers if workers is not None else cpu_count()
     try:
         with open_store(ctx, create=True) as store:
             with progress_display(f"experiment {name}", "planning the tasks") as bar:
@@ -191,6 +192,7 @@ def report_cli(
 
     if (source is None) == (not from_db):
         raise LlcpsError("give a results directory or --from-db (one of them)", hint="e.g. `llcps experiment report results/paper`")
+
     def chosen(table: "ResultsTable") -> tuple[str, "ResultsTable", Path]:
         name, mine = one_preset(table, preset)
         if baseline_preset is not None:
@@ -219,12 +221,6 @@ def report_cli(
 def _seeds(preset: str, count: int | None, first: int) -> range:
     n = PRESETS[preset].default_seeds if count is None else count
     return range(first, first + n)
-
-
-def _cpu_count() -> int:
-    import os
-
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
 def show_provenance(analysis: dict[str, Any]) -> None:
