@@ -166,7 +166,7 @@ def test_csv_and_json_round_trip(tmp_path) -> None:  # noqa: ANN001
 def test_bad_results_file_is_a_project_error(tmp_path) -> None:  # noqa: ANN001
     path = synthetic_table(seeds=1).write_csv(tmp_path / "r.csv")
     text = path.read_text().splitlines()
-    text[1] = text[1].replace(",True,", ",perhaps,").replace(",False,", ",perhaps,")
+    text[1] = text[1].replace(",true,", ",perhaps,").replace(",false,", ",perhaps,")  # booleans are written true/false
     path.write_text("\n".join(text) + "\n")
     with pytest.raises(LlcpsError, match="solved"):
         ResultsTable.read_csv(path)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import platform
 import shutil
 import sqlite3
 import subprocess
@@ -12,12 +13,14 @@ import zipfile
 from contextlib import closing
 from pathlib import Path
 
+import numpy as np
 import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from make_store_fixtures import make as make_store
 from store_writer import sample_trial
 
+from llcps import provenance
 from llcps.domain import OUTCOME_NAMES
 from llcps.errors import StoreError
 from llcps.store import Store, migrations
@@ -183,3 +186,22 @@ def test_wheel_ships_the_migrations(tmp_path: Path) -> None:
     check = "from llcps.store import Store; s = Store.open('w.db', create=True); import llcps; print(llcps.__file__, s.revision)"
     out = subprocess.run([sys.executable, "-c", check], cwd=tmp_path, env={"PYTHONPATH": str(target)}, capture_output=True, text=True, check=True)
     assert out.stdout.split() == [str(target / "llcps" / "__init__.py"), migrations.head_revision()]
+
+
+def test_runs_stored_before_provenance_upgrade_and_new_runs_record_it(tmp_path: Path) -> None:
+    """0005: runs gain their provenance; a run stored at 0002 keeps its fields and has none."""
+    db = make_store("0002", tmp_path)
+    with closing(sqlite3.connect(db)) as conn:
+        assert "host" not in {row[1] for row in conn.execute("PRAGMA table_info(runs)")}
+    with Store.open(str(db), allow_outdated=True) as store:
+        assert store.upgrade() == ("0002", migrations.head_revision())
+    with Store.open(str(db)) as store:
+        (old,) = store.list_runs()
+        assert (old.command, old.seed, old.status, old.llcps_version) == ("llcps solve scenario2", 12, "ok", "0.1.0")
+        assert old.provenance.host is None and old.provenance.git_commit is None and old.provenance.cpu_count is None
+        new_id = store.start_run(command="test", seed=1, config={}, branch="main")
+        new = store.get_run(new_id)
+    env = provenance.current()
+    assert new.provenance == env
+    assert env.python_version == platform.python_version() and env.cpu_count >= 1 and env.host
+    assert env.numpy_version == np.__version__ and env.pybullet_version and env.torch_version and env.sklearn_version

@@ -8,12 +8,14 @@ from typing import Annotated, Optional
 import typer
 
 from llcps.cli._common import JsonFlag, message, new_app, open_store, print_json, print_table
+from llcps.cli._conventions import examples
 from llcps.errors import LlcpsError
 from llcps.store import physics_cache
 
 app = new_app(
     "The physics cache: simulated trials kept in the store, answered again instead of simulated "
-    "(see `llcps experiment run --no-cache`)."
+    "(see `llcps experiment run --no-cache`).",
+    epilog=examples("llcps cache status", "llcps cache limit 4GB && llcps cache prune"),
 )
 
 _UNITS = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "KIB": 1 << 10, "MIB": 1 << 20, "GIB": 1 << 30}
@@ -36,12 +38,9 @@ def _human(n: int) -> str:
     return f"{n} B"
 
 
-@app.command("status")
+@app.command("status", epilog=examples("llcps cache status", "llcps cache status --json"))
 def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
-    """Entries, bytes and the size bound of the physics cache.
-
-    Example: llcps cache status --json
-    """
+    """Entries, bytes and the size bound of the physics cache."""
     with open_store(ctx) as store:
         status = physics_cache.status(store)
     if as_json:
@@ -60,7 +59,10 @@ def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     )
 
 
-@app.command("prune")
+@app.command(
+    "prune",
+    epilog=examples("llcps cache prune --dry-run", "llcps cache prune --to 500MB", "llcps cache prune --to 0  # empty it"),
+)
 def prune_cli(
     ctx: typer.Context,
     to: Annotated[
@@ -73,8 +75,7 @@ def prune_cli(
     """Remove the least recently used entries until the cache fits its bound.
 
     An experiment run does this when it ends; no branch loses anything, later runs
-    simulate the removed trials again. Examples: llcps cache prune --to 500MB;
-    llcps cache prune --to 0 (empty it).
+    simulate the removed trials again.
     """
     limit = parse_size(to) if to is not None else None
     with open_store(ctx) as store:
@@ -85,16 +86,13 @@ def prune_cli(
     message(f"{verb} {result.removed} entries ({_human(result.removed_bytes)}); {result.kept} kept ({_human(result.kept_bytes)})")
 
 
-@app.command("limit")
+@app.command("limit", epilog=examples("llcps cache limit 4GB && llcps cache prune"))
 def limit_cli(
     ctx: typer.Context,
     size: Annotated[str, typer.Argument(metavar="SIZE", help="The bound, e.g. 500MB or 4GB.", show_default=False)],
     as_json: JsonFlag = False,
 ) -> None:
-    """Set the size bound the cache is pruned to (stored in the store; default 2 GiB).
-
-    Example: llcps cache limit 4GB && llcps cache prune
-    """
+    """Set the size bound the cache is pruned to (stored in the store; default 2 GiB)."""
     limit = parse_size(size)
     with open_store(ctx) as store:
         physics_cache.set_max_bytes(store, limit)

@@ -19,7 +19,6 @@ snapshot stored before it), and a learned operator records that state as its con
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -39,7 +38,6 @@ from llcps.scenarios.base import Scenario
 from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
 from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
 from llcps.sim.perception import entity_features, perceive
-from llcps.sim.render import GifRecorder
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import World
 from llcps.store import Store
@@ -54,8 +52,6 @@ NOMINAL_RATE = 0.4
 NOMINAL_MAGNITUDE = 0.15
 #: Push directions K may use to move an object toward a target ("top" tips it instead).
 PUSH_DIRECTIONS = {k: v for k, v in PUSH_DIRECTION.items() if k != "top"}
-#: Simulation steps between GIF frames (240 Hz / 8 = 30 frames per simulated second).
-GIF_EVERY = 8
 #: Cap on steps of one settle/trial, as a safety net (240 Hz).
 SETTLE_STEPS = 480
 #: Re-plans after the first failed plan step before exploration starts.
@@ -63,7 +59,9 @@ MAX_PLAN_REPAIRS = 3
 
 
 ProgressCallback = Callable[[str, int, int], None]
-"""Called as ``progress(phase, done, total)``; phase is "plan" or "explore"."""
+"""Called as ``progress(phase, done, total)``: phase is "fit world model NAME", "plan",
+"explore", "re-plan" or "render"; done and total count exploration trials (total 0: not
+known yet), or frames while rendering."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +102,7 @@ class Agent:
         records: list[TrialRecord],
         cache: PhysicsCache | None = None,
         max_steps: int = DEFAULT_MAX_STEPS,
+        progress: ProgressCallback | None = None,
     ) -> None:
         self.store = store
         self.branch = branch
@@ -113,8 +112,9 @@ class Agent:
         self.result = result
         self.records = records
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
-        self.recorder: GifRecorder | None = None
         self.cache = cache
+        self.progress = progress
+        self._explore_total = 0
         #: The step cap of every trial: the one the physics runs under and the cache keys by.
         self.max_steps = max_steps
         # Physics state of each stored snapshot this episode took, by snapshot id.
@@ -142,9 +142,12 @@ class Agent:
         )
         self.experience = self.experience.added(operator, context, success)
 
-    def filmed(self):
-        """A context that records frames into the episode's GIF, if one was asked for."""
-        return self.recorder if self.recorder is not None else contextlib.nullcontext()
+    def report(self, phase: str, *, total: int | None = None) -> None:
+        """Tell the progress callback the phase and the exploration trials done so far."""
+        if total is not None:
+            self._explore_total = total
+        if self.progress is not None:
+            self.progress(phase, self.result.exploration_trials, self._explore_total)
 
     # -- symbolic glue -------------------------------------------------------
     def task(self, state: State) -> Task:
@@ -186,7 +189,7 @@ class Agent:
         started = time.perf_counter()
         cached: CachedTrial | None = None
         key: str | None = None
-        if snapshot_id is not None and self.cache is not None and self.recorder is None:
+        if snapshot_id is not None and self.cache is not None:
             key = trial_key(self.world.settings, self.world.scene.to_dict(), self._states[snapshot_id], spec, self.max_steps)
             cached = self.cache.get(key)
             if cached is not None and cached.result.spec != spec:  # a damaged entry: simulate instead
@@ -318,8 +321,9 @@ def solve(
         config: scenario, condition, world model, measure, seed, budget.
         command: the command line recorded with the run.
         gui: open a PyBullet GUI window (needs a display).
-        gif: write the plan's execution and the resolving trial to this GIF.
-        progress: optional callback for progress bars.
+        gif: film the episode to this GIF afterwards (:func:`llcps.cps.film.film_episode`);
+            the episode's stored wall time does not include it.
+        progress: optional callback for progress bars (see :data:`ProgressCallback`).
         cache: the physics cache (:mod:`llcps.store.physics_cache`), to answer trials
             simulated before without stepping the engine; what the episode records is
             the same with or without it, but for the trials marked ``cache_hit`` and
@@ -354,8 +358,10 @@ def solve(
     )
     world: World | None = None
     try:
+        if progress is not None:
+            progress(f"fit world model {config.model}", 0, 0)
         records = list(store.visible_trials(branch_name))
-        model = fit_or_load(store, branch_name, config.model, config.seed, records=records)
+        model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records)
         kb = load_knowledge(store, branch_name)
         world = World.from_scene(scenario.scene(config.condition), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
@@ -368,12 +374,9 @@ def solve(
             result=result,
             records=records,
             cache=cache,
+            progress=progress,
         )
-        if gif is not None:
-            agent.recorder = GifRecorder(world, every=GIF_EVERY)
-        _episode(agent, kb, model, result, progress)
-        if agent.recorder is not None and agent.recorder.frames:
-            agent.recorder.save(gif, speedup=2.0)
+        _episode(agent, kb, model, result)
     except KeyboardInterrupt:
         result.status = "interrupted"
     finally:
@@ -387,28 +390,29 @@ def solve(
             result.status = "error"
         store.finish_episode(result.episode_id, status=result.status, summary=result.as_json())
         store.finish_run(result.run_id, status=result.status)
+    if gif is not None and result.status != "interrupted":
+        from llcps.cps.film import film_episode
+
+        film_episode(store, result.episode_id, gif, progress=progress)
     return result
 
 
-def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progress) -> None:
+def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult) -> None:
     """Plan with K and repair the plan; only if no plan reaches the goal, explore."""
     state = perceive(agent.world)
     if agent.scenario.goal_reached(state):
         result.status = "solved"
         return
-    with agent.filmed():
-        failure = plan_and_repair(agent, kb, state, result, progress)
+    failure = plan_and_repair(agent, kb, state, result)
     if result.status == "solved":
         return
     if failure is None:
         result.status = "no_plan"
         return
-    _explore(agent, kb, model, failure, result, progress)
+    _explore(agent, kb, model, failure, result)
 
 
-def plan_and_repair(
-    agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult, progress: ProgressCallback | None
-) -> Failure | None:
+def plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult) -> Failure | None:
     """Execute K's plan; on a failed step re-plan without it, up to MAX_PLAN_REPAIRS times.
 
     Every executed step is a stored ``plan`` trial and counts as an execution of its
@@ -423,8 +427,7 @@ def plan_and_repair(
     first: Failure | None = None
     excluded: set[tuple[str, tuple[str, ...]]] = set()
     for attempt in range(1 + MAX_PLAN_REPAIRS):
-        if progress is not None:
-            progress("plan" if attempt == 0 else "re-plan", attempt, 1 + MAX_PLAN_REPAIRS)
+        agent.report("plan" if attempt == 0 else "re-plan")
         known = agent.knowledge(kb)
         steps = plan(known, agent.task(state), exclude=excluded)
         if steps is None:
@@ -454,7 +457,7 @@ def plan_and_repair(
     return first
 
 
-def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: SolveResult, progress) -> None:
+def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: SolveResult) -> None:
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
     world, config = agent.world, agent.config
     snapshot, failed_step, failure_state = failure.snapshot, failure.step, failure.state
@@ -467,6 +470,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
     desired = desired_outcome(missing_add=failure.monitor.missing_add, missing_del=failure.monitor.missing_del)
     remaining = list(range(len(candidates)))
     order = _rank(model, inputs, remaining, config, desired)
+    agent.report("explore", total=min(config.budget, len(candidates)))
     tried = 0
     while order and result.exploration_trials < config.budget:
         index = order.pop(0)
@@ -474,13 +478,9 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
         spec = candidates[index]
         trial, record = agent.execute(spec, source="exploration", snapshot_id=snapshot, start=snapshot)
         tried += 1
-        if progress is not None:
-            progress("explore", result.exploration_trials, min(config.budget, len(candidates)))
-        resolved = resolves(agent, kb, trial, failure)
-        if resolved:
+        agent.report("explore")
+        if resolves(agent, kb, trial, failure):
             _learn(agent, kb, spec, trial, failure, record, result)
-            if agent.recorder is not None:
-                _film_resolution(agent, kb, spec, snapshot)
             return
         if tried % config.refit_every == 0 and remaining:
             model.update(agent.records)
@@ -531,19 +531,6 @@ def _learn(
     result.status = "solved"
 
 
-def _film_resolution(agent: Agent, kb: KnowledgeBase, spec: TrialSpec, snapshot: int) -> None:
-    """Re-enact the resolving trial (and the plan it enabled) for the GIF; nothing is stored.
-
-    Physics is deterministic from the snapshot, so the film shows what was recorded.
-    """
-    agent.restore(snapshot)
-    with agent.filmed():
-        trial, _ = agent.execute(spec, source="exploration", snapshot_id=None)
-        if not agent.scenario.goal_reached(trial.after):
-            steps = plan(agent.knowledge(kb), agent.task(trial.after)) or ()
-            agent.run_plan(steps, store=False)
-
-
 def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> list[int]:
     proba = model.predict_proba([inputs[i] for i in remaining])
     order = rank(proba, config.measure, seed=config.seed, desired=desired)
@@ -569,6 +556,7 @@ def resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failu
     steps = plan(agent.knowledge(kb), agent.task(trial.after))
     if not steps:
         return False
+    agent.report("re-plan")
     run = agent.run_plan(steps)
     return run.failure is None and agent.scenario.goal_reached(run.state)
 
@@ -580,6 +568,7 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
         "model": config.model,
         "measure": config.measure,
         "seed": config.seed,
+        "model_seed": config.fit_seed,
         "budget": config.budget,
         "refit_every": config.refit_every,
     }

@@ -29,6 +29,13 @@ class SolveConfig:
     budget: int = DEFAULT_BUDGET
     refit_every: int = 1
     grid: Grid = Grid()
+    #: Seed of the world model's fit (None: the episode's ``seed``).
+    model_seed: int | None = None
+
+    @property
+    def fit_seed(self) -> int:
+        """The seed the world model is fitted (or loaded) with."""
+        return self.seed if self.model_seed is None else self.model_seed
 
     def validate(self) -> Scenario:
         """Check names and numbers before anything runs; returns the scenario."""

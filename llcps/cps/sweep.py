@@ -88,7 +88,7 @@ def sweep(
             world.settle(max_steps=SETTLE_STEPS)
             agent = Agent(store=store, branch=branch, world=world, scenario=scenario, config=config, result=result, records=[])
             kb = load_knowledge(store, branch)
-            failure = plan_and_repair(agent, kb, perceive(world), result, None)
+            failure = plan_and_repair(agent, kb, perceive(world), result)
             found.plan, found.plan_repairs, found.failed_action = result.plan, result.plan_repairs, result.failed_action
             if failure is None or failure.snapshot is None:
                 return found

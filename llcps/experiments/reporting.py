@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 from llcps.errors import LlcpsError
 from llcps.experiments.results import ResultsTable, table_from_episodes
@@ -66,14 +66,36 @@ def default_out_dir(preset: str) -> Path:
     return RESULTS_DIR / preset
 
 
-def write_report(table: ResultsTable, out_dir: str | Path) -> tuple[Path, dict[str, Any]]:
-    """Build every report file into ``out_dir``; returns it and the analysis as JSON data."""
+def write_report(
+    table: ResultsTable,
+    out_dir: str | Path,
+    *,
+    store: Store | None = None,
+    html: bool = False,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> tuple[Path, dict[str, Any]]:
+    """Build every report file into ``out_dir``; returns it and the analysis as JSON data.
+
+    With the ``store`` the results came from, the report records where their runs ran
+    and, with ``html``, films a resolving trial per scenario for report.html.
+    """
     import json
 
+    from llcps.experiments import artifacts
     from llcps.experiments.report import build_report
 
-    paths = build_report(table, out_dir)
-    return paths.out_dir, json.loads(paths.figure2_json.read_text(encoding="utf-8"))
+    provenance = films = None
+    if store is not None:
+        provenance = artifacts.table_provenance(store, table)
+        if html:
+            films = artifacts.film_resolutions(store, table, Path(out_dir), progress=progress)
+    if progress is not None:
+        progress("statistics and plots", 0, 0)
+    paths = build_report(table, out_dir, provenance=provenance, films=films, html=html)
+    analysis = json.loads(paths.figure2_json.read_text(encoding="utf-8"))
+    analysis["provenance"] = provenance if provenance is not None else artifacts.read_provenance(paths.out_dir)
+    analysis["report_html"] = None if paths.report_html is None else str(paths.report_html)
+    return paths.out_dir, analysis
 
 
 __all__ = ["RESULTS_DIR", "default_out_dir", "one_preset", "results_table", "with_baseline", "write_report"]

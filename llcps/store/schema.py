@@ -94,6 +94,16 @@ class Run(Base):
     status: Mapped[str] = mapped_column(String(32))
     started_at: Mapped[datetime] = mapped_column(DateTime)
     finished_at: Mapped[datetime | None] = mapped_column(DateTime)
+    # Provenance (llcps.provenance); NULL for runs stored before it was kept.
+    git_commit: Mapped[str | None] = mapped_column(String(64))
+    git_dirty: Mapped[bool | None] = mapped_column(Boolean)
+    python_version: Mapped[str | None] = mapped_column(String(32))
+    pybullet_version: Mapped[str | None] = mapped_column(String(32))
+    torch_version: Mapped[str | None] = mapped_column(String(32))
+    sklearn_version: Mapped[str | None] = mapped_column(String(32))
+    numpy_version: Mapped[str | None] = mapped_column(String(32))
+    host: Mapped[str | None] = mapped_column(String(255))
+    cpu_count: Mapped[int | None] = mapped_column(Integer)
 
 
 class Episode(Base):

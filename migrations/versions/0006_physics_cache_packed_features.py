@@ -9,7 +9,7 @@ cached result; this run's own time stays in ``wall_seconds``). The new
 ``physics_cache`` table holds simulated trials by a digest of their inputs.
 
 Revision ID: 0006
-Revises: 0003
+Revises: 0005
 Create Date: 2026-11-22
 """
 
@@ -23,7 +23,7 @@ import sqlalchemy as sa
 from alembic import op
 
 revision = "0006"
-down_revision = "0003"
+down_revision = "0005"
 branch_labels = None
 depends_on = None
 
