@@ -181,7 +181,7 @@ class Agent:
 
         The trial starts from the stored snapshot ``start`` if given, else from the
         world's current state, which must then be the state of ``snapshot_id``. With
-        ``snapshot_id=None`` the trial is a re-enactment for a GIF: it is not stored.
+        ``snapshot_id=None`` the trial is not stored (nor answered by the cache).
         A stored trial leaves the world in its serialized end state, so what follows
         is the same whether the trial was simulated or answered by the physics cache;
         a cached answer is recorded as such, with this run's wall seconds.
@@ -269,7 +269,8 @@ class Agent:
 
         Args:
             steps: the plan.
-            store: store each step as a ``plan`` trial (False: a re-enactment for a GIF).
+            store: store each step as a ``plan`` trial (False: nothing is stored, e.g. to
+                find where a plan fails).
             record: the knowledge base the plan was made with: count each step as an
                 execution of its operator in its context (success or failure), which sets
                 the operator's cost by experience. None: count nothing.
@@ -278,9 +279,11 @@ class Agent:
         state = perceive(self.world)
         for index, step in enumerate(steps):
             spec = self.controller_call(step)
-            stored = self.snapshot() if store else None
-            self.sync()
-            physics = self._states[stored] if stored is not None else self.world.serialize_state()
+            if store:
+                stored = self.snapshot()
+                physics = self._states[stored]
+            else:
+                stored, physics = None, self.world.serialize_state()
             trial, record_ = self.execute(spec, source="plan", snapshot_id=stored)
             reached = self.scenario.goal_reached(trial.after)
             failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], self.scenario), trial.after)
