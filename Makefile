@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 DB ?= llcps.db
 
-.PHONY: setup run test test-slow clean
+.PHONY: setup run test test-fast test-slow clean
 
 $(BIN)/llcps: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,19 +20,25 @@ setup: $(BIN)/llcps
 # cannot solve exits 1; the sequence goes on and the table shows it.
 run: setup
 	$(BIN)/llcps --db $(DB) db init
-	$(BIN)/llcps --db $(DB) pretrain --n 200 --seed 1
+	$(BIN)/llcps --db $(DB) pretrain --trials 200 --seed 1
 	-$(BIN)/llcps --db $(DB) solve scenario1
 	-$(BIN)/llcps --db $(DB) solve scenario2
 	-$(BIN)/llcps --db $(DB) solve scenario3
-	$(BIN)/llcps --db $(DB) inspect runs
+	$(BIN)/llcps --db $(DB) inspect episodes
 
-# tests/services.sh runs the suite beside the services it needs (a throwaway PostgreSQL
-# server, installed first when missing and run as root) and stops them afterwards.
+# The whole suite, slow tests included (what CI runs), on both cores. .ci/services.sh
+# installs the system packages the tests need (as root); tests/services.sh runs the suite
+# beside a throwaway PostgreSQL server (installed first when missing) and stops it after.
 test: setup
-	tests/services.sh $(BIN)/python -m pytest
+	bash .ci/services.sh
+	tests/services.sh $(BIN)/python -m pytest -n 2 --dist loadfile
+
+# The inner loop: everything but the slow tests (sweeps, lifelong sequences in physics).
+test-fast: setup
+	$(BIN)/python -m pytest -m "not slow"
 
 test-slow: setup
-	tests/services.sh $(BIN)/python -m pytest -m slow
+	tests/services.sh $(BIN)/python -m pytest -n 2 --dist loadfile -m slow
 
 clean:
 	rm -rf $(VENV) *.egg-info

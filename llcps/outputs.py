@@ -87,30 +87,43 @@ def write_error(path: str | Path, exc: OSError, *, what: str) -> LlcpsError:
 
 
 @contextmanager
-def replaced_atomically(path: str | Path, *, what: str) -> Iterator[IO[str]]:
-    """A text file that becomes ``path`` only when the block succeeds.
+def written_atomically(path: str | Path, *, what: str) -> Iterator[Path]:
+    """A temporary path to write that becomes ``path`` only when the block succeeds.
 
-    A regular file is written beside ``path`` and renamed over it at the end, so a
-    failed export leaves no half-written file (and an existing one untouched). A
-    device or pipe (``/dev/stdout``, ``/dev/full``) is written directly.
+    The file is written beside ``path`` and renamed over it at the end, so a failed
+    export leaves no half-written file (and an existing one untouched). A device or
+    pipe (``/dev/stdout``, ``/dev/full``) is yielded as it is and written directly.
 
     Raises:
         LlcpsError: writing failed (see :func:`write_error`).
     """
     path = Path(path)
     try:
-        special = path.exists() and not stat.S_ISREG(path.stat().st_mode)
-        if special:
-            with path.open("w", newline="", encoding="utf-8") as fh:
-                yield fh
+        if path.exists() and not stat.S_ISREG(path.stat().st_mode):
+            yield path
             return
+        mode = stat.S_IMODE(path.stat().st_mode) if path.exists() else 0o666 & ~_umask()
         fd, tmp = tempfile.mkstemp(dir=path.absolute().parent, prefix=f".{path.name}.", suffix=".part")
+        os.close(fd)
         try:
-            with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-                yield fh
+            yield Path(tmp)
+            os.chmod(tmp, mode)  # mkstemp's 0600 would make the export private
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):
                 os.unlink(tmp)
     except OSError as exc:
         raise write_error(path, exc, what=what) from None
+
+
+@contextmanager
+def replaced_atomically(path: str | Path, *, what: str) -> Iterator[IO[str]]:
+    """A text file that becomes ``path`` only when the block succeeds (see :func:`written_atomically`)."""
+    with written_atomically(path, what=what) as target, target.open("w", newline="", encoding="utf-8") as fh:
+        yield fh
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

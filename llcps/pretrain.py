@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 import numpy as np
 
-from llcps.domain import ACTIONS, OUTCOME_NAMES, check_seed
+from llcps.domain import ACTIONS, MAX_PRETRAIN_TRIALS, OUTCOME_NAMES, check_seed
 from llcps.errors import LlcpsError
 from llcps.sim.motion import control_loop_rate
 from llcps.sim.sampler import sample_interaction
@@ -27,9 +27,6 @@ if TYPE_CHECKING:
 
 #: ``progress(done, total)`` after every stored trial.
 ProgressCallback = Callable[[int, int], None]
-
-#: Most random interactions one pretraining run may ask for.
-MAX_PRETRAIN_TRIALS = 10_000_000
 
 #: Measure the raw control-loop rate on every k-th trial's scene (0: never).
 CONTROL_LOOP_EVERY = 10
@@ -185,7 +182,7 @@ def pretrain(
         control_loop_every: measure the raw control-loop rate on every k-th scene (0: never).
     """
     if not 0 <= n <= MAX_PRETRAIN_TRIALS:
-        raise LlcpsError(f"the number of trials must be from 0 to {MAX_PRETRAIN_TRIALS}, got {n}", hint="pass --n 200, say")
+        raise LlcpsError(f"the number of trials must be from 0 to {MAX_PRETRAIN_TRIALS}, got {n}", hint="pass --trials 200, say")
     check_seed(seed)
     from llcps.domain import TrialRecord
 

@@ -15,39 +15,8 @@ import pytest
 from llcps.cps.agent import solve
 from llcps.cps.episode import SolveConfig
 from llcps.cps.replay import replay
-from llcps.cps.candidates import candidate_space_size
 from llcps.pretrain import pretrain
-from llcps.scenarios import SCENARIOS
 from llcps.store import Store
-
-PRETRAIN_TRIALS = 30
-BUDGET = candidate_space_size()  # the whole candidate space: a novelty that can be resolved is
-
-
-@pytest.fixture(scope="module")
-def pretrained(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A store whose main branch holds a small seeded pretraining set."""
-    path = tmp_path_factory.mktemp("agent") / "agent.db"
-    with Store.open(str(path), create=True) as store:
-        pretrain(store, branch="main", n=PRETRAIN_TRIALS, seed=1)
-    return path
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("name", tuple(SCENARIOS))
-def test_novelty_is_resolved_then_reused(pretrained: Path, name: str) -> None:
-    with Store.open(str(pretrained)) as store:
-        store.create_branch(f"life-{name}", from_branch="main", at="pretrain")
-        first = solve(store, branch=f"life-{name}", config=SolveConfig(scenario=name, budget=BUDGET, seed=3))
-        assert first.status == "solved", first.as_json()
-        assert first.candidates == candidate_space_size(name)  # the agent's space is the one the budget names
-        explored = store.visible_trials(f"life-{name}", source="exploration")
-        assert len([t for t in explored if t.episode_id == first.episode_id]) == first.exploration_trials > 0
-        assert first.learned_operators
-        again = solve(store, branch=f"life-{name}", config=SolveConfig(scenario=name, budget=BUDGET, seed=3))
-        assert again.status == "solved" and again.exploration_trials == 0
-        # the learned operator is what the second plan used
-        assert any(step.startswith("(" + first.learned_operators[0].split()[1]) for step in again.plan)
 
 
 def test_branch_at_pretrain_does_not_see_later_exploration_or_operators(tmp_path: Path) -> None:

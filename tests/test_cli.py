@@ -7,7 +7,6 @@ import hashlib
 import io
 import json
 import os
-import shutil
 import sqlite3
 import subprocess
 import sys
@@ -15,16 +14,18 @@ from contextlib import closing
 from pathlib import Path
 
 import pytest
+from make_store_fixtures import make as make_store
 from store_writer import sample_trial
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
 from llcps.domain import OUTCOME_NAMES
-from llcps.store import Store
+from llcps.store import Store, migrations
 from llcps.store.schema import VERSION_TABLE
 
-FIXTURES = Path(__file__).parent / "fixtures"
+
 runner = CliRunner()
+HEAD = migrations.head_revision()
 
 
 def llcps(db: Path | str, *args: str, env: dict[str, str] | None = None):  # noqa: ANN201 - click Result
@@ -67,7 +68,7 @@ def test_acceptance_flow(store_url: str) -> None:
     db = store_url
     result = llcps(db, "db", "init")
     assert result.exit_code == 0, result.output
-    assert "schema 0002" in result.stderr and result.stdout == ""
+    assert f"schema {HEAD}" in result.stderr and result.stdout == ""
     assert llcps(db, "db", "init").exit_code == 0  # idempotent
     result = llcps(db, "db", "branch", "exp", "--from", "main")
     assert result.exit_code == 0 and "created branch exp from main" in result.stderr
@@ -78,9 +79,9 @@ def test_acceptance_flow(store_url: str) -> None:
     ]
     assert llcps(db, "db", "checkout", "exp").exit_code == 0
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
-    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", "0002", True)
+    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", HEAD, True)
     text = llcps(db, "db", "status")
-    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and "0002" in text.stdout
+    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and HEAD in text.stdout
 
 
 def test_inspect_trials_json_and_filters(db: str) -> None:
@@ -142,30 +143,64 @@ def test_reset_and_delete_need_yes(db: str) -> None:
     assert [t["source"] for t in json.loads(llcps(db, "inspect", "trials", "--json").stdout)] == ["pretrain"] * 4
 
 
-def test_export_csv_and_jsonl(db: str, tmp_path: Path) -> None:
+def test_export_csv_jsonl_and_parquet_hold_the_same_flat_rows(db: str, tmp_path: Path) -> None:
     result = llcps(db, "db", "export")
     assert result.exit_code == 0 and "exported 7 trial(s)" in result.stderr
     rows = list(csv.DictReader(io.StringIO(result.stdout)))
     assert [int(r["id"]) for r in rows] == list(range(1, 8))
-    first = json.loads(llcps(db, "inspect", "trials", "--json", "--limit", "0").stdout)
-    for row, trial in zip(rows, first):
+    nested = json.loads(llcps(db, "inspect", "trials", "--json", "--limit", "0").stdout)
+    for row, trial in zip(rows, nested):
         assert row["arg0"] == trial["arguments"][0]
         assert float(row["arg0_vector_magnitude"]) == trial["features"][0]["vector_magnitude"]
-        assert [int(row[name]) for name in OUTCOME_NAMES] == [trial["outcome"][name] for name in OUTCOME_NAMES]
+        # booleans are true/false, like JSON's, for the outcome bits and solved alike
+        assert [row[name] for name in OUTCOME_NAMES] == ["true" if trial["outcome"][name] else "false" for name in OUTCOME_NAMES]
+        assert row["solved"] == ("true" if trial["solved"] else "false")
+        assert (row["arg1"] == "") == (len(trial["arguments"]) == 1)
     out = tmp_path / "trials.jsonl"
     assert llcps(db, "db", "export", "--format", "jsonl", "--out", str(out)).exit_code == 0
-    assert [json.loads(line) for line in out.read_text().splitlines()] == first
+    flat = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [list(r) for r in flat] == [list(rows[0])] * len(rows)  # the same columns, in the same order
+    for line, trial in zip(flat, nested):
+        assert [line[name] for name in OUTCOME_NAMES] == [bool(trial["outcome"][name]) for name in OUTCOME_NAMES]
+        assert line["solved"] is trial["solved"] and line["rate"] == trial["rate"]
+        assert (line["arg1"] is None) == (len(trial["arguments"]) == 1)
+    parquet = tmp_path / "trials.parquet"
+    assert llcps(db, "db", "export", "--format", "parquet", "--out", str(parquet)).exit_code == 0
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(parquet)
+    assert table.column_names == list(rows[0]) and table.num_rows == 7
+    assert table.column("solved").to_pylist() == [t["solved"] for t in nested]
+    assert table.column("positive_touching").to_pylist() == [bool(t["outcome"]["positive_touching"]) for t in nested]
+    assert table.column("arg0_shape").to_pylist() == [t["features"][0]["shape"] for t in nested]
+
+
+def test_export_filters_by_source_scenario_and_episode(db: str, tmp_path: Path) -> None:
+    def ids(*args: str) -> list[int]:
+        result = llcps(db, "db", "export", "--format", "jsonl", *args)
+        assert result.exit_code == 0, result.output
+        return [json.loads(line)["id"] for line in result.stdout.splitlines()]
+
+    assert ids("--source", "exploration") == [5, 6, 7]
+    assert ids("--scenario", "scenario1") == [2, 4]
+    assert ids("--source", "pretrain", "--scenario", "scenario2") == []
+    with Store.open(str(db)) as store:
+        run = store.start_run(command="t", seed=0, config={}, branch="main")
+        episode = store.start_episode(run_id=run, branch="main", scenario="scenario2", condition="novelty", model="nb", measure="m", seed=0)
+        store.add_trials([sample_trial(30 + i, source="exploration", episode_id=episode, run_id=run) for i in range(2)])
+    assert ids("--episode", str(episode)) == [8, 9]
+    refused = llcps(db, "db", "export", "--format", "parquet")
+    assert refused.exit_code == 2 and "--out" in refused.stderr and refused.stdout == ""
 
 
 def test_upgrade_command_on_an_old_store(tmp_path: Path) -> None:
-    db = tmp_path / "old.db"
-    shutil.copy(FIXTURES / "store_0001.db", db)
+    db = make_store("0001", tmp_path)
     refused = llcps(db, "inspect", "trials")
     assert refused.exit_code == 2 and "llcps db upgrade" in refused.stderr
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
     assert (status["revision"], status["up_to_date"], status["visible_trials"]) == ("0001", False, 2)
     upgraded = llcps(db, "db", "upgrade", "--json")
-    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": "0002", "changed": True}
+    assert upgraded.exit_code == 0 and json.loads(upgraded.stdout) == {"from": "0001", "to": HEAD, "changed": True}
     assert len(json.loads(llcps(db, "inspect", "trials", "--json").stdout)) == 2
 
 

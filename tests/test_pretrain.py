@@ -56,7 +56,7 @@ def test_a_negative_count_is_refused(sqlite_store) -> None:
 def test_cli_prints_one_json_document(tmp_path) -> None:
     db = str(tmp_path / "cli.db")
     runner = CliRunner()
-    done = runner.invoke(app, ["--db", db, "pretrain", "--n", "1", "--seed", "2", "--create", "--json"])
+    done = runner.invoke(app, ["--db", db, "pretrain", "--trials", "1", "--seed", "2", "--create", "--json"])
     assert done.exit_code == 0, done.output
     summary = json.loads(done.stdout)
     assert summary["trials"] == 1 and len(summary["trial_ids"]) == 1

@@ -147,8 +147,15 @@ HUGE = "99999999999999999999"
 OUT_OF_RANGE = {
     "solve --seed -5": ["solve", "scenario1", "--seed", "-5"],
     "solve --seed 2^63": ["solve", "scenario1", "--seed", str(2**63)],
-    "pretrain --model-seed": ["pretrain", "--n", "1", "--model-seed", HUGE],
-    "pretrain --seed": ["pretrain", "--n", "1", "--seed", HUGE],
+    "pretrain --model-seed": ["pretrain", "--trials", "1", "--model-seed", HUGE],
+    "pretrain --seed": ["pretrain", "--trials", "1", "--seed", HUGE],
+    "pretrain --trials": ["pretrain", "--trials", HUGE],
+    "solve --model-seed": ["solve", "scenario1", "--model-seed", HUGE],
+    "inspect model --limit": ["inspect", "model", "--limit", HUGE],
+    "inspect model --model-seed": ["inspect", "model", "--model-seed", "-1"],
+    "inspect runs --compare": ["inspect", "runs", "--compare", "1", HUGE],
+    "inspect episodes --run": ["inspect", "episodes", "--run", HUGE],
+    "db export --episode": ["db", "export", "--episode", HUGE],
     "replay id": ["replay", HUGE],
     "inspect trials --limit": ["inspect", "trials", "--limit", HUGE],
     "db branch --at": ["db", "branch", "x", "--at", HUGE],
@@ -165,6 +172,26 @@ def test_out_of_range_numbers_are_refused_before_any_work(db: Path, case: str) -
     assert digest(db) == before
 
 
+@pytest.mark.parametrize(
+    ("args", "old", "new"),
+    [
+        (["pretrain", "--n", HUGE], "--n", "--trials"),
+        (["inspect", "model", "--top", "0"], "--top", "--limit"),
+        (["experiment", "run", "--preset", "smoke", "--out", "/proc/llcps-report"], "--out", "--out-dir"),
+    ],
+)
+def test_a_deprecated_spelling_keeps_the_error_contract(db: Path, args: list[str], old: str, new: str) -> None:
+    """An old option spelling is the new option, ranges and path checks included: one
+    deprecation line, then the same error and hint lines, exit 2, nothing changed."""
+    before = digest(db)
+    result = llcps(db, *args)
+    assert result.exit_code == 2 and result.stdout == "" and "Traceback" not in result.output
+    warning, *rest = result.stderr.splitlines()
+    assert warning.startswith("warning: ") and old in warning and new in warning
+    assert [line.split(":", 1)[0] for line in rest] == ["error", "hint"], result.stderr
+    assert new in rest[0] and digest(db) == before
+
+
 # -- 4. output paths are checked before the work ---------------------------------------------------
 
 
@@ -177,7 +204,8 @@ def test_out_of_range_numbers_are_refused_before_any_work(db: Path, case: str) -
         (["solve", "scenario1", "--gif", "{tmp}/nonexistent/x.gif"], "does not exist"),
         (["solve", "scenario1", "--gif", "{tmp}/x.mp4"], "extension"),
         (["replay", "1", "--gif", "{tmp}/x.mp4"], "extension"),
-        (["experiment", "run", "--preset", "smoke", "--out", "/proc/llcps-report"], "cannot write into directory /proc"),
+        (["experiment", "run", "--preset", "smoke", "--out-dir", "/proc/llcps-report"], "cannot write into directory /proc"),
+        (["db", "export", "--format", "parquet", "--out", "/proc/llcps.parquet"], "cannot write into directory /proc"),
     ],
 )
 def test_output_paths_are_checked_before_any_work(db: Path, tmp_path: Path, args: list[str], needle: str) -> None:
@@ -307,16 +335,16 @@ def test_global_options_also_follow_the_subcommand(db: Path, tmp_path: Path) -> 
 
 @pytest.mark.parametrize(
     "args",
-    [["pretrain", "--n", "1"], ["solve", "scenario1", "--budget", "1"], ["experiment", "run", "--preset", "smoke", "--seeds", "1"]],
+    [["pretrain", "--trials", "1"], ["solve", "scenario1", "--budget", "1"], ["experiment", "run", "--preset", "smoke", "--seeds", "1"]],
 )
 def test_a_mistyped_db_creates_nothing(tmp_path: Path, args: list[str]) -> None:
-    assert_one_error(llcps(tmp_path / "typo.db", *args, "--out" if args[0] == "experiment" else "--json",
+    assert_one_error(llcps(tmp_path / "typo.db", *args, "--out-dir" if args[0] == "experiment" else "--json",
                            *([str(tmp_path / "r")] if args[0] == "experiment" else [])), "no llcps database", "--create")  # fmt: skip
     assert list(tmp_path.iterdir()) == []
 
 
 def test_create_makes_the_store_on_purpose(tmp_path: Path) -> None:
-    done = llcps(tmp_path / "new.db", "pretrain", "--n", "1", "--model", "nb", "--create", "--json")
+    done = llcps(tmp_path / "new.db", "pretrain", "--trials", "1", "--model", "nb", "--create", "--json")
     assert done.exit_code == 0, done.output
     assert json.loads(done.stdout)["trials"] == 1
 

@@ -22,8 +22,8 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
-from typer.core import TyperGroup
 
+from llcps.cli._conventions import ConventionGroup
 from llcps.errors import LlcpsError
 from llcps.store import Store
 
@@ -76,7 +76,7 @@ def usage_error(exc: Any) -> LlcpsError:
 _NO_ARGS_IS_HELP: Any = getattr(click_exceptions, "NoArgsIsHelpError", ())
 
 
-class LlcpsGroup(TyperGroup):
+class LlcpsGroup(ConventionGroup):
     """The root command group: one error contract for everything below it.
 
     Every failure, argument parsing included, prints ``error: ...`` and ``hint: ...`` on
@@ -157,13 +157,15 @@ def hoist_global_options(args: list[str]) -> list[str]:
 
 
 def new_app(help: str, **kwargs: Any) -> typer.Typer:  # noqa: A002 - typer's own name
-    """A Typer app with the project's settings (plain help, no tracebacks, no completion)."""
+    """A Typer app with the project's settings (plain help, no tracebacks; completion
+    options only where the root app asks for them)."""
     settings: dict[str, Any] = {
         "help": help,
         "no_args_is_help": True,
         "rich_markup_mode": None,
         "pretty_exceptions_enable": False,
         "add_completion": False,
+        "cls": ConventionGroup,
     }
     settings.update(kwargs)
     return typer.Typer(**settings)

@@ -19,16 +19,28 @@ from llcps.cli._common import (
     print_table,
     selected_branch,
 )
-from llcps.domain import MAX_ID
-from llcps.outputs import check_output_file, replaced_atomically
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
+from llcps.domain import MAX_ID, TRIAL_SOURCES
+from llcps.errors import LlcpsError
+from llcps.outputs import check_output_file
+from llcps.scenarios import get_scenario
 from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
-from llcps.store.export import EXPORT_FORMATS, export_trials
+from llcps.store.export import BINARY_FORMATS, EXPORT_FORMATS, export_trials
 from llcps.store.schema import MAX_BRANCH_NAME
 
-app = new_app("Create, inspect, migrate, branch and export the experience store.")
+app = new_app(
+    "Create, inspect, migrate, branch and export the experience store.",
+    epilog=examples(
+        "llcps db init && llcps db status",
+        "llcps db branch fresh --at pretrain && llcps db checkout fresh",
+        "llcps db export --format parquet --out trials.parquet",
+    ),
+)
 
 ResetTarget = choice_enum("ResetTarget", RESET_TARGETS)
 ExportFormat = choice_enum("ExportFormat", EXPORT_FORMATS)
+TrialSource = choice_enum("ExportSource", TRIAL_SOURCES)
 DEFAULT_RESET_TARGET = ResetTarget(PRETRAIN)
 DEFAULT_EXPORT_FORMAT = ExportFormat("csv")
 
@@ -83,7 +95,14 @@ def _fork_point(value: Optional[str]) -> Optional[str]:
     return text
 
 
-@app.command("init")
+@app.command(
+    "init",
+    epilog=examples(
+        "llcps db init                       # ./llcps.db, branch main",
+        "llcps --db runs.db db init --json",
+        "llcps --db postgresql+psycopg://me@dbhost/llcps db init",
+    ),
+)
 def init_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Create the store with a `main` branch, or migrate an existing one to the newest schema."""
     with open_store(ctx, create=True, allow_outdated=True) as store:
@@ -96,14 +115,26 @@ def init_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
             _print_status(store, selected_branch(ctx), True)
 
 
-@app.command("status")
+@app.command(
+    "status",
+    epilog=examples(
+        "llcps db status",
+        "llcps --branch exp db status --json",
+    ),
+)
 def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Show the database URL, schema revision, current branch and trial counts."""
     with open_store(ctx, allow_outdated=True) as store:
         _print_status(store, selected_branch(ctx), as_json)
 
 
-@app.command("list")
+@app.command(
+    "list",
+    epilog=examples(
+        "llcps db list",
+        "llcps db list --json",
+    ),
+)
 def list_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """List branches with parent, fork point, own and visible trial counts."""
     with open_store(ctx) as store:
@@ -121,7 +152,14 @@ def list_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     )
 
 
-@app.command("branch")
+@app.command(
+    "branch",
+    epilog=examples(
+        "llcps db branch fresh --at pretrain   # back to the pretraining data",
+        "llcps db branch exp --from main --at 120",
+        "llcps db branch copy --json",
+    ),
+)
 def branch_cli(
     ctx: typer.Context,
     name: BranchName,
@@ -153,7 +191,13 @@ def branch_cli(
     )
 
 
-@app.command("checkout")
+@app.command(
+    "checkout",
+    epilog=examples(
+        "llcps db checkout exp",
+        "llcps db checkout main --json",
+    ),
+)
 def checkout_cli(ctx: typer.Context, name: BranchName, as_json: JsonFlag = False) -> None:
     """Make a branch the current one (the default of --branch)."""
     with open_store(ctx) as store:
@@ -161,7 +205,14 @@ def checkout_cli(ctx: typer.Context, name: BranchName, as_json: JsonFlag = False
     _print_branch(info, as_json, f"switched to branch {info.name} ({info.visible_trials} visible trials)")
 
 
-@app.command("reset")
+@app.command(
+    "reset",
+    epilog=examples(
+        "llcps db reset                       # dry run: what would go",
+        "llcps --branch exp db reset --to pretrain --yes",
+        "llcps db reset --to empty --yes --json",
+    ),
+)
 def reset_cli(
     ctx: typer.Context,
     to: Annotated[
@@ -184,7 +235,13 @@ def reset_cli(
     message(change.summary)
 
 
-@app.command("delete")
+@app.command(
+    "delete",
+    epilog=examples(
+        "llcps db delete exp                  # dry run",
+        "llcps db delete exp --yes",
+    ),
+)
 def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_json: JsonFlag = False) -> None:
     """Delete a branch and everything it owns (not main, the current branch, or a parent)."""
     with open_store(ctx) as store:
@@ -197,36 +254,69 @@ def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_js
     message(change.summary)
 
 
-@app.command("upgrade")
+@app.command(
+    "upgrade",
+    epilog=examples(
+        "llcps db upgrade",
+        "llcps --db old.db db upgrade --json",
+    ),
+)
 def upgrade_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Migrate the store to the newest schema revision this llcps knows."""
-    with open_store(ctx, allow_outdated=True) as store:
-        before, after = store.upgrade()
+    with open_store(ctx, allow_outdated=True) as store, progress_display("db upgrade", "checking the schema") as progress:
+        before, after = store.upgrade(progress=lambda revision, done, total: progress(f"migrating to schema {revision}", done, total))
     if as_json:
         print_json({"from": before, "to": after, "changed": before != after})
     message(f"upgraded from schema {before} to {after}" if before != after else f"already at schema {after}")
 
 
-@app.command("export")
+@app.command(
+    "export",
+    epilog=examples(
+        "llcps db export --out trials.csv",
+        "llcps --branch exp db export --format parquet --out exp.parquet",
+        "llcps db export --format jsonl --source exploration --scenario scenario2 > explore.jsonl",
+        "llcps db export --episode 3 --out episode3.csv",
+    ),
+)
 def export_cli(
     ctx: typer.Context,
     fmt: Annotated[
         ExportFormat,  # type: ignore[valid-type]
-        typer.Option("--format", help="csv: one flat row per trial; jsonl: one JSON trial per line."),
+        typer.Option(
+            "--format",
+            help="csv, jsonl (one flat JSON object per line) or parquet (needs --out); every format has the same flat columns.",
+        ),
     ] = DEFAULT_EXPORT_FORMAT,  # type: ignore[assignment]
     out: Annotated[
         Optional[Path],
-        typer.Option("--out", metavar="FILE", help="File to write (default: stdout); its directory must exist.", show_default=False),
+        typer.Option("--out", metavar="FILE", help="File to write (default: stdout); its directory must exist.", show_default=False, dir_okay=False),
     ] = None,
+    source: Annotated[
+        Optional[TrialSource],  # type: ignore[valid-type]
+        typer.Option("--source", help="Only trials from this source.", show_default=False),
+    ] = None,
+    scenario: Annotated[Optional[str], typer.Option("--scenario", metavar="NAME", help="Only trials of this scenario (a name or its alias).", show_default=False)] = None,
+    episode: Annotated[Optional[int], typer.Option("--episode", metavar="ID", min=1, max=MAX_ID, help="Only trials of this episode.", show_default=False)] = None,
 ) -> None:
-    """Export the trials --branch (default: the current branch) sees, in id order."""
+    """Export the trials --branch (default: the current branch) sees, in id order, one flat row per trial."""
+    fmt_name = str(fmt.value)  # type: ignore[attr-defined]
+    if fmt_name in BINARY_FORMATS and out is None:
+        raise LlcpsError(f"--format {fmt_name} writes a binary file", hint="pass --out FILE")
+    if scenario is not None:
+        scenario = get_scenario(scenario).name
     if out is not None:
         check_output_file(out, what="--out")
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name
-        if out is None:
-            count = export_trials(store, branch, str(fmt.value), sys.stdout)  # type: ignore[attr-defined]
-        else:
-            with replaced_atomically(out, what="--out") as fh:
-                count = export_trials(store, branch, str(fmt.value), fh)  # type: ignore[attr-defined]
+        count = export_trials(
+            store,
+            branch=branch,
+            fmt=fmt_name,
+            out=sys.stdout if out is None else out,
+            source=None if source is None else str(source.value),  # type: ignore[attr-defined]
+            scenario=scenario,
+            episode=episode,
+            what="--out",
+        )
     message(f"exported {count} trial(s) of branch {branch}" + (f" to {out}" if out else ""))

@@ -8,8 +8,16 @@ from typing import Annotated, Optional
 import typer
 
 from llcps.cli._common import JsonFlag, message, open_store, print_json, print_table
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
 from llcps.domain import MAX_ID
 from llcps.outputs import GIF_SUFFIXES, check_output_file
+
+EXAMPLES = examples(
+    "llcps replay 42                       # must match what was recorded",
+    "llcps replay 42 --gif trial42.gif     # and film it, captioned",
+    "llcps replay 42 --json",
+)
 
 
 def replay_cli(
@@ -18,7 +26,14 @@ def replay_cli(
         int, typer.Argument(metavar="TRIAL_ID", min=1, max=MAX_ID, help="Id of a stored trial (see `llcps inspect trials`).", show_default=False)
     ],
     gif: Annotated[
-        Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the replay to a GIF (PATH ends in .gif; its directory must exist).", show_default=False)
+        Optional[Path],
+        typer.Option(
+            "--gif",
+            metavar="FILE",
+            help="Render the replay to a GIF, captioned with the trial and its parameters (FILE ends in .gif; its directory must exist).",
+            show_default=False,
+            dir_okay=False,
+        ),
     ] = None,
     gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
     as_json: JsonFlag = False,
@@ -30,10 +45,11 @@ def replay_cli(
     """
     if gif is not None:
         check_output_file(gif, what="--gif", suffixes=GIF_SUFFIXES)
-    from llcps.cps.replay import replay  # the simulator loads only when needed
+    with progress_display("replay", "loading the simulator") as progress:
+        from llcps.cps.replay import replay  # the simulator loads only when needed
 
-    with open_store(ctx) as store:
-        report = replay(store, trial_id, gif=gif, gui=gui)
+        with open_store(ctx) as store:
+            report = replay(store, trial_id, gif=gif, gui=gui, progress=progress)
     if as_json:
         print_json(report.as_json())
     else:

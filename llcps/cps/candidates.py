@@ -10,6 +10,7 @@ this list; ``random`` shuffles it.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 from typing import Iterator, Mapping, Sequence
@@ -102,6 +103,7 @@ def focused_count(candidates: Sequence[TrialSpec], failed: TrialSpec) -> int:
     return n
 
 
+@functools.cache  # the scenarios' scenes are fixed: counted once per process
 def candidate_space_size(scenario: str | None = None) -> int:
     """How many exploration candidates a scenario's novelty offers (the largest of all
     scenarios for None): every combination of the grid, less the failed call itself.

@@ -11,8 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from llcps.cps.film import PHASES, ProgressCallback, Shot, reenact
 from llcps.domain import Outcome, TrialRecord
-from llcps.errors import LlcpsError
 from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.store import Store
 
@@ -55,45 +55,36 @@ class ReplayReport:
         }
 
 
-def replay(store: Store, trial_id: int, *, gif: str | Path | None = None, gui: bool = False) -> ReplayReport:
+def replay(
+    store: Store,
+    trial_id: int,
+    *,
+    gif: str | Path | None = None,
+    gui: bool = False,
+    progress: ProgressCallback | None = None,
+) -> ReplayReport:
     """Re-execute stored trial ``trial_id`` from its start snapshot.
 
     Args:
         store: the experience store holding the trial and its snapshot.
         trial_id: the trial to replay.
-        gif: also render the replay to this GIF.
+        gif: also render the replay to this captioned GIF.
         gui: watch it in a PyBullet window (needs a display).
+        progress: ``progress(phase, done, total)`` in simulation steps.
 
     Raises:
         LlcpsError: the trial does not exist or has no stored start state; its snapshot
             fails its hash, size or structure checks (see :mod:`llcps.sim.snapshot`).
     """
     from llcps.scenarios import get_scenario
-    from llcps.sim.render import GifRecorder
-    from llcps.sim.trial import run_trial
-    from llcps.sim.world import SceneSpec, World
 
     if gif is not None:
         check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
     trial = store.get_trial(trial_id)
-    if trial.snapshot_id is None:
-        raise LlcpsError(f"trial {trial_id} has no stored start state, so it cannot be replayed", hint="replay a trial with a snapshot_id")
-    snapshot = store.get_snapshot(trial.snapshot_id)
-    scene = SceneSpec.from_dict(snapshot.scene)  # checked before the engine builds anything
-    goal = get_scenario(trial.scenario) if trial.scenario else None
-    world = World.from_scene(scene, gui=gui)
-    try:
-        world.restore_serialized(snapshot.state)
-        recorder = GifRecorder(world) if gif is not None else None
-        if recorder is not None:
-            with recorder:
-                result = run_trial(world, trial.spec)
-            recorder.save(gif, speedup=2.0)
-        else:
-            result = run_trial(world, trial.spec)
-        solved = goal.goal_reached(result.after) if goal is not None else False
-    finally:
-        world.close()
+    goal = get_scenario(trial.scenario) if trial.scenario else None  # a stored name is checked before any physics
+    (done,) = reenact(store, [Shot(trial, PHASES.get(trial.source, trial.source))], gif=gif, gui=gui, progress=progress)
+    result = done.result
+    solved = goal.goal_reached(result.after) if goal is not None else False
     return ReplayReport(
         trial=trial,
         outcome=result.outcome,

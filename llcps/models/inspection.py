@@ -11,11 +11,11 @@ monitor until its first failing step. Nothing is written to the store on the way
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from llcps.domain import OUTCOME_NAMES, WorldModelInput
+from llcps.domain import OUTCOME_NAMES, WorldModelInput, check_seed
 from llcps.errors import LlcpsError
 from llcps.models.base import WorldModel
 from llcps.models.evaluation import EvaluationReport, evaluate
@@ -141,8 +141,8 @@ def failure_point(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
         steps = plan(kb, agent.task(perceive(world)))
         if not steps:
             raise LlcpsError(f"the knowledge base of {branch!r} has no plan for {spec.name}'s novelty condition")
-        _, failed_step, failure = agent.run_plan(kb, steps, store=False)
-        if failed_step is None:
+        run = agent.run_plan(steps, store=False)
+        if run.failure is None:
             learned = bool(store.visible_operators(branch))
             raise LlcpsError(
                 f"the plan for {spec.name}'s novelty condition succeeds on {branch!r}: no failure state to rank",
@@ -150,6 +150,8 @@ def failure_point(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
                 if learned
                 else "the novelty does not make the nominal plan fail (see docs/scenarios.md)",
             )
+        failed_step, failure = run.failure.step, run.failure.monitor
+        world.restore_serialized(run.failure.physics)  # candidates start where a_f did
         failed_spec = agent.controller_call(failed_step)
         specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
         features = {name: entity_features(world, name) for name in agent.kinds}
@@ -175,6 +177,8 @@ def inspect_models(
     test_fraction: float = 0.25,
     scenario: str | None = None,
     top: int = 5,
+    model_seed: int | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> ModelInspection:
     """Evaluate ``models`` on the branch's trials and, with a scenario, rank its candidates.
 
@@ -182,30 +186,46 @@ def inspect_models(
         store: the experience store.
         branch: whose visible trials train and test the models.
         models: WORLD_MODELS names.
-        seed: seeds the held-out split, the models and tie-breaks.
+        seed: seeds the held-out split and tie-breaks (and the models, without ``model_seed``).
         test_fraction: share of trials held out for the metrics.
         scenario: a scenario whose failure state's candidates to rank (optional).
         top: candidates shown per measure.
+        model_seed: seed of the world models (None: ``seed``).
+        progress: called as ``progress(phase, done, total)`` as the work goes on.
     """
+    check_seed(seed)
+    fit_seed = seed if model_seed is None else check_seed(model_seed, "model seed")
+
+    def say(phase: str, done: int = 0, total: int = 0) -> None:
+        if progress is not None:
+            progress(phase, done, total)
+
     for name in models:
         world_model_entry(name)
     if top < 1:
         raise LlcpsError(f"--top must be at least 1, got {top}")
+    say("loading trials")
     records = store.visible_trials(branch)
     outcomes = outcome_matrix(records)
     frequencies = dict(zip(OUTCOME_NAMES, (outcomes.mean(axis=0) if len(records) else np.zeros(6)).round(4).tolist()))
     evaluations: tuple[EvaluationReport, ...] = ()
     note = None
     try:
-        evaluations = tuple(evaluate(name, records, seed=seed, test_fraction=test_fraction) for name in models)
+        done = []
+        for index, name in enumerate(models):
+            say(f"held-out evaluation of {name}", index, len(models))
+            done.append(evaluate(name, records, seed=seed, test_fraction=test_fraction, model_seed=fit_seed))
+        evaluations = tuple(done)
     except LlcpsError as exc:
         note = exc.message
     failure = None
     rankings: dict[str, dict[str, list[RankedCandidate]]] = {}
     if scenario is not None:
+        say(f"{scenario}: running the plan to its failure")
         failure = failure_point(store, branch=branch, scenario=scenario, seed=seed)
-        for name in models:
-            model = fit_or_load(store, branch, name, seed, records=records)
+        for index, name in enumerate(models):
+            say(f"ranking {len(failure.candidates)} candidates with {name}", index, len(models))
+            model = fit_or_load(store, branch, name, fit_seed, records=records)
             rankings[name] = {
                 measure: top_candidates(
                     model, failure.candidates, measure=measure, top=top, seed=seed, desired=failure.desired

@@ -15,14 +15,16 @@ import os
 import sys
 import tempfile
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as package_version
 from typing import Any, Callable, Mapping
 
 import pybullet as p
 from pybullet_utils import bullet_client
 
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.sim import native_output_silenced
+from llcps.sim import CONTROLLERS_REVISION, native_output_silenced
 from llcps.sim import snapshot as snapshots
 from llcps.sim.entities import (
     Entity,
@@ -54,6 +56,49 @@ REST_LINEAR = 0.005  # m/s
 REST_ANGULAR = 0.05  # rad/s
 REST_CHECK_EVERY = 8  # steps between rest checks
 REST_CHECKS = 3  # consecutive quiet checks that count as rest
+
+
+def _engine_version() -> str:
+    """PyBullet's package version and API date: a new engine may compute other physics."""
+    try:
+        release = package_version("pybullet")
+    except PackageNotFoundError:  # pragma: no cover - a source build
+        release = "unknown"
+    return f"pybullet {release} api {p.getAPIVersion()}"
+
+
+@dataclass(frozen=True)
+class PhysicsSettings:
+    """Everything besides the scene, the state and the call that a trial's physics depends on.
+
+    A :class:`World` owns one; the physics cache keys every trial by it, so a change
+    of any field (a new engine, other solver settings, a revised controller) can
+    never be answered from trials simulated under the old one.
+
+    Attributes:
+        time_step: seconds per simulation step.
+        solver_iterations: the constraint solver's iterations per step.
+        sub_steps: engine sub-steps per step (0: none).
+        deterministic_overlapping_pairs: sort broad-phase pairs (needed for bit-exact replay).
+        gravity: m/s^2 along x, y, z.
+        engine: the physics engine's version.
+        controllers: :data:`~llcps.sim.controllers.CONTROLLERS_REVISION`, the revision of
+            llcps's own controllers, motion primitives and perception.
+    """
+
+    time_step: float = 1.0 / 240.0
+    solver_iterations: int = 50
+    sub_steps: int = 0
+    deterministic_overlapping_pairs: bool = True
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    engine: str = field(default_factory=_engine_version)
+    controllers: int = CONTROLLERS_REVISION
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able form (the cache key hashes it)."""
+        data = asdict(self)
+        data["gravity"] = list(self.gravity)
+        return data
 
 
 @dataclass(frozen=True)
@@ -128,8 +173,6 @@ class SceneSpec:
             ) from exc
 
 
-
-
 def _object(value: Any) -> Mapping[str, Any]:
     if not isinstance(value, Mapping):
         raise TypeError(f"expected a JSON object, got {type(value).__name__}")
@@ -142,10 +185,10 @@ class World:
     Attributes:
         client: the BulletClient (DIRECT unless ``gui``).
         scene: the description this world was built from.
+        settings: the engine settings every rebuild applies.
         robot: the Panda.
         entities: entities by name (objects and containers).
         fixtures: static bodies by name: "table", "floor" and the scene's fixtures.
-        time_step: seconds per simulation step.
         visuals: whether the robot's visual meshes are loaded (only rendering needs them).
     """
 
@@ -153,7 +196,7 @@ class World:
         self,
         *,
         gui: bool = False,
-        time_step: float = 1.0 / 240.0,
+        settings: PhysicsSettings | None = None,
         scene: SceneSpec | Mapping[str, Any] | None = None,
         visuals: bool = False,
     ) -> None:
@@ -168,7 +211,7 @@ class World:
         self._velocity = functools.partial(p.getBaseVelocity, physicsClientId=cid)
         self.gui = gui
         self.visuals = visuals or gui
-        self.time_step = float(time_step)
+        self.settings = settings if settings is not None else PhysicsSettings()
         self.entities: dict[str, Entity] = {}
         self.fixtures: dict[str, int] = {}
         self.names: dict[int, str] = {}
@@ -185,14 +228,19 @@ class World:
         *,
         gui: bool = False,
         visuals: bool = False,
-        time_step: float = 1.0 / 240.0,
+        settings: PhysicsSettings | None = None,
     ) -> "World":
         """Build a world from a scene description (deterministic: same scene, same bodies).
 
         ``visuals`` loads the robot's visual meshes now; rendering loads them on demand
         anyway (:meth:`ensure_visuals`), and skipping them makes rebuilds four times faster.
         """
-        return cls(gui=gui, scene=scene, visuals=visuals, time_step=time_step)
+        return cls(gui=gui, scene=scene, visuals=visuals, settings=settings)
+
+    @property
+    def time_step(self) -> float:
+        """Seconds per simulation step."""
+        return self.settings.time_step
 
     # ------------------------------------------------------------------ building
 
@@ -202,10 +250,14 @@ class World:
             scene = SceneSpec.from_dict(scene)
         c = self.client
         c.resetSimulation()
+        settings = self.settings
         c.setPhysicsEngineParameter(
-            fixedTimeStep=self.time_step, numSubSteps=0, deterministicOverlappingPairs=1, numSolverIterations=50
+            fixedTimeStep=settings.time_step,
+            numSubSteps=settings.sub_steps,
+            deterministicOverlappingPairs=int(settings.deterministic_overlapping_pairs),
+            numSolverIterations=settings.solver_iterations,
         )
-        c.setGravity(0.0, 0.0, -9.81)
+        c.setGravity(*settings.gravity)
         if self.gui:
             c.configureDebugVisualizer(p.COV_ENABLE_GUI, 0)
         self.scene = scene
@@ -369,8 +421,21 @@ class World:
         The state is remembered as trusted, so restoring it skips the checks.
         """
         raw = self._save_raw()
-        snapshots.TRUSTED.add((self._scene_key, snapshots.state_digest(raw)))
+        self._trust(raw)
         self._restore_raw(raw)
+        return zlib.compress(raw, STATE_COMPRESSION)
+
+    def save_state(self) -> bytes:
+        """The current physics state as :meth:`serialize_state` gives it, without continuing from it.
+
+        The world goes on from its live state, which is not the same as the one a
+        restore of these bytes gives (the engine keeps history a saved state does
+        not hold). For callers that restore next anyway: an agent whose next step
+        either restores another state or continues from exactly these bytes. The
+        state is remembered as trusted, so restoring it skips the checks.
+        """
+        raw = self._save_raw()
+        self._trust(raw)
         return zlib.compress(raw, STATE_COMPRESSION)
 
     def restore_serialized(self, state: bytes, *, probe: bool = True) -> None:
@@ -379,12 +444,25 @@ class World:
 
         Afterwards the world is exactly a fresh ``World.from_scene(scene)`` with the
         state restored; the motors hold the restored pose and nothing is grasped.
+        A state this process did not make or check before goes through
+        :meth:`check_serialized` first.
 
-        A state this process did not make or check before is untrusted: it is
-        inflated under a size cap, its structure is checked against the scene's
-        (:func:`llcps.sim.snapshot.check_state`) and, with ``probe``, it is restored
-        once in a child process first, so that a state that would crash the engine
-        becomes a clean error (see :mod:`llcps.sim.snapshot`).
+        Raises:
+            StateError: the state is too large, malformed, or not one of this scene.
+        """
+        self._restore_raw(self.check_serialized(state, probe=probe))
+
+    def check_serialized(self, state: bytes, *, probe: bool = True) -> bytes:
+        """Check that an untrusted serialized state may be restored into this world's scene;
+        returns its raw ``.bullet`` bytes.
+
+        The state is inflated under a size cap, its structure is checked against the
+        scene's (:func:`llcps.sim.snapshot.check_state`) and, with ``probe``, it is
+        restored once in a child process first, so that a state that would crash the
+        engine becomes a clean error (see :mod:`llcps.sim.snapshot`). A state this
+        process made, or checked before, costs only its digest. The first check of a
+        scene may rebuild the world from it (to take the reference state): restore a
+        state afterwards.
 
         Raises:
             StateError: the state is too large, malformed, or not one of this scene.
@@ -396,10 +474,13 @@ class World:
             if probe:
                 snapshots.probe_states(self.scene.to_dict(), [raw])
             snapshots.TRUSTED.add(key)
-        self._restore_raw(raw)
+        return raw
 
     def reference_state(self) -> bytes:
-        """The raw state of this world's scene freshly built: what a stored state is checked against."""
+        """The raw state of this world's scene freshly built: what a stored state is checked against.
+
+        Taking it the first time rebuilds the world from its scene (the live state is lost).
+        """
         found = _REFERENCES.get(self._scene_key)
         if found is None:
             self.load(self.scene)
@@ -408,6 +489,10 @@ class World:
             while len(_REFERENCES) > _REFERENCE_CAPACITY:
                 _REFERENCES.pop(next(iter(_REFERENCES)))
         return found
+
+    def _trust(self, raw: bytes) -> None:
+        """Remember a state this process saved: restoring it needs no checks."""
+        snapshots.TRUSTED.add((self._scene_key, snapshots.state_digest(raw)))
 
     def _save_raw(self) -> bytes:
         fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
