@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
+from make_store_fixtures import make as make_store
 from store_writer import sample_trial
 
 from llcps.domain import OUTCOME_NAMES
@@ -31,21 +32,29 @@ def _digest(path: Path) -> str:
 
 
 def test_revisions_are_a_line_from_0001() -> None:
-    assert migrations.known_revisions() == ["0001", "0002"]
-    assert migrations.head_revision() == "0002"
+    revisions = migrations.known_revisions()
+    assert revisions[:2] == ["0001", "0002"] and "0004" in revisions
+    assert revisions == sorted(revisions) and len(set(revisions)) == len(revisions)
+    assert migrations.head_revision() == revisions[-1]
     assert (migrations.migrations_dir() / "env.py").is_file()
 
 
-def test_every_past_revision_has_a_fixture() -> None:
-    assert PAST_REVISIONS, "a head-only history needs no upgrade fixture"
-    for revision in PAST_REVISIONS:
-        assert (FIXTURES / f"store_{revision}.db").is_file(), f"run tests/fixtures/make_store_fixtures.py {revision}"
+def test_the_kept_store_file_is_at_its_revision() -> None:
+    with closing(sqlite3.connect(FIXTURES / "store_0001.db")) as conn:
+        assert conn.execute(f"SELECT version_num FROM {VERSION_TABLE}").fetchall() == [("0001",)]
 
 
-@pytest.mark.parametrize("revision", PAST_REVISIONS)
-def test_old_store_upgrades_to_head_and_reads_and_writes(tmp_path: Path, revision: str) -> None:
+#: (how the old store is made, revision): the kept file, and every past revision built by Alembic.
+OLD_STORES = [("kept", "0001")] + [("alembic", revision) for revision in PAST_REVISIONS]
+
+
+@pytest.mark.parametrize(("made", "revision"), OLD_STORES, ids=[f"{m}-{r}" for m, r in OLD_STORES])
+def test_old_store_upgrades_to_head_and_reads_and_writes(tmp_path: Path, made: str, revision: str) -> None:
     db = tmp_path / "old.db"
-    shutil.copy(FIXTURES / f"store_{revision}.db", db)
+    if made == "kept":
+        shutil.copy(FIXTURES / f"store_{revision}.db", db)
+    else:
+        make_store(revision, db)
     with pytest.raises(StoreError, match="older") as info:
         Store.open(str(db))
     assert "llcps db upgrade" in (info.value.hint or "")

@@ -8,8 +8,11 @@ from typing import Annotated, Optional
 
 import typer
 
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
 from llcps.cli._common import (
     JsonFlag,
+    err_console,
     YesFlag,
     choice_enum,
     message,
@@ -51,6 +54,11 @@ def _print_status(store: Store, branch: str | None, as_json: bool) -> None:
             ("branches", status.branches),
             ("trials in database", status.trials_total),
             ("visible trials", f"{status.visible_trials} ({by_source})"),
+            *(
+                [("trial changes", ", ".join(f"{k} {v}" for k, v in status.changes.items()))]
+                if status.changes is not None
+                else []
+            ),
         ],
         show_header=False,
     )
@@ -185,13 +193,56 @@ def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_js
 
 
 @app.command("upgrade")
-def upgrade_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
-    """Migrate the store to the newest schema revision this llcps knows."""
+def upgrade_cli(
+    ctx: typer.Context,
+    replay_changes: Annotated[
+        bool,
+        typer.Option(
+            "--replay-changes/--no-replay-changes",
+            help="Recover the symbolic change of trials stored without one by replaying them from their "
+            "stored start state; without replay they are marked unknown.",
+        ),
+    ] = True,
+    as_json: JsonFlag = False,
+) -> None:
+    """Migrate the store to the newest schema revision this llcps knows, and give every
+    trial its symbolic change (the goal-aware world model learns from it).
+
+    Trials stored before changes were recorded are replayed from their start state
+    (deterministic physics); one that has none, or whose replay disagrees with what was
+    stored, is marked unknown. `llcps db status` shows the counts.
+
+    Examples:
+      llcps db upgrade
+      llcps db upgrade --no-replay-changes   # fast: mark older trials' changes unknown
+    """
+    from llcps.cps.changes import backfill_changes  # PyBullet loads only when there is work
+
     with open_store(ctx, allow_outdated=True) as store:
         before, after = store.upgrade()
+        with Progress(
+            TextColumn("trial changes"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=err_console,
+            transient=True,
+        ) as progress:
+            task = progress.add_task("trial changes", total=None)
+            report = backfill_changes(
+                store,
+                replay=replay_changes,
+                progress=lambda done, total: progress.update(task, completed=done, total=total),
+            )
     if as_json:
-        print_json({"from": before, "to": after, "changed": before != after})
+        print_json({"from": before, "to": after, "changed": before != after, "changes": report.as_json()})
     message(f"upgraded from schema {before} to {after}" if before != after else f"already at schema {after}")
+    if report.total:
+        message(
+            f"trial changes: {report.replayed} replayed, {report.unknown} unknown "
+            f"({report.no_snapshot} without a stored start state or replay, {report.mismatched} whose replay disagreed)"
+        )
 
 
 @app.command("export")

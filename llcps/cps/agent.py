@@ -11,30 +11,28 @@ from __future__ import annotations
 
 import contextlib
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
-from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.episode import SolveConfig, SolveResult
+from llcps.cps.exploration import failure_point, rank_candidates
 from llcps.cps.knowledge import load_knowledge
-from llcps.cps.outcomes import desired_outcome
-from llcps.domain import ControllerParams, State, TrialRecord, TrialSpec, WorldModelInput
+from llcps.domain import PUSH_DIRECTION, ControllerParams, State, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
-from llcps.models.measures import rank
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
-from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
+from llcps.sim.controllers import DEFAULT_MAX_STEPS
 from llcps.sim.memo import TrialMemo, memo_key
-from llcps.sim.perception import entity_features, perceive
+from llcps.sim.perception import perceive
 from llcps.sim.render import GifRecorder
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import World
 from llcps.store import Store
 from llcps.symbolic.knowledge import KnowledgeBase, Task
-from llcps.symbolic.monitor import check_step
+from llcps.symbolic.monitor import StepFailure, check_step
 from llcps.symbolic.operators import learn_operator, refine_failed_action
 from llcps.symbolic.planner import GroundAction, plan
 
@@ -67,6 +65,7 @@ class Agent:
         result: SolveResult,
         records: list[TrialRecord],
         memo: TrialMemo | None = None,
+        changes: dict[int, TrialChange] | None = None,
     ) -> None:
         self.store = store
         self.branch = branch
@@ -75,6 +74,8 @@ class Agent:
         self.config = config
         self.result = result
         self.records = records
+        #: The known symbolic change of each trial in ``records``, by trial id.
+        self.changes: dict[int, TrialChange] = {} if changes is None else changes
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
         self.recorder: GifRecorder | None = None
         self.memo = memo
@@ -155,9 +156,11 @@ class Agent:
             snapshot_id=snapshot_id,
             scenario=self.scenario.name,
         )
-        trial_id = self.store.add_trial(new)
+        change = trial.change
+        trial_id = self.store.add_trial(new, change=change)
         record = replace(new, id=trial_id)
         self.records.append(record)
+        self.changes[trial_id] = replace(change, trial_id=trial_id)
         self.result.sim_steps += trial.sim_steps
         if source == "plan":
             self.result.plan_trials += 1
@@ -270,7 +273,8 @@ def solve(
     world: World | None = None
     try:
         records = list(store.visible_trials(branch_name))
-        model = fit_or_load(store, branch_name, config.model, config.seed, records=records)
+        changes = store.visible_changes(branch_name)
+        model = fit_or_load(store, branch_name, config.model, config.seed, records=records, changes=changes)
         kb = load_knowledge(store, branch_name)
         world = World.from_scene(scenario.scene(config.condition), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
@@ -283,6 +287,7 @@ def solve(
             result=result,
             records=records,
             memo=memo,
+            changes=changes,
         )
         if gif is not None:
             agent.recorder = GifRecorder(world, every=GIF_EVERY)
@@ -303,39 +308,63 @@ def solve(
     return result
 
 
-def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progress) -> None:
-    """Plan with K, execute with the monitor; at the first failure, explore (as the paper does)."""
+@dataclass(frozen=True)
+class PlanOutcome:
+    """How executing K's plan went: ``solved``, ``no_plan``, or ``failed`` at ``failure``.
+
+    Attributes:
+        status: solved, no_plan or failed.
+        plan: the plan's step labels.
+        state: the symbolic state where execution stopped.
+        failure: the failed step and its missing effects (status ``failed``).
+    """
+
+    status: str
+    plan: tuple[str, ...] = ()
+    state: State = frozenset()
+    failure: StepFailure | None = None
+
+
+def plan_to_failure(agent: Agent, kb: KnowledgeBase, *, store: bool = True) -> PlanOutcome:
+    """Plan with K from what the robot perceives and execute under the monitor, up to
+    the first failing step: where exploration starts (the agent's path, also taken by
+    ``llcps inspect model`` without storing anything)."""
     state = perceive(agent.world)
     if agent.scenario.goal_reached(state):
-        result.status = "solved"
-        return
+        return PlanOutcome("solved", state=state)
     steps = plan(kb, agent.task(state))
     if steps is None:
-        result.status = "no_plan"
-        return
-    result.plan = [step.label for step in steps]
+        return PlanOutcome("no_plan", state=state)
+    labels = tuple(step.label for step in steps)
     with agent.filmed():
-        state, failed_step, failure = agent.run_plan(kb, steps)
+        state, failed_step, failure = agent.run_plan(kb, steps, store=store)
     if failed_step is None:
-        result.status = "solved" if agent.scenario.goal_reached(state) else "no_plan"
+        return PlanOutcome("solved" if agent.scenario.goal_reached(state) else "no_plan", labels, state)
+    return PlanOutcome("failed", labels, state, failure)
+
+
+def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progress) -> None:
+    """Plan with K, execute with the monitor; at the first failure, explore (as the paper does)."""
+    outcome = plan_to_failure(agent, kb)
+    result.plan = list(outcome.plan)
+    if outcome.failure is None:
+        result.status = outcome.status
         return
-    result.failed_action = failed_step.label
+    failure = outcome.failure
+    result.failed_action = failure.step.label
     result.missing_effects = failure.describe()
-    _explore(agent, kb, model, failed_step, failure, state, result, progress)
+    _explore(agent, kb, model, failure.step, failure, outcome.state, result, progress)
 
 
 def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failure_state: State, result, progress):
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
-    world, config = agent.world, agent.config
+    config = agent.config
     snapshot = agent.snapshot()
-    failed_spec = agent.controller_call(failed_step)
-    candidates = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
+    point = failure_point(agent, failure, failure_state)
+    candidates = point.candidates
     result.candidates = len(candidates)
-    features = {name: entity_features(world, name) for name in agent.kinds}
-    inputs = [WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in candidates]
-    desired = desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del)
     remaining = list(range(len(candidates)))
-    order = _rank(model, inputs, remaining, config, desired)
+    order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     tried = 0
     while order and result.exploration_trials < config.budget:
         index = order.pop(0)
@@ -374,8 +403,8 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
                 _film_resolution(agent, kb, spec, snapshot)
             return new_kb
         if tried % config.refit_every == 0 and remaining:
-            model.update(agent.records)
-            order = _rank(model, inputs, remaining, config, desired)
+            model.update(agent.records, agent.changes)
+            order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     result.status = "budget_exhausted"
     return kb
 
@@ -391,12 +420,6 @@ def _film_resolution(agent: Agent, kb: KnowledgeBase, spec: TrialSpec, snapshot:
         if not agent.scenario.goal_reached(trial.after):
             steps = plan(kb, agent.task(trial.after)) or ()
             agent.run_plan(kb, steps, store=False)
-
-
-def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> list[int]:
-    proba = model.predict_proba([inputs[i] for i in remaining])
-    order = rank(proba, config.measure, seed=config.seed, desired=desired)
-    return [remaining[i] for i in order]
 
 
 def _resolves(
@@ -438,4 +461,4 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
     }
 
 
-__all__ = ["SolveConfig", "SolveResult", "solve", "load_knowledge"]
+__all__ = ["PlanOutcome", "SolveConfig", "SolveResult", "load_knowledge", "plan_to_failure", "solve"]
