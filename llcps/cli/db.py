@@ -241,7 +241,8 @@ def upgrade_cli(
     if report.total:
         message(
             f"trial changes: {report.replayed} replayed, {report.unknown} unknown "
-            f"({report.no_snapshot} without a stored start state or replay, {report.mismatched} whose replay disagreed)"
+            f"({report.no_snapshot} without a stored start state or replay, {report.failed} whose state did not "
+            f"rebuild, {report.mismatched} whose replay disagreed)"
         )
 
 

@@ -6,8 +6,9 @@ recovered by *replay*: rebuild its scene, restore the state, run the same contro
 call, and take the change between the states before and after. The replay must agree
 with the stored trial (the same Omega and the same number of simulation steps); then
 the change is recorded with source ``replayed``. A trial without a stored start state,
-or whose replay disagrees, is recorded as ``unknown`` and the goal-aware world model
-leaves it out. Nothing else about a trial is changed.
+whose stored state cannot be replayed, or whose replay disagrees, is recorded as
+``unknown`` and the goal-aware world model leaves it out. Nothing else about a trial
+is changed.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from llcps.domain import TrialChange
+from llcps.errors import LlcpsError
 from llcps.store import Store
 
 ProgressCallback = Callable[[int, int], None]
@@ -34,12 +36,13 @@ class BackfillReport:
     replayed: int = 0
     no_snapshot: int = 0
     mismatched: int = 0
+    failed: int = 0
     wall_seconds: float = 0.0
     mismatched_ids: list[int] = field(default_factory=list)
 
     @property
     def unknown(self) -> int:
-        return self.no_snapshot + self.mismatched
+        return self.no_snapshot + self.mismatched + self.failed
 
     def as_json(self) -> dict[str, object]:
         return {
@@ -48,6 +51,7 @@ class BackfillReport:
             "unknown": self.unknown,
             "unknown_no_snapshot": self.no_snapshot,
             "unknown_replay_mismatch": self.mismatched,
+            "unknown_replay_failed": self.failed,
             "mismatched_ids": self.mismatched_ids[:100],
             "wall_seconds": round(self.wall_seconds, 3),
         }
@@ -76,12 +80,19 @@ def backfill_changes(store: Store, *, replay: bool = True, progress: ProgressCal
             if not replay or snapshot_id is None:
                 report.no_snapshot += 1
             else:
-                change, world, scene_key = _replay(store, trial_id, snapshot_id, world, scene_key)
-                if change is None:
-                    report.mismatched += 1
-                    report.mismatched_ids.append(trial_id)
+                try:
+                    change, world, scene_key = _replay(store, trial_id, snapshot_id, world, scene_key)
+                except LlcpsError:  # a stored scene or state that does not rebuild
+                    report.failed += 1
+                    if world is not None:
+                        world.close()
+                    world, scene_key = None, None
                 else:
-                    report.replayed += 1
+                    if change is None:
+                        report.mismatched += 1
+                        report.mismatched_ids.append(trial_id)
+                    else:
+                        report.replayed += 1
             pending.append((trial_id, change))
             if len(pending) >= BATCH:
                 store.put_changes(pending)

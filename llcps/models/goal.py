@@ -12,13 +12,28 @@ trial; it does not retrain the learner (a refit on tens of thousands of examples
 take many failures to move, and costs a second for some learners) but keeps
 *episode evidence*: every example of the trials the learner has not seen, grouped into
 families by :func:`~llcps.models.relational.family_keys` (action, predicate, sign and
-roles; then also the orientation). A family's predictions are multiplied, in odds, by
-``(s + k) / (e + k)``, where ``s`` is how many of its tried examples changed as asked,
-``e`` how many the learner expected to (the sum of its probabilities) and ``k``
-(:data:`EVIDENCE_PRIOR`) the strength of the learner's word; the finer family's ratio
-is taken against the coarser one's corrected expectation. A family that keeps failing
-where success was expected drops fast; failures where failure was expected change
-nothing. The evidence lives for one fit: the next fit learns from those trials anyway.
+roles; then also the orientation). Physics is deterministic and every exploration trial
+starts from the same state, so the outcomes of one family's parameterizations are not
+independent draws: either the family can work in this scene or it cannot. Each family
+is therefore a two-way mixture: it works here with belief ``b``, and then a share
+:data:`FAMILY_SUCCESS` of its members changes the atom; or it does not, and none does.
+The learner's mean probability ``p`` over the family's tried members sets the prior
+belief ``b = min(p / FAMILY_SUCCESS, MAX_BELIEF)`` (never more than :data:`MAX_BELIEF`:
+the scene is novel, and the learner may not see why a family that works elsewhere
+fails here). After ``n`` failures and no success the belief is
+``b (1 - s)^n / (b (1 - s)^n + 1 - b)``, a success makes it 1, and every member's
+probability is scaled by posterior over prior belief. With the defaults every failure
+roughly halves a family's probability whatever the learner said, and a failure with the
+same orientation halves it again. The evidence lives for one fit: the next fit learns
+from those trials anyway.
+
+**Nothing is ruled out.** A learner trained on random interactions gives a change
+it never saw (a push that lands an object in a container) a vanishing probability, and
+such a change is what a novelty may need. The head's probability is therefore the
+learner's mixed with the base rate of its kind of change (predicate and sign) over the
+training set: ``(1 - e) p + e r`` with ``e`` = :data:`NOVELTY_MIX`. The order among
+untried candidates is the learner's; a family that keeps failing falls below all of
+them.
 
 **Several atoms.** A candidate's score is the product of its atoms' probabilities:
 the atoms are treated as independent given the candidate (:func:`joint_probability`).
@@ -45,10 +60,15 @@ from llcps.models.relational import (
     stratum_of,
 )
 
-#: Pseudo-count behind the learner's expectation in the episode evidence (see the module docstring).
-EVIDENCE_PRIOR = 1.0
-#: Probabilities are kept inside [FLOOR, 1 - FLOOR] so that odds and logs stay finite.
-FLOOR = 1e-6
+#: Share of a family's members that change the atom when the family works in a scene.
+FAMILY_SUCCESS = 0.5
+#: Most belief, before any evidence, that a family works in a novel scene.
+MAX_BELIEF = 0.5
+#: Share of the base rate of its kind of change mixed into every learned probability:
+#: in a novel scene no change is ruled out (see the module docstring).
+NOVELTY_MIX = 0.1
+#: Probabilities are kept inside [FLOOR, 1 - FLOOR] so that logs stay finite.
+FLOOR = 1e-12
 
 
 class GoalLearner(ABC):
@@ -166,6 +186,17 @@ class Standardizer:
         return self
 
 
+def family_scale(tried: int, changed: float, mean_probability: float) -> float:
+    """How much a family's probabilities change after ``tried`` members of it, ``changed``
+    of which changed the atom as asked (see the module docstring): posterior over prior
+    belief that the family works here."""
+    prior = min(mean_probability / FAMILY_SUCCESS, MAX_BELIEF)
+    if changed > 0:
+        return 1.0 / prior
+    stays = prior * (1.0 - FAMILY_SUCCESS) ** tried
+    return (stays / (stays + 1.0 - prior)) / prior
+
+
 def joint_probability(proba: np.ndarray) -> np.ndarray:
     """P(every atom changes as needed) per candidate: the product over atoms (independence)."""
     return np.prod(np.clip(proba, 0.0, 1.0), axis=1)
@@ -177,6 +208,8 @@ class GoalHead:
     def __init__(self, learner: GoalLearner) -> None:
         self.learner = learner
         self.prior = 0.5
+        #: Weighted, Laplace-smoothed change rate per (predicate, sign) stratum.
+        self.rates = np.full(N_STRATA, 0.5)
         self.learned = False
         self.n_examples = 0
         #: Largest trial id the learner was fitted on: later trials are episode evidence.
@@ -194,6 +227,11 @@ class GoalHead:
         positive = float(examples.weights @ examples.labels)
         total = float(examples.weights.sum())
         self.prior = (positive + 1.0) / (total + 2.0)
+        strata = stratum_of(examples.features)
+        for k in range(N_STRATA):
+            rows = strata == k
+            w = examples.weights[rows]
+            self.rates[k] = (float(w @ examples.labels[rows]) + 1.0) / (float(w.sum()) + 2.0)
         self.learned = bool(0 < examples.labels.sum() < len(examples))
         if self.learned:
             self.learner.fit(examples.features, examples.labels, examples.weights)
@@ -213,8 +251,8 @@ class GoalHead:
         if not len(examples):
             return self
         coarse, fine = family_keys(examples.features)
-        expected = self._base(examples.features) * examples.weights
-        observed = examples.labels * examples.weights
+        expected = self._base(examples.features)
+        observed = examples.labels.astype(np.float64)
         parts = (coarse, fine, observed, expected)
         if self._evidence is not None:
             parts = tuple(np.concatenate([old, new]) for old, new in zip(self._evidence, parts))
@@ -223,9 +261,13 @@ class GoalHead:
 
     # --------------------------------------------------------------- predicting
     def _base(self, features: np.ndarray) -> np.ndarray:
-        if not self.learned or not len(features):
-            return np.full(len(features), self.prior)
-        return np.clip(self.learner.predict(features), FLOOR, 1.0 - FLOOR)
+        """The learner's probability mixed with its stratum's change rate (nothing is ruled out)."""
+        if not len(features):
+            return np.zeros(0)
+        rate = self.rates[stratum_of(features)]
+        if not self.learned:
+            return rate
+        return (1.0 - NOVELTY_MIX) * np.clip(self.learner.predict(features), 0.0, 1.0) + NOVELTY_MIX * rate
 
     def _corrected(self, features: np.ndarray) -> np.ndarray:
         p = self._base(features)
@@ -233,22 +275,15 @@ class GoalHead:
             return p
         coarse, fine = family_keys(features)
         ev_coarse, ev_fine, observed, expected = self._evidence
-        ratio = np.ones(len(features))
-        k = EVIDENCE_PRIOR
-        for key in np.unique(coarse):
-            in_family = ev_coarse == key
-            if not in_family.any():
-                continue
-            r1 = (observed[in_family].sum() + k) / (expected[in_family].sum() + k)
-            rows = coarse == key
-            ratio[rows] *= r1
-            for sub in np.unique(fine[rows]):
-                in_sub = ev_fine == sub
-                if in_sub.any():
-                    r2 = (observed[in_sub].sum() + k) / (r1 * expected[in_sub].sum() + k)
-                    ratio[rows & (fine == sub)] *= r2
-        odds = p / (1.0 - p) * ratio
-        return np.clip(odds / (1.0 + odds), FLOOR, 1.0 - FLOOR)
+        scale = np.ones(len(features))
+        for keys, ev_keys in ((coarse, ev_coarse), (fine, ev_fine)):
+            for key in np.unique(keys):
+                tried = ev_keys == key
+                if tried.any():
+                    scale[keys == key] *= family_scale(
+                        int(tried.sum()), float(observed[tried].sum()), float(expected[tried].mean())
+                    )
+        return np.clip(p * scale, FLOOR, 1.0 - FLOOR)
 
     def predict(self, query: GoalQuery) -> np.ndarray:
         """P(each atom changes as needed) per candidate: float64 (n_candidates, n_atoms) in [0, 1]."""
@@ -263,7 +298,7 @@ class GoalHead:
 
     # -------------------------------------------------------------- persistence
     def export(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        arrays = {"goal/prior": np.array([self.prior])}
+        arrays = {"goal/prior": np.array([self.prior]), "goal/rates": self.rates}
         if self.learned:
             arrays.update({f"goal/{k}": v for k, v in self.learner.export().items()})
         meta = {"goal_learned": self.learned, "goal_examples": self.n_examples, "goal_watermark": self.watermark}
@@ -274,12 +309,18 @@ class GoalHead:
         if not 0.0 < prior < 1.0:
             raise ValueError("the goal prior must lie strictly inside (0, 1)")
         self.prior = prior
+        rates = array(arrays, "goal/rates", (N_STRATA,))
+        if np.any((rates <= 0) | (rates >= 1)):
+            raise ValueError("the goal change rates must lie strictly inside (0, 1)")
+        self.rates = rates.astype(np.float64)
         self.learned = bool(meta.get("goal_learned", False))
         self.n_examples = int(meta.get("goal_examples", 0))
         self.watermark = int(meta.get("goal_watermark", 0))
         if self.learned:
             prefix = "goal/"
-            self.learner.load({k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix)})
+            self.learner.load(
+                {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix) and k not in ("goal/prior", "goal/rates")}
+            )
         return self
 
 
