@@ -252,9 +252,10 @@ def test_a_family_that_keeps_failing_drops(toy, query, name):
     assert model.goal.watermark == 10_011
 
 
-def test_families_are_action_predicate_sign_roles_then_orientation(query):
+def test_families_are_action_predicate_sign_roles_then_orientation_then_magnitude(query):
     rows = encode_queries(query)
-    coarse, fine = family_keys(rows)
+    coarse, fine, finest = family_keys(rows)
+    magnitudes = [c.params.movement_magnitude for c in query.candidates]
     actions = [c.action for c in query.candidates]
     orientations = [c.params.orientation for c in query.candidates]
     for i in range(0, len(rows), 37):
@@ -263,5 +264,7 @@ def test_families_are_action_predicate_sign_roles_then_orientation(query):
             if actions[i] == actions[j] and same_args:
                 assert coarse[i] == coarse[j]
                 assert (fine[i] == fine[j]) == (orientations[i] == orientations[j])
+                same = orientations[i] == orientations[j] and magnitudes[i] == magnitudes[j]
+                assert (finest[i] == finest[j]) == same
             if actions[i] != actions[j]:
                 assert coarse[i] != coarse[j]

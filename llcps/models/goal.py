@@ -12,7 +12,7 @@ trial; it does not retrain the learner (a refit on tens of thousands of examples
 take many failures to move, and costs a second for some learners) but keeps
 *episode evidence*: every example of the trials the learner has not seen, grouped into
 families by :func:`~llcps.models.relational.family_keys` (action, predicate, sign and
-roles; then also the orientation). Physics is deterministic and every exploration trial
+roles; then also the orientation; then also the movement magnitude). Physics is deterministic and every exploration trial
 starts from the same state, so the outcomes of one family's parameterizations are not
 independent draws: either the family can work in this scene or it cannot. Each family
 is therefore a two-way mixture: it works here with belief ``b``, and then a share
@@ -23,8 +23,9 @@ the scene is novel, and the learner may not see why a family that works elsewher
 fails here). After ``n`` failures and no success the belief is
 ``b (1 - s)^n / (b (1 - s)^n + 1 - b)``, a success makes it 1, and every member's
 probability is scaled by posterior over prior belief. With the defaults every failure
-roughly halves a family's probability whatever the learner said, and a failure with the
-same orientation halves it again. The evidence lives for one fit: the next fit learns
+roughly halves a family's probability whatever the learner said, a failure with the
+same orientation halves it again, and one with the same orientation and magnitude
+again: exploration moves away from what failed, first in parameters, then in kind. The evidence lives for one fit: the next fit learns
 from those trials anyway.
 
 **Nothing is ruled out.** A learner trained on random interactions gives a change
@@ -250,10 +251,10 @@ class GoalHead:
         self._evidence_ids.update(r.id for r in fresh)  # type: ignore[misc]
         if not len(examples):
             return self
-        coarse, fine = family_keys(examples.features)
+        keys = family_keys(examples.features)
         expected = self._base(examples.features)
         observed = examples.labels.astype(np.float64)
-        parts = (coarse, fine, observed, expected)
+        parts = (*keys, observed, expected)
         if self._evidence is not None:
             parts = tuple(np.concatenate([old, new]) for old, new in zip(self._evidence, parts))
         self._evidence = parts
@@ -273,10 +274,9 @@ class GoalHead:
         p = self._base(features)
         if self._evidence is None or not len(features):
             return p
-        coarse, fine = family_keys(features)
-        ev_coarse, ev_fine, observed, expected = self._evidence
+        *ev_levels, observed, expected = self._evidence
         scale = np.ones(len(features))
-        for keys, ev_keys in ((coarse, ev_coarse), (fine, ev_fine)):
+        for keys, ev_keys in zip(family_keys(features), ev_levels):
             for key in np.unique(keys):
                 tried = ev_keys == key
                 if tried.any():

@@ -456,18 +456,21 @@ class ExampleTable:
         return Examples.concatenate(parts)
 
 
-#: Columns of the evidence keys: what makes two (candidate, atom) pairs one *family*.
+#: Columns of the evidence keys: what makes two (candidate, atom) pairs one *family*,
+#: then what narrows it (the orientation; then the orientation and the magnitude).
 FAMILY_COLUMNS: tuple[tuple[str, ...], ...] = (
     _onehot("action", ACTIONS) + _onehot("predicate", PREDICATES) + ("add",) + _onehot("role1", ROLES) + _onehot("role2", _ROLE2),
     _onehot("orientation", ORIENTATIONS),
 )
 
 
-def family_keys(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two nested family keys per row: (action, predicate, sign, roles) and that plus the orientation.
+def family_keys(features: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Three nested family keys per row: (action, predicate, sign, roles); that and the
+    orientation; that and the movement magnitude.
 
     Within one episode, pairs of a family share what matters physically: a family the
-    robot keeps failing with drops (see :mod:`llcps.models.goal`).
+    robot keeps failing with drops, and parameterizations near a failure drop more
+    (see :mod:`llcps.models.goal`).
     """
     coarse_cols = [_INDEX[c] for c in FAMILY_COLUMNS[0]]
     fine_cols = [_INDEX[c] for c in FAMILY_COLUMNS[1]]
@@ -475,7 +478,9 @@ def family_keys(features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     coarse = bits @ (1 << np.arange(len(coarse_cols), dtype=np.int64))
     orientation = (features[:, fine_cols] > 0.5) @ np.arange(1, len(fine_cols) + 1, dtype=np.int64)
     fine = coarse * (len(fine_cols) + 1) + orientation
-    return coarse.astype(np.int64), fine.astype(np.int64)
+    magnitude = np.round(features[:, _INDEX["movement_magnitude"]] * 1e4).astype(np.int64)  # 0.1 mm steps
+    finest = fine * 100_003 + magnitude
+    return coarse.astype(np.int64), fine.astype(np.int64), finest
 
 
 #: (predicate, sign) strata of the rows: what kind of change is asked.
