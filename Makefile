@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 DB ?= llcps.db
 
-.PHONY: setup run test test-slow clean
+.PHONY: setup run test test-fast test-slow clean
 
 $(BIN)/llcps: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,17 +20,23 @@ setup: $(BIN)/llcps
 # cannot solve exits 1; the sequence goes on and the table shows it.
 run: setup
 	$(BIN)/llcps --db $(DB) db init
-	$(BIN)/llcps --db $(DB) pretrain --n 200 --seed 1
+	$(BIN)/llcps --db $(DB) pretrain --trials 200 --seed 1
 	-$(BIN)/llcps --db $(DB) solve scenario1
 	-$(BIN)/llcps --db $(DB) solve scenario2
 	-$(BIN)/llcps --db $(DB) solve scenario3
-	$(BIN)/llcps --db $(DB) inspect runs
+	$(BIN)/llcps --db $(DB) inspect episodes
 
+# The whole suite, slow tests included (what CI runs), on both cores.
 test: setup
-	$(BIN)/python -m pytest
+	bash .ci/services.sh
+	$(BIN)/python -m pytest -n 2 --dist loadfile
+
+# The inner loop: everything but the slow tests (sweeps, lifelong sequences in physics).
+test-fast: setup
+	$(BIN)/python -m pytest -m "not slow"
 
 test-slow: setup
-	$(BIN)/python -m pytest -m slow
+	$(BIN)/python -m pytest -n 2 --dist loadfile -m slow
 
 clean:
 	rm -rf $(VENV) *.egg-info

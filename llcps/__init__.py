@@ -7,3 +7,14 @@ novelty and learns a new operator.
 """
 
 __version__ = "0.1.0"
+
+
+def open(url_or_path="llcps.db", *, create=False):  # noqa: A001 - the API's entry point
+    """Open an experience store for analysis: a :class:`llcps.api.Workbench`.
+
+    ``llcps.open("llcps.db").trials()`` is a pandas DataFrame of every trial the
+    current branch sees. pandas loads on the first call, not with ``import llcps``.
+    """
+    from llcps.api import Workbench
+
+    return Workbench.open(url_or_path, create=create)

@@ -246,6 +246,11 @@ class TrialRecord:
     scenario: str | None = None
     created_at: str | None = None
     extra: Mapping[str, object] = field(default_factory=dict)
+    #: Answered from the physics cache: ``wall_seconds`` is then what this run spent
+    #: on it, and ``simulation_wall_seconds`` the wall time of the simulation that
+    #: computed the result (for a simulated trial, its own simulation time).
+    cache_hit: bool = False
+    simulation_wall_seconds: float | None = None
 
     @property
     def model_input(self) -> WorldModelInput:
@@ -271,6 +276,8 @@ class TrialRecord:
             "solved": self.solved,
             "sim_steps": self.sim_steps,
             "wall_seconds": self.wall_seconds,
+            "cache_hit": self.cache_hit,
+            "simulation_wall_seconds": self.simulation_wall_seconds,
             "seed": self.seed,
             "snapshot_id": self.snapshot_id,
             "created_at": self.created_at,

@@ -32,22 +32,6 @@ def pretrained(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name", tuple(SCENARIOS))
-def test_novelty_is_resolved_then_reused(pretrained: Path, name: str) -> None:
-    with Store.open(str(pretrained)) as store:
-        store.create_branch(f"life-{name}", from_branch="main", at="pretrain")
-        first = solve(store, branch=f"life-{name}", config=SolveConfig(scenario=name, budget=BUDGET, seed=3))
-        assert first.status == "solved", first.as_json()
-        explored = store.visible_trials(f"life-{name}", source="exploration")
-        assert len([t for t in explored if t.episode_id == first.episode_id]) == first.exploration_trials > 0
-        assert first.learned_operators
-        again = solve(store, branch=f"life-{name}", config=SolveConfig(scenario=name, budget=BUDGET, seed=3))
-        assert again.status == "solved" and again.exploration_trials == 0
-        # the learned operator is what the second plan used
-        assert any(step.startswith("(" + first.learned_operators[0].split()[1]) for step in again.plan)
-
-
 def test_branch_at_pretrain_does_not_see_later_exploration_or_operators(tmp_path: Path) -> None:
     path = tmp_path / "b.db"
     with Store.open(str(path), create=True) as store:

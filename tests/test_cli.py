@@ -7,7 +7,6 @@ import hashlib
 import io
 import json
 import os
-import shutil
 import sqlite3
 import subprocess
 import sys
@@ -16,6 +15,7 @@ from pathlib import Path
 from typing import Iterator
 
 import pytest
+from make_store_fixtures import make as make_store
 from store_writer import sample_trial
 from typer.testing import CliRunner
 
@@ -24,8 +24,9 @@ from llcps.domain import OUTCOME_NAMES
 from llcps.store import Store, migrations
 from llcps.store.schema import VERSION_TABLE
 
-FIXTURES = Path(__file__).parent / "fixtures"
+
 runner = CliRunner()
+HEAD = migrations.head_revision()
 
 
 def llcps(db: Path | str, *args: str, env: dict[str, str] | None = None):  # noqa: ANN201 - click Result
@@ -51,7 +52,7 @@ def test_acceptance_flow(tmp_path: Path) -> None:
     db = tmp_path / "new.db"
     result = llcps(db, "db", "init")
     assert result.exit_code == 0, result.output
-    assert f"schema {migrations.head_revision()}" in result.stderr and result.stdout == ""
+    assert f"schema {HEAD}" in result.stderr and result.stdout == ""
     assert llcps(db, "db", "init").exit_code == 0  # idempotent
     result = llcps(db, "db", "branch", "exp", "--from", "main")
     assert result.exit_code == 0 and "created branch exp from main" in result.stderr
@@ -62,9 +63,9 @@ def test_acceptance_flow(tmp_path: Path) -> None:
     ]
     assert llcps(db, "db", "checkout", "exp").exit_code == 0
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
-    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", migrations.head_revision(), True)
+    assert (status["current_branch"], status["branch"], status["revision"], status["up_to_date"]) == ("exp", "exp", HEAD, True)
     text = llcps(db, "db", "status")
-    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and migrations.head_revision() in text.stdout
+    assert text.exit_code == 0 and "current branch" in text.stdout and "exp" in text.stdout and HEAD in text.stdout
 
 
 def test_inspect_trials_json_and_filters(db: Path) -> None:
@@ -123,24 +124,58 @@ def test_reset_and_delete_need_yes(db: Path) -> None:
     assert [t["source"] for t in json.loads(llcps(db, "inspect", "trials", "--json").stdout)] == ["pretrain"] * 4
 
 
-def test_export_csv_and_jsonl(db: Path, tmp_path: Path) -> None:
+def test_export_csv_jsonl_and_parquet_hold_the_same_flat_rows(db: Path, tmp_path: Path) -> None:
     result = llcps(db, "db", "export")
     assert result.exit_code == 0 and "exported 7 trial(s)" in result.stderr
     rows = list(csv.DictReader(io.StringIO(result.stdout)))
     assert [int(r["id"]) for r in rows] == list(range(1, 8))
-    first = json.loads(llcps(db, "inspect", "trials", "--json", "--limit", "0").stdout)
-    for row, trial in zip(rows, first):
+    nested = json.loads(llcps(db, "inspect", "trials", "--json", "--limit", "0").stdout)
+    for row, trial in zip(rows, nested):
         assert row["arg0"] == trial["arguments"][0]
         assert float(row["arg0_vector_magnitude"]) == trial["features"][0]["vector_magnitude"]
-        assert [int(row[name]) for name in OUTCOME_NAMES] == [trial["outcome"][name] for name in OUTCOME_NAMES]
+        # booleans are true/false, like JSON's, for the outcome bits and solved alike
+        assert [row[name] for name in OUTCOME_NAMES] == ["true" if trial["outcome"][name] else "false" for name in OUTCOME_NAMES]
+        assert row["solved"] == ("true" if trial["solved"] else "false")
+        assert (row["arg1"] == "") == (len(trial["arguments"]) == 1)
     out = tmp_path / "trials.jsonl"
     assert llcps(db, "db", "export", "--format", "jsonl", "--out", str(out)).exit_code == 0
-    assert [json.loads(line) for line in out.read_text().splitlines()] == first
+    flat = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [list(r) for r in flat] == [list(rows[0])] * len(rows)  # the same columns, in the same order
+    for line, trial in zip(flat, nested):
+        assert [line[name] for name in OUTCOME_NAMES] == [bool(trial["outcome"][name]) for name in OUTCOME_NAMES]
+        assert line["solved"] is trial["solved"] and line["rate"] == trial["rate"]
+        assert (line["arg1"] is None) == (len(trial["arguments"]) == 1)
+    parquet = tmp_path / "trials.parquet"
+    assert llcps(db, "db", "export", "--format", "parquet", "--out", str(parquet)).exit_code == 0
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(parquet)
+    assert table.column_names == list(rows[0]) and table.num_rows == 7
+    assert table.column("solved").to_pylist() == [t["solved"] for t in nested]
+    assert table.column("positive_touching").to_pylist() == [bool(t["outcome"]["positive_touching"]) for t in nested]
+    assert table.column("arg0_shape").to_pylist() == [t["features"][0]["shape"] for t in nested]
+
+
+def test_export_filters_by_source_scenario_and_episode(db: Path, tmp_path: Path) -> None:
+    def ids(*args: str) -> list[int]:
+        result = llcps(db, "db", "export", "--format", "jsonl", *args)
+        assert result.exit_code == 0, result.output
+        return [json.loads(line)["id"] for line in result.stdout.splitlines()]
+
+    assert ids("--source", "exploration") == [5, 6, 7]
+    assert ids("--scenario", "scenario1") == [2, 4]
+    assert ids("--source", "pretrain", "--scenario", "scenario2") == []
+    with Store.open(str(db)) as store:
+        run = store.start_run(command="t", seed=0, config={}, branch="main")
+        episode = store.start_episode(run_id=run, branch="main", scenario="scenario2", condition="novelty", model="nb", measure="m", seed=0)
+        store.add_trials([sample_trial(30 + i, source="exploration", episode_id=episode, run_id=run) for i in range(2)])
+    assert ids("--episode", str(episode)) == [8, 9]
+    refused = llcps(db, "db", "export", "--format", "parquet")
+    assert refused.exit_code == 2 and "--out" in refused.stderr and refused.stdout == ""
 
 
 def test_upgrade_command_on_an_old_store(tmp_path: Path) -> None:
-    db = tmp_path / "old.db"
-    shutil.copy(FIXTURES / "store_0001.db", db)
+    db = make_store("0001", tmp_path)
     refused = llcps(db, "inspect", "trials")
     assert refused.exit_code == 2 and "llcps db upgrade" in refused.stderr
     status = json.loads(llcps(db, "db", "status", "--json").stdout)
@@ -148,8 +183,8 @@ def test_upgrade_command_on_an_old_store(tmp_path: Path) -> None:
     upgraded = llcps(db, "db", "upgrade", "--json")
     assert upgraded.exit_code == 0
     report = json.loads(upgraded.stdout)
-    assert (report["from"], report["to"], report["changed"]) == ("0001", migrations.head_revision(), True)
-    # the kept store's snapshot holds no real physics state: its trials' changes are unknown
+    assert (report["from"], report["to"], report["changed"]) == ("0001", HEAD, True)
+    # the old store's snapshot holds no real physics state: its trials' changes are unknown
     assert (report["changes"]["trials"], report["changes"]["replayed"], report["changes"]["unknown"]) == (2, 0, 2)
     assert len(json.loads(llcps(db, "inspect", "trials", "--json").stdout)) == 2
 

@@ -168,7 +168,7 @@ def test_csv_and_json_round_trip(tmp_path) -> None:  # noqa: ANN001
 def test_bad_results_file_is_a_project_error(tmp_path) -> None:  # noqa: ANN001
     path = synthetic_table(seeds=1).write_csv(tmp_path / "r.csv")
     text = path.read_text().splitlines()
-    text[1] = text[1].replace(",True,", ",perhaps,").replace(",False,", ",perhaps,")
+    text[1] = text[1].replace(",true,", ",perhaps,").replace(",false,", ",perhaps,")  # booleans are written true/false
     path.write_text("\n".join(text) + "\n")
     with pytest.raises(LlcpsError, match="solved"):
         ResultsTable.read_csv(path)
@@ -273,7 +273,9 @@ def test_build_report_writes_every_file(tmp_path) -> None:  # noqa: ANN001
     paths = build_report(table, tmp_path / "report", resamples=1000, seed=0)
     for path in paths.all():
         assert path.is_file() and path.stat().st_size > 0, path
-    assert set(paths.plots) == {"figure2", "distribution", "cumulative"}
+    scenarios = {f"survival_{s}" for s in SCENARIO_SEQUENCE}
+    assert set(paths.plots) == {"figure2", "distribution", "cumulative", *scenarios}
+    assert paths.survival_csv is not None and all(f"plots/{name}.png" in paths.report_md.read_text() for name in scenarios)
     assert {p.suffix for ps in paths.plots.values() for p in ps} == {".png", ".svg"}
     assert paths.random_csv is not None
     assert ResultsTable.read(paths.results_csv) == table

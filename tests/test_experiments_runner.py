@@ -6,9 +6,11 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
+from contextlib import closing
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -31,6 +33,7 @@ from llcps.experiments.runner import (
 )
 from llcps.experiments.transfer import count_rows, export_branches, import_payload, inverse
 from llcps.store import Store
+from llcps.store import physics_cache
 
 SMOKE = PRESETS["smoke"]
 
@@ -225,6 +228,35 @@ def test_results_are_identical_with_two_workers(reference: tuple[Store, Any], tm
         assert store_signature(store) == store_signature(ref_store)
 
 
+def test_results_are_identical_without_the_cache_and_from_a_warm_one(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    """The reference ran with a cold cache; --no-cache and a later run on a warm cache give the same store."""
+    ref_store, ref_summary = reference
+    assert ref_summary.cache is not None and ref_summary.cache["stored"] > 0
+    with Store.open(str(tmp_path / "plain.db"), create=True) as store:
+        summary = run_experiment(store, preset="smoke", workers=1, cache=False)
+        assert summary.status == "ok" and summary.cache is None and physics_cache.status(store).entries == 0
+        assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke"))
+        assert store_signature(store) == store_signature(ref_store)
+    warm_db = tmp_path / "warm.db"
+    with Store.open(str(warm_db), create=True):
+        pass
+    with closing(sqlite3.connect(warm_db)) as conn, conn:  # the reference's cache, as a later run finds it
+        conn.execute("ATTACH DATABASE ? AS ref", (ref_store.url.split("///", 1)[1],))
+        conn.execute("INSERT INTO physics_cache SELECT * FROM ref.physics_cache")
+    with Store.open(str(warm_db)) as store:
+        summary = run_experiment(store, preset="smoke", workers=2)
+        assert summary.status == "ok" and summary.cache == {**summary.cache, "misses": 0, "stored": 0}
+        assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke"))
+        assert store_signature(store) == store_signature(ref_store)
+        sequence_trials = [t for t in store.visible_trials(None) if t.source != "pretrain"]
+        episode_trials = [
+            t for info in store.list_branches() if "-pretrain-" not in info.name and info.name.startswith("exp-")
+            for t in store.visible_trials(info.name) if t.branch == info.name
+        ]
+        assert not sequence_trials and episode_trials and all(t.cache_hit for t in episode_trials)
+        assert summary.cache["hits"] == len(episode_trials)
+
+
 def test_ray_engine_gives_the_local_engine_results(reference: tuple[Store, Any], tmp_path: Path) -> None:
     pytest.importorskip("ray", reason="Ray is not installed (pip install 'llcps[ray]')")
     ref_store, _ = reference
@@ -390,3 +422,39 @@ def test_ray_engine_without_ray_names_the_extra(monkeypatch: pytest.MonkeyPatch)
     with pytest.raises(LlcpsError) as info:
         make_engine("ray", 2)
     assert info.value.hint == "pip install 'llcps[ray]'" and "not installed" in info.value.message
+
+
+class _RecordingEngine:
+    """Finishes every task at once with an error; remembers the order tasks were submitted in."""
+
+    name, workers = "recording", 2
+
+    def __init__(self) -> None:
+        self.submitted: list[str] = []
+
+    def submit(self, task: Any) -> str:
+        self.submitted.append(task.label)
+        return task.label
+
+    def wait(self, handles: Any, timeout: float) -> list[str]:
+        return list(handles)[:1]
+
+    def result(self, handle: str) -> Any:
+        raise RuntimeError("not run")
+
+    def close(self, *, abort: bool, pending: Any = ()) -> None:
+        pass
+
+
+def test_the_scheduler_keeps_twins_apart(store: Store) -> None:
+    from llcps.experiments.scheduler import RunSummary, schedule
+
+    tasks = [t for t in plan_tasks(SMOKE, 2) if isinstance(t, SequenceTask)]  # s0 update, s0 reset, s1 update, s1 reset
+    for name in {t.pretrain_branch for t in tasks}:
+        store.create_branch(name, from_branch="main", at=0)
+    engine = _RecordingEngine()
+    summary = RunSummary(preset="smoke", seeds=(0, 1), engine="recording", workers=2)
+    schedule(store, engine, tasks, {b.name for b in store.list_branches()}, summary, {}, None)
+    # the two sequences of seed 0 would simulate scenario 1 side by side: seed 1's goes second
+    assert engine.submitted[:2] == [tasks[0].label, tasks[2].label]
+    assert sorted(engine.submitted) == sorted(t.label for t in tasks) and len(summary.failed) == 4

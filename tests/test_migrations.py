@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import platform
 import shutil
 import sqlite3
 import subprocess
@@ -12,18 +13,20 @@ import zipfile
 from contextlib import closing
 from pathlib import Path
 
+import numpy as np
 import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from make_store_fixtures import make as make_store
 from store_writer import sample_trial
 
+from llcps import provenance
 from llcps.domain import OUTCOME_NAMES
 from llcps.errors import StoreError
 from llcps.store import Store, migrations
 from llcps.store.schema import VERSION_TABLE, Base, Trial
 
-FIXTURES = Path(__file__).parent / "fixtures"
+
 PAST_REVISIONS = migrations.known_revisions()[:-1]
 
 
@@ -33,28 +36,17 @@ def _digest(path: Path) -> str:
 
 def test_revisions_are_a_line_from_0001() -> None:
     revisions = migrations.known_revisions()
-    assert revisions[:2] == ["0001", "0002"] and "0004" in revisions
-    assert revisions == sorted(revisions) and len(set(revisions)) == len(revisions)
+    # Ids are reserved per line of work, so the chain holds them in the order the work was
+    # merged (0004 follows 0006): a store already at an earlier head still gets every later one.
+    assert revisions[0] == "0001" and len(set(revisions)) == len(revisions)
+    assert set(revisions) >= {"0001", "0002", "0003", "0004", "0005", "0006"}
     assert migrations.head_revision() == revisions[-1]
     assert (migrations.migrations_dir() / "env.py").is_file()
 
 
-def test_the_kept_store_file_is_at_its_revision() -> None:
-    with closing(sqlite3.connect(FIXTURES / "store_0001.db")) as conn:
-        assert conn.execute(f"SELECT version_num FROM {VERSION_TABLE}").fetchall() == [("0001",)]
-
-
-#: (how the old store is made, revision): the kept file, and every past revision built by Alembic.
-OLD_STORES = [("kept", "0001")] + [("alembic", revision) for revision in PAST_REVISIONS]
-
-
-@pytest.mark.parametrize(("made", "revision"), OLD_STORES, ids=[f"{m}-{r}" for m, r in OLD_STORES])
-def test_old_store_upgrades_to_head_and_reads_and_writes(tmp_path: Path, made: str, revision: str) -> None:
-    db = tmp_path / "old.db"
-    if made == "kept":
-        shutil.copy(FIXTURES / f"store_{revision}.db", db)
-    else:
-        make_store(revision, db)
+@pytest.mark.parametrize("revision", PAST_REVISIONS)
+def test_old_store_upgrades_to_head_and_reads_and_writes(tmp_path: Path, revision: str) -> None:
+    db = make_store(revision, tmp_path)  # Alembic up to the revision, rows written with plain SQL
     with pytest.raises(StoreError, match="older") as info:
         Store.open(str(db))
     assert "llcps db upgrade" in (info.value.hint or "")
@@ -75,6 +67,8 @@ def test_old_store_upgrades_to_head_and_reads_and_writes(tmp_path: Path, made: s
         store.add_operator(branch="main", name="op", pddl="(:action op)", definition={}, scenario=None, episode_id=None)
         assert store.count_visible_trials("after-upgrade") == 1
         assert [o.name for o in store.visible_operators("main")] == ["op"]
+        store.add_operator_execution(branch="main", operator="op", success=True, trial_id=new_id)
+        assert [(c.operator, c.successes, c.failures) for c in store.operator_experience("main")] == [("op", 1, 0)]
     with closing(sqlite3.connect(db)) as conn:
         assert conn.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
         assert conn.execute("PRAGMA foreign_key_check").fetchall() == []
@@ -195,3 +189,22 @@ def test_wheel_ships_the_migrations(tmp_path: Path) -> None:
     check = "from llcps.store import Store; s = Store.open('w.db', create=True); import llcps; print(llcps.__file__, s.revision)"
     out = subprocess.run([sys.executable, "-c", check], cwd=tmp_path, env={"PYTHONPATH": str(target)}, capture_output=True, text=True, check=True)
     assert out.stdout.split() == [str(target / "llcps" / "__init__.py"), migrations.head_revision()]
+
+
+def test_runs_stored_before_provenance_upgrade_and_new_runs_record_it(tmp_path: Path) -> None:
+    """0005: runs gain their provenance; a run stored at 0002 keeps its fields and has none."""
+    db = make_store("0002", tmp_path)
+    with closing(sqlite3.connect(db)) as conn:
+        assert "host" not in {row[1] for row in conn.execute("PRAGMA table_info(runs)")}
+    with Store.open(str(db), allow_outdated=True) as store:
+        assert store.upgrade() == ("0002", migrations.head_revision())
+    with Store.open(str(db)) as store:
+        (old,) = store.list_runs()
+        assert (old.command, old.seed, old.status, old.llcps_version) == ("llcps solve scenario2", 12, "ok", "0.1.0")
+        assert old.provenance.host is None and old.provenance.git_commit is None and old.provenance.cpu_count is None
+        new_id = store.start_run(command="test", seed=1, config={}, branch="main")
+        new = store.get_run(new_id)
+    env = provenance.current()
+    assert new.provenance == env
+    assert env.python_version == platform.python_version() and env.cpu_count >= 1 and env.host
+    assert env.numpy_version == np.__version__ and env.pybullet_version and env.torch_version and env.sklearn_version

@@ -78,7 +78,7 @@ def test_unknown_scenario_is_one_line_and_exit_2(db):
 
 @pytest.mark.parametrize("scenario", list(SCENARIOS))
 def test_scenario_candidates_are_ranked_under_every_measure(db, scenario):
-    result = run(db, "--scenario", scenario, "--top", "4", "--model", "nb", "--json")
+    result = run(db, "--scenario", scenario, "--limit", "4", "--model", "nb", "--json")
     assert result.exit_code == 0, result.output
     ranked = json.loads(result.stdout)["scenario"]
     assert ranked["name"] == scenario and ranked["candidates"] > 4

@@ -54,7 +54,7 @@ def test_a_negative_count_is_refused(store) -> None:
 def test_cli_prints_one_json_document(tmp_path) -> None:
     db = str(tmp_path / "cli.db")
     runner = CliRunner()
-    done = runner.invoke(app, ["--db", db, "pretrain", "--n", "1", "--seed", "2", "--json"])
+    done = runner.invoke(app, ["--db", db, "pretrain", "--trials", "1", "--seed", "2", "--json"])
     assert done.exit_code == 0, done.output
     summary = json.loads(done.stdout)
     assert summary["trials"] == 1 and len(summary["trial_ids"]) == 1

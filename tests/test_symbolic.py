@@ -10,13 +10,12 @@ from llcps.errors import LlcpsError, UnknownNameError
 from llcps.symbolic.knowledge import KnowledgeBase, Task, default_domain_pddl
 from llcps.symbolic.monitor import check_step
 from llcps.symbolic.operators import (
-    LEARNED_COST,
     LearnedOperator,
     learn_operator,
     operator_name,
     parse_operator_name,
-    refine_failed_action,
 )
+from llcps.symbolic.experience import Experience
 from llcps.symbolic.planner import PlanningLimitError, plan, plan_cost
 from llcps.symbolic.validate import validate
 
@@ -257,13 +256,16 @@ def learned_push() -> LearnedOperator:
 
 def test_learned_operator_keeps_what_matters():
     op = learned_push()
-    assert op.name == "push_front_r0p2_m0p3" and op.cost == LEARNED_COST
+    assert op.name == "push_front_r0p2_m0p3"
     assert op.parameters == (("?c", "container"), ("?o", "item"))  # the ball had nothing to do with it
     assert op.arguments == ("?c",) and op.source_arguments == ("tray", "cube")
     assert op.add == {F("reachable", "?c"), F("reachable", "?o")}
     assert op.delete == frozenset()
     assert F("in", "?o", "?c") in op.preconditions and F("on", "?c", "table") in op.preconditions
-    assert not any("ball" in a for a in op.preconditions)
+    assert not any("ball" in a for a in op.preconditions | op.negative_preconditions)
+    # the context: what did not hold among the parameters holds no more where it applies
+    assert {F("reachable", "?c"), F("reachable", "?o"), F("on", "?o", "table")} <= op.negative_preconditions
+    assert not op.preconditions & op.negative_preconditions
     assert op.controller_spec(("bin", "ball")) == TrialSpec("push", ("bin",), PUSH_TRAY.params)
     assert op.controller_spec({"?c": "tray", "?o": "cube"}) == PUSH_TRAY
 
@@ -295,7 +297,7 @@ def test_learned_operator_round_trips_through_pddl_and_the_planner_prefers_it():
     (back,) = kb.learned
     assert back.same_knowledge(op) and back.source_arguments is None
     assert back.action == "push" and back.params == PUSH_TRAY.params and back.arguments == ("?c",)
-    # Goal: the cube within reach. The learned push (0.5) is the only way, and is used.
+    # Goal: the cube within reach. The learned push is the only way, and is used.
     task = Task(TRAY_OBJECTS, FAILURE_STATE, goal_pos=frozenset({F("reachable", "cube")}))
     assert plan(KB, task) is None
     assert planned(kb, task) == ["(push_front_r0p2_m0p3 tray cube)"]
@@ -332,44 +334,49 @@ def test_adding_the_same_knowledge_twice_changes_nothing_and_clashes_are_renamed
     assert KnowledgeBase.from_pddl(kb2.to_pddl()).learned[1].params == PUSH_TRAY.params
 
 
-# --------------------------------------------------------------------------- refinement
+# --------------------------------------------------------------------------- where a_f failed
 
 
-def test_refinement_teaches_the_failed_action_what_it_lacked():
+def test_a_step_is_not_planned_where_its_operator_failed_and_the_learned_way_is():
+    """Where the removal failed (cube out of reach in the tray), the planner takes the learned
+    push that brings both within reach and then the removal; elsewhere, the removal alone."""
     task = Task(TRAY_OBJECTS, FAILURE_STATE, goal_neg=frozenset({F("in", "cube", "tray")}))
     (failed,) = plan(KB, task)
     assert failed.name == "remove_from_container"
     assert check_step(failed, FAILURE_STATE) is not None  # it fails in the novelty
 
-    kb = refine_failed_action(KB, failed, learned_push(), FAILURE_STATE)
-    remove = kb.operator("remove_from_container")
-    assert remove.preconditions == {F("in", "?o", "?c"), F("reachable", "?o"), F("reachable", "?c")}
-    assert kb.refinement_of("remove_from_container") == {
-        "action": "remove_from_container",
-        "preconditions": [["reachable", "?c"], ["reachable", "?o"]],
-    }
-    assert kb.refinement_of("push") is None
-
-    # Where the cube is out of reach, the planner chains the learned push before the removal ...
+    kb = KB.with_operator(learned_push())
+    kb = kb.with_experience(Experience.of([(failed.name, kb.context(failed, FAILURE_STATE), False)]))
+    assert not kb.allowed(failed, FAILURE_STATE) and kb.allowed(failed, AFTER_PUSH)
     assert planned(kb, task) == ["(push_front_r0p2_m0p3 tray cube)", "(remove_from_container cube tray)"]
-    # ... where it is within reach, the removal alone.
     reachable = Task(TRAY_OBJECTS, AFTER_PUSH, goal_neg=task.goal_neg)
     assert planned(kb, reachable) == ["(remove_from_container cube tray)"]
-    # K' survives PDDL and the store's JSON.
-    assert KnowledgeBase.from_pddl(kb.to_pddl()).operator("remove_from_container") == remove
-    stored = {"operator": learned_push().to_json(), "refinement": kb.refinement_of("remove_from_container")}
-    assert KB.apply_learned(stored) == kb
+    # a success in the same context lifts the ban: the cost decides again
+    worked = kb.with_experience(kb.experience.added(failed.name, kb.context(failed, FAILURE_STATE), True))
+    assert worked.allowed(failed, FAILURE_STATE)
 
 
-def test_refinement_ignores_effects_the_failed_action_achieves_itself():
-    # Tipping the tray spilled the cube onto the table: a replacement for the removal, not an enabler.
+def test_stored_refinements_of_earlier_versions_still_load():
+    stored = {
+        "operator": learned_push().to_json(),
+        "refinement": {"action": "remove_from_container", "preconditions": [["reachable", "?c"], ["reachable", "?o"]]},
+    }
+    kb = KB.apply_learned(stored)
+    assert kb.operator("remove_from_container").preconditions == {F("in", "?o", "?c"), F("reachable", "?o"), F("reachable", "?c")}
+    with pytest.raises(LlcpsError):
+        KB.apply_learned({"operator": learned_push().to_json(), "refinement": {"action": "remove_from_container"}})
+
+
+def test_a_tipping_trial_replaces_the_removal_where_the_removal_failed():
+    # Tipping the tray spilled the cube onto the table: it does the removal's job another way.
     spec = TrialSpec("push", ("tray",), ControllerParams(0.5, 0.4, "top"))
     after = (FAILURE_STATE | {F("on", "cube", "table")}) - {F("in", "cube", "tray"), F("touching", "cube", "tray")}
     op = learn_operator(spec=spec, before=FAILURE_STATE, after=after, objects=TRAY_OBJECTS)
     task = Task(TRAY_OBJECTS, FAILURE_STATE, goal_neg=frozenset({F("in", "cube", "tray")}))
     (failed,) = plan(KB, task)
-    kb = refine_failed_action(KB, failed, op, FAILURE_STATE)
-    assert kb.operator("remove_from_container") == KB.operator("remove_from_container")
+    kb = KB.with_operator(op)
+    kb = kb.with_experience(Experience.of([(failed.name, kb.context(failed, FAILURE_STATE), False)]))
+    assert kb.operator("remove_from_container").preconditions == KB.operator("remove_from_container").preconditions
     assert planned(kb, task) == [f"({op.name} tray cube)"]
 
 

@@ -9,9 +9,9 @@ from hypothesis import strategies as st
 
 from llcps.domain import ControllerParams, TrialSpec, fluent
 from llcps.symbolic.knowledge import KnowledgeBase, Task
-from llcps.symbolic.operators import learn_operator, refine_failed_action
+from llcps.symbolic.experience import Experience
+from llcps.symbolic.operators import learn_operator
 from llcps.symbolic.planner import plan, plan_cost
-from llcps.symbolic.schema import GroundAction
 from llcps.symbolic.validate import validate
 
 OBJECTS = {"cube": "item", "ball": "item", "tray": "container", "bin": "container"}
@@ -24,17 +24,25 @@ ATOMS = sorted(
 
 def _k_prime() -> KnowledgeBase:
     """K expanded by a learned push of the tray that brings the cube in it within reach."""
-    kb = KnowledgeBase.default()
     before = frozenset({fluent("visible", "tray"), fluent("in", "cube", "tray")})
     after = before | {fluent("reachable", "cube")}
     spec = TrialSpec("push", ("tray",), ControllerParams(0.2, 0.3, "front"))
-    learned = learn_operator(spec=spec, before=before, after=after, objects=OBJECTS)
-    failed = next(op for op in kb.operators() if op.name == "remove_from_container").ground(("cube", "tray"))
-    assert isinstance(failed, GroundAction)
-    return refine_failed_action(kb, failed, learned, before)
+    return KnowledgeBase.default().with_operator(learn_operator(spec=spec, before=before, after=after, objects=OBJECTS))
 
 
-KNOWLEDGE = [KnowledgeBase.default(), _k_prime()]
+def _experienced() -> KnowledgeBase:
+    """K' with experience: the removal failed where the cube was out of reach, the push worked."""
+    kb = _k_prime()
+    (learned,) = kb.learned
+    remove = kb.operator("remove_from_container").ground(("cube", "tray"))
+    assert remove is not None
+    where = frozenset({fluent("in", "?o", "?c")})
+    return kb.with_experience(
+        Experience.of([("remove_from_container", where, False), (learned.name, learned.preconditions, True)])
+    )
+
+
+KNOWLEDGE = [KnowledgeBase.default(), _k_prime(), _experienced()]
 
 #: Goal literals some operator can achieve, so that plans are more than empty.
 ACHIEVABLE = sorted(

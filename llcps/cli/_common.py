@@ -18,8 +18,7 @@ from typing import Annotated, Any, Iterable
 import typer
 from rich.console import Console
 from rich.table import Table
-from typer.core import TyperGroup
-
+from llcps.cli._conventions import ConventionGroup
 from llcps.errors import LlcpsError
 from llcps.store import Store
 
@@ -41,7 +40,7 @@ def report_error(exc: LlcpsError) -> None:
         typer.echo(f"hint: {exc.hint}", err=True)
 
 
-class LlcpsGroup(TyperGroup):
+class LlcpsGroup(ConventionGroup):
     """The root command group: turns project errors into one line and an exit code."""
 
     def invoke(self, ctx: Any) -> Any:
@@ -53,13 +52,15 @@ class LlcpsGroup(TyperGroup):
 
 
 def new_app(help: str, **kwargs: Any) -> typer.Typer:  # noqa: A002 - typer's own name
-    """A Typer app with the project's settings (plain help, no tracebacks, no completion)."""
+    """A Typer app with the project's settings (plain help, no tracebacks; completion
+    options only where the root app asks for them)."""
     settings: dict[str, Any] = {
         "help": help,
         "no_args_is_help": True,
         "rich_markup_mode": None,
         "pretty_exceptions_enable": False,
         "add_completion": False,
+        "cls": ConventionGroup,
     }
     settings.update(kwargs)
     return typer.Typer(**settings)

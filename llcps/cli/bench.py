@@ -10,10 +10,17 @@ from llcps.bench import GROUPS, SLOW_GROUPS, Figure, run_bench
 from llcps.cli._common import (
     JsonFlag,
     choice_enum,
-    err_console,
     message,
     print_json,
     print_table,
+)
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
+
+EXAMPLES = examples(
+    "llcps bench --quick                      # under a minute",
+    "llcps bench --group physics --group store",
+    "llcps bench --json > bench.json",
 )
 
 GroupName = choice_enum("BenchGroup", tuple(GROUPS))
@@ -38,8 +45,8 @@ def bench_cli(
     target is missed (the `met` column says which).
     """
     groups = [str(g.value) for g in group] if group else None  # type: ignore[attr-defined]
-    with err_console.status("bench") as status:
-        figures = run_bench(quick=quick, groups=groups, progress=lambda text: status.update(f"bench: {text}"))
+    with progress_display("bench", "loading") as progress:
+        figures = run_bench(quick=quick, groups=groups, progress=progress.note)
     if as_json:
         print_json([f.as_json() for f in figures])
         return

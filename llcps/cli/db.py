@@ -8,8 +8,6 @@ from typing import Annotated, Optional
 
 import typer
 
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
 from llcps.cli._common import (
     JsonFlag,
     err_console,
@@ -22,14 +20,25 @@ from llcps.cli._common import (
     print_table,
     selected_branch,
 )
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
 from llcps.errors import LlcpsError
 from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
-from llcps.store.export import EXPORT_FORMATS, export_trials
+from llcps.domain import TRIAL_SOURCES
+from llcps.store.export import BINARY_FORMATS, EXPORT_FORMATS, export_trials
 
-app = new_app("Create, inspect, migrate, branch and export the experience store.")
+app = new_app(
+    "Create, inspect, migrate, branch and export the experience store.",
+    epilog=examples(
+        "llcps db init && llcps db status",
+        "llcps db branch fresh --at pretrain && llcps db checkout fresh",
+        "llcps db export --format parquet --out trials.parquet",
+    ),
+)
 
 ResetTarget = choice_enum("ResetTarget", RESET_TARGETS)
 ExportFormat = choice_enum("ExportFormat", EXPORT_FORMATS)
+TrialSource = choice_enum("ExportSource", TRIAL_SOURCES)
 DEFAULT_RESET_TARGET = ResetTarget(PRETRAIN)
 DEFAULT_EXPORT_FORMAT = ExportFormat("csv")
 
@@ -79,7 +88,14 @@ def _confirm(change: BranchChange, as_json: bool, yes: bool) -> None:
     raise LlcpsError(f"{change.summary}; nothing changed", hint="rerun with --yes to do it")
 
 
-@app.command("init")
+@app.command(
+    "init",
+    epilog=examples(
+        "llcps db init                       # ./llcps.db, branch main",
+        "llcps --db runs.db db init --json",
+        "llcps --db postgresql+psycopg://me@dbhost/llcps db init",
+    ),
+)
 def init_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Create the store with a `main` branch, or migrate an existing one to the newest schema."""
     with open_store(ctx, create=True, allow_outdated=True) as store:
@@ -92,14 +108,26 @@ def init_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
             _print_status(store, selected_branch(ctx), True)
 
 
-@app.command("status")
+@app.command(
+    "status",
+    epilog=examples(
+        "llcps db status",
+        "llcps --branch exp db status --json",
+    ),
+)
 def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Show the database URL, schema revision, current branch and trial counts."""
     with open_store(ctx, allow_outdated=True) as store:
         _print_status(store, selected_branch(ctx), as_json)
 
 
-@app.command("list")
+@app.command(
+    "list",
+    epilog=examples(
+        "llcps db list",
+        "llcps db list --json",
+    ),
+)
 def list_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """List branches with parent, fork point, own and visible trial counts."""
     with open_store(ctx) as store:
@@ -117,7 +145,14 @@ def list_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     )
 
 
-@app.command("branch")
+@app.command(
+    "branch",
+    epilog=examples(
+        "llcps db branch fresh --at pretrain   # back to the pretraining data",
+        "llcps db branch exp --from main --at 120",
+        "llcps db branch copy --json",
+    ),
+)
 def branch_cli(
     ctx: typer.Context,
     name: BranchName,
@@ -152,7 +187,13 @@ def branch_cli(
     )
 
 
-@app.command("checkout")
+@app.command(
+    "checkout",
+    epilog=examples(
+        "llcps db checkout exp",
+        "llcps db checkout main --json",
+    ),
+)
 def checkout_cli(ctx: typer.Context, name: BranchName, as_json: JsonFlag = False) -> None:
     """Make a branch the current one (the default of --branch)."""
     with open_store(ctx) as store:
@@ -160,7 +201,14 @@ def checkout_cli(ctx: typer.Context, name: BranchName, as_json: JsonFlag = False
     _print_branch(info, as_json, f"switched to branch {info.name} ({info.visible_trials} visible trials)")
 
 
-@app.command("reset")
+@app.command(
+    "reset",
+    epilog=examples(
+        "llcps db reset                       # dry run: what would go",
+        "llcps --branch exp db reset --to pretrain --yes",
+        "llcps db reset --to empty --yes --json",
+    ),
+)
 def reset_cli(
     ctx: typer.Context,
     to: Annotated[
@@ -181,7 +229,13 @@ def reset_cli(
     message(change.summary)
 
 
-@app.command("delete")
+@app.command(
+    "delete",
+    epilog=examples(
+        "llcps db delete exp                  # dry run",
+        "llcps db delete exp --yes",
+    ),
+)
 def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_json: JsonFlag = False) -> None:
     """Delete a branch and everything it owns (not main, the current branch, or a parent)."""
     with open_store(ctx) as store:
@@ -192,7 +246,14 @@ def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_js
     message(change.summary)
 
 
-@app.command("upgrade")
+@app.command(
+    "upgrade",
+    epilog=examples(
+        "llcps db upgrade",
+        "llcps --db old.db db upgrade --json",
+        "llcps db upgrade --no-replay-changes   # fast: mark older trials' changes unknown",
+    ),
+)
 def upgrade_cli(
     ctx: typer.Context,
     replay_changes: Annotated[
@@ -209,32 +270,19 @@ def upgrade_cli(
     trial its symbolic change (the goal-aware world model learns from it).
 
     Trials stored before changes were recorded are replayed from their start state
-    (deterministic physics); one that has none, or whose replay disagrees with what was
-    stored, is marked unknown. `llcps db status` shows the counts.
-
-    Examples:
-      llcps db upgrade
-      llcps db upgrade --no-replay-changes   # fast: mark older trials' changes unknown
+    (deterministic physics); one that has none, whose state does not rebuild, or whose
+    replay disagrees with what was stored is marked unknown. `llcps db status` shows the
+    counts.
     """
     from llcps.cps.changes import backfill_changes  # PyBullet loads only when there is work
 
-    with open_store(ctx, allow_outdated=True) as store:
-        before, after = store.upgrade()
-        with Progress(
-            TextColumn("trial changes"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            TimeRemainingColumn(),
-            console=err_console,
-            transient=True,
-        ) as progress:
-            task = progress.add_task("trial changes", total=None)
-            report = backfill_changes(
-                store,
-                replay=replay_changes,
-                progress=lambda done, total: progress.update(task, completed=done, total=total),
-            )
+    with open_store(ctx, allow_outdated=True) as store, progress_display("db upgrade", "checking the schema") as progress:
+        before, after = store.upgrade(progress=lambda revision, done, total: progress(f"migrating to schema {revision}", done, total))
+        report = backfill_changes(
+            store,
+            replay=replay_changes,
+            progress=lambda done, total: progress("replaying trials for their changes", done, total),
+        )
     if as_json:
         print_json({"from": before, "to": after, "changed": before != after, "changes": report.as_json()})
     message(f"upgraded from schema {before} to {after}" if before != after else f"already at schema {after}")
@@ -246,25 +294,49 @@ def upgrade_cli(
         )
 
 
-@app.command("export")
+@app.command(
+    "export",
+    epilog=examples(
+        "llcps db export --out trials.csv",
+        "llcps --branch exp db export --format parquet --out exp.parquet",
+        "llcps db export --format jsonl --source exploration --scenario scenario2 > explore.jsonl",
+        "llcps db export --episode 3 --out episode3.csv",
+    ),
+)
 def export_cli(
     ctx: typer.Context,
     fmt: Annotated[
         ExportFormat,  # type: ignore[valid-type]
-        typer.Option("--format", help="csv: one flat row per trial; jsonl: one JSON trial per line."),
+        typer.Option(
+            "--format",
+            help="csv, jsonl (one flat JSON object per line) or parquet (needs --out); every format has the same flat columns.",
+        ),
     ] = DEFAULT_EXPORT_FORMAT,  # type: ignore[assignment]
     out: Annotated[
         Optional[Path], typer.Option("--out", metavar="FILE", help="File to write (default: stdout).", show_default=False, dir_okay=False)
     ] = None,
+    source: Annotated[
+        Optional[TrialSource],  # type: ignore[valid-type]
+        typer.Option("--source", help="Only trials from this source.", show_default=False),
+    ] = None,
+    scenario: Annotated[Optional[str], typer.Option("--scenario", metavar="NAME", help="Only trials of this scenario.", show_default=False)] = None,
+    episode: Annotated[Optional[int], typer.Option("--episode", metavar="ID", help="Only trials of this episode.", show_default=False)] = None,
 ) -> None:
-    """Export the trials --branch (default: the current branch) sees, in id order."""
+    """Export the trials --branch (default: the current branch) sees, in id order, one flat row per trial."""
+    fmt_name = str(fmt.value)  # type: ignore[attr-defined]
+    if fmt_name in BINARY_FORMATS and out is None:
+        raise LlcpsError(f"--format {fmt_name} writes a binary file", hint="pass --out FILE")
+    if out is not None and not out.parent.is_dir():
+        raise LlcpsError(f"directory {out.parent} does not exist", hint="create it first or choose another --out")
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name
-        if out is None:
-            count = export_trials(store, branch, str(fmt.value), sys.stdout)  # type: ignore[attr-defined]
-        else:
-            if not out.parent.is_dir():
-                raise LlcpsError(f"directory {out.parent} does not exist", hint="create it first or choose another --out")
-            with out.open("w", newline="", encoding="utf-8") as fh:
-                count = export_trials(store, branch, str(fmt.value), fh)  # type: ignore[attr-defined]
+        count = export_trials(
+            store,
+            branch=branch,
+            fmt=fmt_name,
+            out=sys.stdout if out is None else out,
+            source=None if source is None else str(source.value),  # type: ignore[attr-defined]
+            scenario=scenario,
+            episode=episode,
+        )
     message(f"exported {count} trial(s) of branch {branch}" + (f" to {out}" if out else ""))

@@ -15,9 +15,29 @@ HEADER = """# CLI reference
 
 Generated from the command tree by `python -m llcps.cli.docs > docs/cli.md`; a test keeps it in sync.
 Global options go before the command: `llcps --db runs.db --branch exp inspect trials`.
-With `--json` a command prints exactly one JSON document on stdout; messages go to stderr.
+With `--json` a command prints exactly one JSON document on stdout; messages and progress go to stderr.
 Errors print `error: ...` and `hint: ...` on stderr and exit non-zero (2 for bad input).
+`llcps --version` prints the version; `llcps --install-completion` installs shell completion.
+
+An option name means the same in every command: `--seed` seeds the command's own random
+choices and is recorded with its run, `--model-seed` seeds the world models; `--limit N`
+is how many rows to show, `--trials N` / `--seeds N` / `--budget N` how many to make;
+`--out FILE` is a file, `--out-dir DIR` a directory; `--scenario`, `--source`,
+`--episode` and `--run` filter. Long commands show their phase, counts and an ETA on
+stderr (on a terminal).
 """
+
+
+def _renamed_section() -> str:
+    from llcps.cli._conventions import RENAMED_OPTIONS
+
+    rows = "".join(
+        f"| `llcps {command}` | `{old}` | `{new}` |\n" for command, names in RENAMED_OPTIONS.items() for old, new in names.items()
+    )
+    return (
+        "\n## Renamed options\n\nThe old spellings still work for one release: they are hidden from `--help` "
+        "and print a deprecation line on stderr.\n\n| command | old | new |\n|---|---|---|\n" + rows
+    )
 
 
 def walk(command: Any, ctx: Any) -> Iterator[tuple[Any, Any]]:
@@ -41,13 +61,23 @@ def iter_commands() -> Iterator[tuple[Any, Any]]:
     yield from walk(root, root.context_class(root, info_name="llcps"))
 
 
+def _example_text(epilog: str) -> list[str]:
+    """The example lines of an epilog as written (comments kept)."""
+    from llcps.cli._conventions import EXAMPLES_HEADING
+
+    block = epilog.split(EXAMPLES_HEADING, 1)[1]
+    return [line.strip() for line in block.splitlines() if line.strip() and line.strip() != "\b"]
+
+
 def _cell(text: str) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
 def render() -> str:
     """The whole reference as Markdown."""
-    parts = [HEADER]
+    from llcps.cli._conventions import example_lines
+
+    parts = [HEADER, _renamed_section()]
     for command, ctx in iter_commands():
         parts.append(f"\n## `{ctx.command_path}`\n")
         parts.append(f"\n{(command.help or '').strip()}\n")
@@ -58,6 +88,9 @@ def render() -> str:
         if rows:
             parts.append("\n| argument / option | help |\n|---|---|\n")
             parts.extend(f"| `{_cell(name)}` | {_cell(help_text)} |\n" for name, help_text in rows)
+        examples = example_lines(getattr(command, "epilog", None))
+        if examples:
+            parts.append("\nExamples:\n\n```\n" + "\n".join(_example_text(command.epilog)) + "\n```\n")
         subcommands = getattr(command, "commands", {})
         if subcommands:
             parts.append("\n| command | what it does |\n|---|---|\n")

@@ -8,10 +8,12 @@ from typing import Annotated, Any, Optional
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from llcps.cli._common import JsonFlag, choice_enum, err_console, message, new_app, open_store, print_json, print_table
+from llcps.cli._common import JsonFlag, choice_enum, message, new_app, open_store, print_json, print_table
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
 from llcps.errors import LlcpsError
+from llcps.provenance import cpu_count
 from llcps.experiments.grid import PRESETS
 from llcps.experiments.runner import (
     ENGINES,
@@ -24,7 +26,22 @@ from llcps.experiments.runner import (
     write_report,
 )
 
-app = new_app("Run the experiment grid (Figure 2 over many seeds) and report on it.")
+app = new_app(
+    "Run the experiment grid (Figure 2 over many seeds) and report on it.",
+    epilog=examples(
+        "llcps --db runs.db experiment run --preset smoke --html",
+        "llcps experiment report results/paper --html",
+    ),
+)
+
+OutDir = Annotated[
+    Optional[Path],
+    typer.Option("--out-dir", metavar="DIR", help="Report directory (default: results/<preset>).", show_default=False, file_okay=False),
+]
+HtmlFlag = Annotated[
+    bool,
+    typer.Option("--html", help="Also write report.html: one self-contained page with every plot and a film of a resolving trial per scenario."),
+]
 
 PresetName = choice_enum("PresetName", tuple(PRESETS))
 EngineName = choice_enum("EngineName", ENGINES)
@@ -37,7 +54,15 @@ _PRESET_HELP = "Grid to run: " + "; ".join(
 ) + "."
 
 
-@app.command("run")
+@app.command(
+    "run",
+    epilog=examples(
+        "llcps --db runs.db experiment run --preset smoke                 # a couple of minutes",
+        "llcps --db runs.db experiment run --preset paper --seeds 20 --workers 2",
+        "llcps --db runs.db experiment run --preset paper --first-seed 20 --seeds 20   # another machine's share",
+        "llcps --db runs.db experiment run --preset smoke --html --out-dir report/",
+    ),
+)
 def run_cli(
     ctx: typer.Context,
     preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = "paper",  # type: ignore[valid-type, assignment]
@@ -57,15 +82,13 @@ def run_cli(
         Optional[str],
         typer.Option("--ray-address", metavar="ADDR", help="Ray cluster to join (default: start a local Ray instance).", show_default=False),
     ] = None,
-    out: Annotated[
-        Optional[Path],
-        typer.Option("--out", metavar="DIR", help="Report directory (default: results/<preset>).", show_default=False, file_okay=False),
-    ] = None,
-    memo: Annotated[
+    out_dir: OutDir = None,
+    html: HtmlFlag = False,
+    cache: Annotated[
         bool,
         typer.Option(
-            "--memo/--no-memo",
-            help="Answer a trial a worker already simulated (same scene, state and call) from that simulation; results are identical either way.",
+            "--cache/--no-cache",
+            help="Answer a trial simulated before (same physics settings, scene, state, call and step cap) from the store's physics cache, shared by all workers and later runs; results are identical either way.",
         ),
     ] = True,
     as_json: JsonFlag = False,
@@ -79,14 +102,13 @@ def run_cli(
     either engine. Exit code 1 when a task failed.
     """
     name = str(preset.value)  # type: ignore[attr-defined]
-    n_workers = workers if workers is not None else _cpu_count()
+    n_workers = workers if workers is not None else cpu_count()
     try:
         with open_store(ctx, create=True) as store:
-            with _progress() as bar:
-                task = bar.add_task(f"experiment {name}", total=None, last="")
+            with progress_display(f"experiment {name}", "planning the tasks") as bar:
 
                 def report(done: int, total: int, label: str) -> None:
-                    bar.update(task, completed=done, total=total, last=label)
+                    bar(f"tasks (last: {label})" if label else "tasks", done, total)
 
                 summary = run_experiment(
                     store,
@@ -96,31 +118,42 @@ def run_cli(
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
                     progress=report,
-                    memo=memo,
+                    cache=cache,
                 )
             if summary.status == "interrupted":
                 message(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
                 raise typer.Exit(EXIT_INTERRUPTED)
             table = results_table(store, name, summary.seeds)
+            for label, error in summary.failed:
+                message(f"task {label} failed: {error}")
+            if summary.blocked:
+                message(f"{summary.blocked} sequence(s) not run: their pretraining failed")
+            if len(table) == 0:
+                raise LlcpsError("no results to report", hint="see the failed tasks above")
+            with progress_display("report") as bar:
+                out_dir, analysis = write_report(
+                    table, out_dir if out_dir is not None else default_out_dir(name), store=store, html=html, progress=bar
+                )
     except KeyboardInterrupt:
         message("interrupted: every task imported so far is kept; run the same command to resume")
         raise typer.Exit(EXIT_INTERRUPTED) from None
-    for label, error in summary.failed:
-        message(f"task {label} failed: {error}")
-    if summary.blocked:
-        message(f"{summary.blocked} sequence(s) not run: their pretraining failed")
-    if len(table) == 0:
-        raise LlcpsError("no results to report", hint="see the failed tasks above")
-    out_dir, analysis = write_report(table, out if out is not None else default_out_dir(name))
     if as_json:
         print_json({"run": summary.as_json(), "report_dir": str(out_dir), **analysis})
     else:
         show_run(summary, out_dir)
+        show_provenance(analysis)
         show_figure2(analysis)
     raise typer.Exit(EXIT_OK if summary.status == "ok" else EXIT_FAILED)
 
 
-@app.command("report")
+@app.command(
+    "report",
+    epilog=examples(
+        "llcps experiment report results/paper                       # rebuild from results.csv",
+        "llcps --db runs.db experiment report --from-db --preset paper --html",
+        "llcps --db runs.db experiment report --from-db --preset paper --baseline-preset random --out-dir results/paper",
+    ),
+)
 def report_cli(
     ctx: typer.Context,
     source: Annotated[
@@ -141,33 +174,47 @@ def report_cli(
             show_default=False,
         ),
     ] = None,
-    out: Annotated[
+    out_dir: Annotated[
         Optional[Path],
-        typer.Option("--out", metavar="DIR", help="Report directory (default: DIR itself, or results/<preset> with --from-db).", show_default=False, file_okay=False),
+        typer.Option(
+            "--out-dir", metavar="DIR", help="Report directory (default: DIR itself, or results/<preset> with --from-db).", show_default=False, file_okay=False
+        ),
     ] = None,
+    html: HtmlFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
-    """Rebuild the tables, CSV/JSON, plots and report.md from stored results, running nothing."""
+    """Rebuild the tables, CSV/JSON, plots and report.md (and report.html) from stored results,
+    running no experiment; prints where the runs ran and our Figure 2.
+
+    From a results directory, the provenance and films it already holds are used; with
+    --from-db they are read (and filmed) from the store."""
     from llcps.experiments.results import ResultsTable, table_from_episodes
 
     if (source is None) == (not from_db):
         raise LlcpsError("give a results directory or --from-db (one of them)", hint="e.g. `llcps experiment report results/paper`")
-    if source is not None:
-        table = ResultsTable.read(source)
-    else:
-        with open_store(ctx) as store:
-            table = table_from_episodes(store.list_episodes()).table
-    source_table = table
-    name, table = one_preset(table, preset)
-    if baseline_preset is not None:
-        table = with_baseline(table, source_table, baseline_preset)
-    if out is None:
-        out = default_out_dir(name) if source is None else (source if source.is_dir() else source.parent)
-    out_dir, analysis = write_report(table, out)
+
+    def chosen(table: "ResultsTable") -> tuple[str, "ResultsTable", Path]:
+        name, mine = one_preset(table, preset)
+        if baseline_preset is not None:
+            mine = with_baseline(mine, table, baseline_preset)
+        target = out_dir
+        if target is None:
+            target = default_out_dir(name) if source is None else (source if source.is_dir() else source.parent)
+        return name, mine, target
+
+    with progress_display("report", "reading the results") as bar:
+        if source is not None:
+            _, table, target = chosen(ResultsTable.read(source))
+            written, analysis = write_report(table, target, html=html, progress=bar)
+        else:
+            with open_store(ctx) as store:
+                _, table, target = chosen(table_from_episodes(store.list_episodes()).table)
+                written, analysis = write_report(table, target, store=store, html=html, progress=bar)
     if as_json:
-        print_json({"report_dir": str(out_dir), **analysis})
+        print_json({"report_dir": str(written), **analysis})
     else:
-        message(f"report written to {out_dir / 'report.md'}")
+        message(f"report written to {written / 'report.md'}" + (f" and {analysis['report_html']}" if analysis.get("report_html") else ""))
+        show_provenance(analysis)
         show_figure2(analysis)
 
 
@@ -176,32 +223,25 @@ def _seeds(preset: str, count: int | None, first: int) -> range:
     return range(first, first + n)
 
 
-def _cpu_count() -> int:
-    import os
+def show_provenance(analysis: dict[str, Any]) -> None:
+    """Where the results' runs ran, one line per distinct environment (stderr)."""
+    from llcps.experiments.artifacts import provenance_line
 
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
-
-
-def _progress() -> Progress:
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("eta"),
-        TimeRemainingColumn(),
-        TextColumn("{task.fields[last]}"),
-        console=err_console,
-        transient=True,
-    )
+    environments = analysis.get("provenance") or []
+    if not environments:
+        message("provenance: none recorded with these results")
+    for item in environments:
+        message(f"provenance: {provenance_line(item)}")
 
 
 def show_run(summary: RunSummary, out_dir: Path) -> None:
     """What the run did, for people (stderr)."""
     failed = f", {len(summary.failed)} failed" if summary.failed else ""
+    rate = summary.cache_hit_rate
+    cache = "" if rate is None else f", physics cache answered {summary.cache.get('hits', 0)} trial(s) ({rate:.0%})"  # type: ignore[union-attr]
     message(
         f"{summary.preset}: {summary.done} task(s) run, {summary.skipped} already stored{failed} "
-        f"({summary.workers} {summary.engine} worker(s), {summary.wall_seconds:.1f} s); report in {out_dir / 'report.md'}"
+        f"({summary.workers} {summary.engine} worker(s), {summary.wall_seconds:.1f} s{cache}); report in {out_dir / 'report.md'}"
     )
 
 

@@ -7,9 +7,18 @@ from typing import Annotated, Optional
 import typer
 
 from llcps.cli._common import JsonFlag, choice_enum, new_app, open_store, print_json, print_table, selected_branch
+from llcps.cli._conventions import examples
 from llcps.domain import OUTCOME_NAMES, TRIAL_SOURCES, TrialRecord
 
-app = new_app("Inspect the experience store: trials and what was learned from them.")
+app = new_app(
+    "Inspect the experience store: trials, runs, episodes and what was learned from them.",
+    epilog=examples(
+        "llcps inspect trials --source exploration",
+        "llcps inspect episodes",
+        "llcps inspect runs --compare 1 2",
+        "llcps inspect model --scenario scenario2",
+    ),
+)
 
 TrialSource = choice_enum("TrialSource", TRIAL_SOURCES)
 
@@ -21,7 +30,14 @@ def outcome_text(record: TrialRecord) -> str:
     return " ".join(_OUTCOME_SHORT[name] for name, bit in record.outcome.as_dict().items() if bit) or "-"
 
 
-@app.command("trials")
+@app.command(
+    "trials",
+    epilog=examples(
+        "llcps inspect trials                                # the newest 20",
+        "llcps inspect trials --source exploration --solved",
+        "llcps inspect trials --episode 3 --limit 0 --json   # one episode's trials, for scripts",
+    ),
+)
 def trials_cli(
     ctx: typer.Context,
     scenario: Annotated[Optional[str], typer.Option("--scenario", metavar="NAME", help="Only trials of this scenario.", show_default=False)] = None,
@@ -33,6 +49,7 @@ def trials_cli(
         Optional[bool],
         typer.Option("--solved/--unsolved", help="Only trials that solved (or did not solve) their task.", show_default=False),
     ] = None,
+    episode: Annotated[Optional[int], typer.Option("--episode", metavar="ID", help="Only trials of this episode.", show_default=False)] = None,
     limit: Annotated[int, typer.Option("--limit", min=0, metavar="N", help="Show the newest N matching trials; 0 shows all.")] = 20,
     as_json: JsonFlag = False,
 ) -> None:
@@ -44,6 +61,7 @@ def trials_cli(
             source=None if source is None else str(source.value),  # type: ignore[attr-defined]
             scenario=scenario,
             solved=solved,
+            episode=episode,
             limit=limit or None,
             newest_first=True,
         )

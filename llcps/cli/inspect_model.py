@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import typer
 
 from llcps.cli._common import JsonFlag, choice_enum, message, open_store, print_json, print_table, selected_branch
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
 from llcps.cli.inspect import app
 from llcps.domain import OUTCOME_NAMES
 from llcps.models import PAPER_MODELS, WORLD_MODELS
@@ -20,7 +22,14 @@ ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
 _SHORT = {name: ("+" if name.startswith("positive") else "-") + name.split("_", 1)[1][:5] for name in OUTCOME_NAMES}
 
 
-@app.command("model")
+@app.command(
+    "model",
+    epilog=examples(
+        "llcps inspect model                                   # nb and nn: held-out metrics",
+        "llcps inspect model --scenario scenario2 --limit 3    # and each measure's top 3 candidates",
+        "llcps inspect model --model forest --model logreg --seed 1 --json",
+    ),
+)
 def model_cli(
     ctx: typer.Context,
     model: Annotated[
@@ -31,20 +40,32 @@ def model_cli(
         Optional[str],
         typer.Option("--scenario", metavar="NAME", help="Also rank this scenario's failure-state candidates under every measure.", show_default=False),
     ] = None,
-    top: Annotated[int, typer.Option("--top", min=1, metavar="K", help="Candidates shown per measure.")] = 5,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the held-out split, the models and tie-breaks.")] = 0,
+    limit: Annotated[int, typer.Option("--limit", min=1, metavar="N", help="Candidates shown per measure.")] = 5,
+    seed: Annotated[int, typer.Option("--seed", help="Run seed: the held-out split and tie-breaks.")] = 0,
+    model_seed: Annotated[
+        Optional[int], typer.Option("--model-seed", help="Seed of the world models (default: --seed).", show_default=False)
+    ] = None,
     test_fraction: Annotated[float, typer.Option("--test-fraction", min=0.01, max=0.99, help="Share of trials held out.")] = 0.25,
     as_json: JsonFlag = False,
 ) -> None:
     """Evaluate world models on the branch's trials (held-out split) next to the majority baseline."""
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
-    with open_store(ctx) as store:
-        branch = store.resolve_branch(selected_branch(ctx)).name
+    with progress_display("inspect model", "loading the world models") as progress:
         from llcps.cps.inspection import inspect_models  # sklearn loads only when used
 
-        report = inspect_models(
-            store, branch=branch, models=names, seed=seed, test_fraction=test_fraction, scenario=scenario, top=top
-        )
+        with open_store(ctx) as store:
+            branch = store.resolve_branch(selected_branch(ctx)).name
+            report = inspect_models(
+                store,
+                branch=branch,
+                models=names,
+                seed=seed,
+                model_seed=model_seed,
+                test_fraction=test_fraction,
+                scenario=scenario,
+                top=limit,
+                progress=progress,
+            )
     if as_json:
         print_json(report.as_json())
     else:

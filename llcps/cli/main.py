@@ -16,14 +16,36 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import bench, db, experiment, inspect, inspect_model, inspect_runs, pretrain, replay, solve  # noqa: F401 - inspect_* add `inspect` subcommands
+from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, pretrain, replay, solve  # noqa: F401 - inspect_* add `inspect` subcommands
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
+from llcps.cli._conventions import examples
 
 app = new_app(
     "Life-long creative problem solving: a robot that explores novelties and learns world models "
     "from every trial, kept in a branchable experience store.",
     cls=LlcpsGroup,
+    add_completion=True,
+    epilog=examples(
+        "llcps db init                                   # a store at ./llcps.db",
+        "llcps pretrain --trials 200 --seed 1            # random interactions, models fitted",
+        "llcps solve scenario2                           # plan, explore, learn an operator",
+        "llcps --db runs.db --branch exp inspect trials  # global options go first",
+        "llcps --version",
+    ),
 )
+
+
+def _show_version(value: bool) -> None:
+    """Print the version (and the source commit, in a git checkout) and stop."""
+    if not value:
+        return
+    import llcps
+    from llcps.provenance import git_state
+
+    commit, dirty = git_state()
+    suffix = f" (commit {commit[:12]}{'+dirty' if dirty else ''})" if commit else ""
+    typer.echo(f"llcps {llcps.__version__}{suffix}")
+    raise typer.Exit()
 
 
 @app.callback()
@@ -39,6 +61,10 @@ def _global_options(
             "--branch", envvar="LLCPS_BRANCH", metavar="NAME", help="Branch to read and write (default: the store's current branch).", show_default=False
         ),
     ] = None,
+    version: Annotated[
+        bool,
+        typer.Option("--version", is_eager=True, callback=_show_version, help="Print the llcps version and exit."),
+    ] = False,
 ) -> None:
     """Life-long creative problem solving with world models trained on an experience store."""
     ctx.obj = CliContext(db=db_location, branch=branch)
@@ -47,11 +73,12 @@ def _global_options(
 # Command registry: one line per module.
 app.add_typer(db.app, name="db")
 app.add_typer(inspect.app, name="inspect")
-app.command("solve")(solve.solve_cli)
-app.command("pretrain")(pretrain.pretrain_cli)
-app.command("replay")(replay.replay_cli)
-app.command("bench")(bench.bench_cli)
+app.command("solve", epilog=solve.EXAMPLES)(solve.solve_cli)
+app.command("pretrain", epilog=pretrain.EXAMPLES)(pretrain.pretrain_cli)
+app.command("replay", epilog=replay.EXAMPLES)(replay.replay_cli)
+app.command("bench", epilog=bench.EXAMPLES)(bench.bench_cli)
 app.add_typer(experiment.app, name="experiment")
+app.add_typer(cache.app, name="cache")
 
 
 def main() -> None:

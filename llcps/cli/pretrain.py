@@ -2,26 +2,28 @@
 
 from __future__ import annotations
 
-import time
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from llcps.cli._common import JsonFlag, choice_enum, err_console, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import JsonFlag, choice_enum, open_store, print_json, print_table, selected_branch
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
 from llcps.domain import OUTCOME_NAMES
 from llcps.models import PAPER_MODELS, WORLD_MODELS
-from llcps.pretrain import PretrainSummary, pretrain
+
+if TYPE_CHECKING:
+    from llcps.pretrain import PretrainSummary
 
 ModelName = choice_enum("PretrainModel", tuple(WORLD_MODELS))
 
 
 def pretrain_cli(
     ctx: typer.Context,
-    n: Annotated[
-        int, typer.Option("--n", metavar="N", min=0, help="Number of random interactions (trials) to run.")
+    trials: Annotated[
+        int, typer.Option("--trials", metavar="N", min=0, help="Number of random interactions (trials) to run.")
     ] = 200,
-    seed: Annotated[int, typer.Option("--seed", help="Run seed; trial i gets its own seed derived from it.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", help="Run seed: trial i gets its own seed derived from it.")] = 0,
     model: Annotated[
         Optional[list[ModelName]],  # type: ignore[valid-type]
         typer.Option(
@@ -31,7 +33,9 @@ def pretrain_cli(
             show_default=False,
         ),
     ] = None,
-    model_seed: Annotated[int, typer.Option("--model-seed", help="Seed of the fitted models (`llcps solve --seed` reuses a model fitted with its seed).")] = 0,
+    model_seed: Annotated[
+        int, typer.Option("--model-seed", help="Seed of the fitted models (`llcps solve --model-seed` reuses a model fitted with it).")
+    ] = 0,
     as_json: JsonFlag = False,
 ) -> None:
     """Run N random interactions in settled random scenes, store each as a trial, then
@@ -40,46 +44,41 @@ def pretrain_cli(
     The same seed writes the same trials (features, outcome, sim steps) bit for bit.
     """
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
-    with open_store(ctx, create=True) as store:
-        with Progress(
-            TextColumn("pretraining"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            TimeRemainingColumn(),
-            console=err_console,
-            transient=True,
-        ) as progress:
-            task = progress.add_task("pretraining", total=n)
+    with progress_display("pretrain", "loading the simulator") as progress:
+        from llcps.pretrain import pretrain  # the simulator loads only when a command needs it
+
+        with open_store(ctx, create=True) as store:
             summary = pretrain(
                 store,
                 branch=selected_branch(ctx),
-                n=n,
+                n=trials,
                 seed=seed,
-                progress=lambda done, total: progress.update(task, completed=done),
+                progress=lambda done, total: progress("random interactions", done, total),
             )
-        fitted = _fit_models(store, summary.branch, names, model_seed)
+            from llcps.models.persistence import fit_models  # torch / sklearn load only here
+
+            fitted = fit_models(
+                store,
+                summary.branch,
+                names,
+                model_seed,
+                progress=lambda name, done, total: progress(f"fitting world model {name}", done, total),
+            )
     if as_json:
-        print_json({**summary.as_json(), "models": fitted})
+        print_json({**summary.as_json(), "models": [f.as_json() for f in fitted]})
     else:
         show(summary)
-        print_table("world models fitted", ("model", "seed", "trials", "fit seconds"), [(f["name"], f["seed"], f["trials"], f"{f['fit_seconds']:.2f}") for f in fitted])
+        print_table("world models fitted", ("model", "seed", "trials", "fit seconds"), [(f.name, f.seed, f.trials, f"{f.fit_seconds:.2f}") for f in fitted])
 
 
-def _fit_models(store, branch: str, names: list[str], seed: int) -> list[dict[str, object]]:
-    """Fit (and store) each world model on the branch's visible trials."""
-    from llcps.models.persistence import fit_or_load  # torch / sklearn load only here
-
-    records = store.visible_trials(branch)
-    fitted = []
-    for name in names:
-        started = time.perf_counter()
-        fit_or_load(store, branch, name, seed, records=records)
-        fitted.append({"name": name, "seed": seed, "trials": len(records), "fit_seconds": time.perf_counter() - started})
-    return fitted
+EXAMPLES = examples(
+    "llcps pretrain                                 # 200 random interactions, nb and nn fitted",
+    "llcps pretrain --trials 50 --seed 3 --model nb",
+    "llcps --branch exp pretrain --trials 200 --model-seed 1 --json",
+)
 
 
-def show(summary: PretrainSummary) -> None:
+def show(summary: "PretrainSummary") -> None:
     """The run summary for people: Omega label frequencies and throughput."""
     n = summary.trials
     rows = [

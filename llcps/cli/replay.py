@@ -8,12 +8,22 @@ from typing import Annotated, Optional
 import typer
 
 from llcps.cli._common import JsonFlag, message, open_store, print_json, print_table
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
+
+EXAMPLES = examples(
+    "llcps replay 42                       # must match what was recorded",
+    "llcps replay 42 --gif trial42.gif     # and film it, captioned",
+    "llcps replay 42 --json",
+)
 
 
 def replay_cli(
     ctx: typer.Context,
     trial_id: Annotated[int, typer.Argument(metavar="TRIAL_ID", help="Id of a stored trial (see `llcps inspect trials`).", show_default=False)],
-    gif: Annotated[Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the replay to a GIF.", show_default=False)] = None,
+    gif: Annotated[
+        Optional[Path], typer.Option("--gif", metavar="FILE", help="Render the replay to a GIF, captioned with the trial and its parameters.", show_default=False, dir_okay=False)
+    ] = None,
     gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
     as_json: JsonFlag = False,
 ) -> None:
@@ -21,10 +31,11 @@ def replay_cli(
 
     Exit code 0 when everything matches what was recorded, 1 when it does not.
     """
-    from llcps.cps.replay import replay  # the simulator loads only when needed
+    with progress_display("replay", "loading the simulator") as progress:
+        from llcps.cps.replay import replay  # the simulator loads only when needed
 
-    with open_store(ctx) as store:
-        report = replay(store, trial_id, gif=gif, gui=gui)
+        with open_store(ctx) as store:
+            report = replay(store, trial_id, gif=gif, gui=gui, progress=progress)
     if as_json:
         print_json(report.as_json())
     else:

@@ -6,10 +6,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.syntax import Syntax
 
 from llcps.cli._common import JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
+from llcps.cli._conventions import examples
+from llcps.cli._progress import progress_display
 from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, SolveConfig
 from llcps.models import MEASURES, WORLD_MODELS
 from llcps.scenarios import CONDITIONS, SCENARIOS
@@ -33,16 +34,31 @@ def solve_cli(
     condition: Annotated[Condition, typer.Option("--condition", help="Original (the plan works) or novelty (it fails).")] = "novelty",  # type: ignore[valid-type, assignment]
     model: Annotated[ModelName, typer.Option("--model", help="World model that ranks exploration.")] = DEFAULT_MODEL,  # type: ignore[valid-type, assignment]
     measure: Annotated[MeasureName, typer.Option("--measure", help="Measure that orders candidates by the model's prediction.")] = DEFAULT_MEASURE,  # type: ignore[valid-type, assignment]
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the model and of tie-breaks; recorded with every trial.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", help="Run seed: breaks ties in the ranking; recorded with every trial.")] = 0,
+    model_seed: Annotated[
+        Optional[int],
+        typer.Option("--model-seed", help="Seed of the world model's fit (default: --seed; `llcps pretrain --model-seed` stores one).", show_default=False),
+    ] = None,
     budget: Annotated[int, typer.Option("--budget", metavar="N", help="Most exploration trials before giving up (exit 1).")] = DEFAULT_BUDGET,
     refit_every: Annotated[int, typer.Option("--refit-every", metavar="N", help="Refit the world model after every N exploration trials.")] = 1,
     gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
-    gif: Annotated[Optional[Path], typer.Option("--gif", metavar="PATH", help="Render the plan and the resolving trial to a GIF.", show_default=False)] = None,
+    gif: Annotated[
+        Optional[Path],
+        typer.Option(
+            "--gif",
+            metavar="FILE",
+            help="Afterwards, film the plan, the resolving trial and the plan it enabled to a captioned GIF (not counted in the stored times).",
+            show_default=False,
+            dir_okay=False,
+        ),
+    ] = None,
     as_json: JsonFlag = False,
 ) -> None:
     """Plan, execute, explore on failure, learn an operator; every trial goes to the store.
 
-    Exit code 0 when the task is solved, 1 when the budget ran out (every trial is
+    Progress shows the phase (fit, plan, explore, re-plan, render) and, while exploring,
+    trials against the budget with an ETA (the time to spend the whole budget at the
+    current rate: an upper bound, as a resolving trial ends it early). Exit code 0 when the task is solved, 1 when the budget ran out (every trial is
     kept), 2 for bad input, 130 when interrupted (Ctrl-C; completed trials are kept).
     """
     config = SolveConfig(
@@ -51,35 +67,36 @@ def solve_cli(
         model=str(model.value),  # type: ignore[attr-defined]
         measure=str(measure.value),  # type: ignore[attr-defined]
         seed=seed,
+        model_seed=model_seed,
         budget=budget,
         refit_every=refit_every,
     )
     config.validate()
-    from llcps.cps.agent import solve  # the simulator loads only when a command needs it
+    before = _mtime(gif)
+    with progress_display("solve", "loading the simulator") as progress:
+        from llcps.cps.agent import solve  # the simulator loads only when a command needs it
 
-    with open_store(ctx, create=True) as store, _progress() as progress:
-        task = progress.add_task("exploring", total=None, visible=False)
-
-        def report(phase: str, done: int, total: int) -> None:
-            progress.update(task, completed=done, total=total, visible=True, description=phase)
-
-        result = solve(store, branch=selected_branch(ctx), config=config, gui=gui, gif=gif, progress=report)
+        with open_store(ctx, create=True) as store:
+            result = solve(store, branch=selected_branch(ctx), config=config, gui=gui, gif=gif, progress=progress)
     if as_json:
         print_json(result.as_json())
     else:
         show(result)
+    if gif is not None and result.status != "interrupted":
+        message(f"film written to {gif}" if _mtime(gif) != before else "no film: the episode executed no trial")
     raise typer.Exit(_exit_code(result))
 
 
-def _progress() -> Progress:
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-    )
+EXAMPLES = examples(
+    "llcps solve scenario2                                  # the novelty, default model and measure",
+    "llcps solve scenario3 --condition original             # the nominal plan works there",
+    "llcps solve bucket --model nn --measure most-changes --budget 50 --json",
+    "llcps solve scenario1 --gif scenario1.gif              # then film it",
+)
+
+
+def _mtime(path: Path | None) -> int | None:
+    return path.stat().st_mtime_ns if path is not None and path.exists() else None
 
 
 def _exit_code(result: "SolveResult") -> int:

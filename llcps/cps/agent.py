@@ -1,15 +1,24 @@
-"""The lifelong CPS agent: plan, execute with monitoring, explore on failure, learn K'.
+"""The lifelong CPS agent: plan, execute with monitoring, repair the plan, explore on
+failure, learn K'.
 
 One call of :func:`solve` is one *episode*: a scenario in one condition, solved on
 one branch of the experience store. Every trial the robot executes is written to
 the store as it happens; the world model trains on every trial the branch can see
 (the lifelong training set) and is refit during exploration, as the paper's agent
 does within a scenario.
+
+Before it explores, the agent tries what it already knows: when a plan step fails, it
+re-plans from the perceived state without that ground action (the operator that failed
+is demoted by its failure, see :func:`llcps.symbolic.knowledge.experience_cost`),
+executes the repaired plan, and repeats up to :data:`MAX_PLAN_REPAIRS` times. Only when
+no repaired plan reaches the goal does creative problem solving start, for the first step
+that failed, a_f: the novelty is that a_f fails where K expected it to work, so
+exploration looks for an alternative to a_f from the state a_f was executed in (the
+snapshot stored before it), and a learned operator records that state as its context.
 """
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -19,21 +28,21 @@ import numpy as np
 
 from llcps.cps.episode import SolveConfig, SolveResult
 from llcps.cps.exploration import failure_point, rank_candidates
-from llcps.cps.knowledge import load_knowledge
+from llcps.cps.knowledge import load_experience, load_knowledge
 from llcps.domain import PUSH_DIRECTION, ControllerParams, State, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
+from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
 from llcps.sim.controllers import DEFAULT_MAX_STEPS
-from llcps.sim.memo import TrialMemo, memo_key
 from llcps.sim.perception import perceive
-from llcps.sim.render import GifRecorder
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import World
 from llcps.store import Store
+from llcps.symbolic.experience import Context, Experience
 from llcps.symbolic.knowledge import KnowledgeBase, Task
 from llcps.symbolic.monitor import StepFailure, check_step
-from llcps.symbolic.operators import learn_operator, refine_failed_action
+from llcps.symbolic.operators import learn_operator
 from llcps.symbolic.planner import GroundAction, plan
 
 #: Controller settings of K's own actions: the robot's nominal way of doing each.
@@ -41,14 +50,39 @@ NOMINAL_RATE = 0.4
 NOMINAL_MAGNITUDE = 0.15
 #: Push directions K may use to move an object toward a target ("top" tips it instead).
 PUSH_DIRECTIONS = {k: v for k, v in PUSH_DIRECTION.items() if k != "top"}
-#: Simulation steps between GIF frames (240 Hz / 8 = 30 frames per simulated second).
-GIF_EVERY = 8
 #: Cap on steps of one settle/trial, as a safety net (240 Hz).
 SETTLE_STEPS = 480
+#: Re-plans after the first failed plan step before exploration starts.
+MAX_PLAN_REPAIRS = 3
 
 
 ProgressCallback = Callable[[str, int, int], None]
-"""Called as ``progress(phase, done, total)``; phase is "plan" or "explore"."""
+"""Called as ``progress(phase, done, total)``: phase is "fit world model NAME", "plan",
+"explore", "re-plan" or "render"; done and total count exploration trials (total 0: not
+known yet), or frames while rendering."""
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A plan step that failed: the step a_f, what the monitor found missing, and the
+    state it was executed from: perceived, as physics (serialized) and as a stored
+    snapshot (None when the plan was not stored). Exploration looks for an alternative to
+    a_f from that state."""
+
+    step: GroundAction
+    monitor: StepFailure
+    state: State
+    physics: bytes
+    snapshot: int | None
+
+
+@dataclass(frozen=True)
+class PlanRun:
+    """How a plan execution ended: the state after the last executed step and, if a step
+    failed, the failure."""
+
+    state: State
+    failure: Failure | None = None
 
 
 class Agent:
@@ -64,7 +98,9 @@ class Agent:
         config: SolveConfig,
         result: SolveResult,
         records: list[TrialRecord],
-        memo: TrialMemo | None = None,
+        cache: PhysicsCache | None = None,
+        max_steps: int = DEFAULT_MAX_STEPS,
+        progress: ProgressCallback | None = None,
         changes: dict[int, TrialChange] | None = None,
     ) -> None:
         self.store = store
@@ -77,16 +113,42 @@ class Agent:
         #: The known symbolic change of each trial in ``records``, by trial id.
         self.changes: dict[int, TrialChange] = {} if changes is None else changes
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
-        self.recorder: GifRecorder | None = None
-        self.memo = memo
+        self.cache = cache
+        self.progress = progress
+        self._explore_total = 0
+        #: The step cap of every trial: the one the physics runs under and the cache keys by.
+        self.max_steps = max_steps
         # Physics state of each stored snapshot this episode took, by snapshot id.
         self._states: dict[int, bytes] = {}
-        # End state of a trial answered by the memo, loaded when the world is next used.
+        # The serialized end state of the last stored trial: the world continues from
+        # exactly these bytes, loaded when it is next used (unless a restore comes first).
         self._pending: bytes | None = None
+        # Operator executions as plan steps the branch sees, this episode's included.
+        self.experience: Experience = load_experience(store, branch)
 
-    def filmed(self):
-        """A context that records frames into the episode's GIF, if one was asked for."""
-        return self.recorder if self.recorder is not None else contextlib.nullcontext()
+    def knowledge(self, kb: KnowledgeBase) -> KnowledgeBase:
+        """``kb`` costed by the experience the branch has, this episode's included."""
+        return kb.with_experience(self.experience)
+
+    def record_execution(self, operator: str, context: Context, success: bool, trial_id: int | None) -> None:
+        """Store one execution of ``operator`` as a plan step in ``context`` (see
+        :mod:`llcps.symbolic.experience`); the operator's cost follows from the counts."""
+        self.store.add_operator_execution(
+            branch=self.branch,
+            operator=operator,
+            success=success,
+            context=sorted(context),
+            episode_id=self.result.episode_id,
+            trial_id=trial_id,
+        )
+        self.experience = self.experience.added(operator, context, success)
+
+    def report(self, phase: str, *, total: int | None = None) -> None:
+        """Tell the progress callback the phase and the exploration trials done so far."""
+        if total is not None:
+            self._explore_total = total
+        if self.progress is not None:
+            self.progress(phase, self.result.exploration_trials, self._explore_total)
 
     # -- symbolic glue -------------------------------------------------------
     def task(self, state: State) -> Task:
@@ -96,6 +158,7 @@ class Agent:
 
     def controller_call(self, step: GroundAction) -> TrialSpec:
         """Map a plan step to its controller call: learned settings, or K's nominal ones."""
+        self.sync()  # a push's direction is read from the world
         call = step.controller
         if call is None:
             raise LlcpsError(f"plan step {step.label} has no controller")
@@ -119,28 +182,34 @@ class Agent:
 
         The trial starts from the stored snapshot ``start`` if given, else from the
         world's current state, which must then be the state of ``snapshot_id``. With
-        ``snapshot_id=None`` the trial is a re-enactment for a GIF: it is not stored.
+        ``snapshot_id=None`` the trial is not stored (nor answered by the cache).
         A stored trial leaves the world in its serialized end state, so what follows
-        is the same whether the trial was simulated or answered by the memo.
+        is the same whether the trial was simulated or answered by the physics cache;
+        a cached answer is recorded as such, with this run's wall seconds.
         """
-        trial: TrialResult | None = None
-        key: bytes | None = None
-        if snapshot_id is not None and self.memo is not None and self.recorder is None:
-            key = memo_key(self.world.scene.to_dict(), self._states[snapshot_id], spec, DEFAULT_MAX_STEPS)
-            cached = self.memo.get(key)
-            if cached is not None:
-                trial, self._pending = cached
-        if trial is None:
+        started = time.perf_counter()
+        cached: CachedTrial | None = None
+        key: str | None = None
+        if snapshot_id is not None and self.cache is not None:
+            key = trial_key(self.world.settings, self.world.scene.to_dict(), self._states[snapshot_id], spec, self.max_steps)
+            cached = self.cache.get(key)
+            if cached is not None and cached.result.spec != spec:  # a damaged entry: simulate instead
+                cached = None
+        if cached is not None:
+            trial, self._pending = cached.result, cached.end_state
+        else:
             if start is not None:
                 self.restore(start)
             else:
                 self.sync()
-            trial = run_trial(self.world, spec)
+            trial = run_trial(self.world, spec, max_steps=self.max_steps)
             if snapshot_id is None:
                 return trial, None
-            end = self.world.serialize_state()
+            # Continue from exactly the stored bytes; the restore waits until the world is
+            # used again, and is skipped when a restore of another state comes first.
+            self._pending = self.world.save_state()
             if key is not None:
-                self.memo.put(key, trial, end)
+                self.cache.put(key, trial, self._pending)
         new = TrialRecord(
             branch=self.branch,
             source=source,
@@ -149,7 +218,9 @@ class Agent:
             outcome=trial.outcome,
             solved=self.scenario.goal_reached(trial.after),
             sim_steps=trial.sim_steps,
-            wall_seconds=trial.wall_seconds,
+            wall_seconds=trial.wall_seconds if cached is None else time.perf_counter() - started,
+            cache_hit=cached is not None,
+            simulation_wall_seconds=trial.wall_seconds,
             seed=self.config.seed,
             run_id=self.result.run_id,
             episode_id=self.result.episode_id,
@@ -162,6 +233,8 @@ class Agent:
         self.records.append(record)
         self.changes[trial_id] = replace(change, trial_id=trial_id)
         self.result.sim_steps += trial.sim_steps
+        if cached is not None:
+            self.result.cache_hits += 1
         if source == "plan":
             self.result.plan_trials += 1
         elif source == "exploration":
@@ -182,34 +255,50 @@ class Agent:
         self.world.restore_serialized(self._states[snapshot_id])
 
     def sync(self) -> None:
-        """Bring the world to the end state of the last trial, if the memo answered it."""
+        """Bring the world to the serialized end state of the last stored trial, if not done yet."""
         if self._pending is not None:
             state, self._pending = self._pending, None
             self.world.restore_serialized(state)
 
     def run_plan(
-        self, kb: KnowledgeBase, steps: Sequence[GroundAction], *, store: bool = True
-    ) -> tuple[State, GroundAction | None, object]:
+        self, steps: Sequence[GroundAction], *, store: bool = True, record: KnowledgeBase | None = None
+    ) -> PlanRun:
         """Execute a plan step by step with the monitor; stop at the first failing step.
 
         The monitor checks the effects the plan relies on (causal links): those in the
         goal or needed by a later step's preconditions. A learned operator records every
         change it was seen to make; an incidental one (a neighbour nudged) need not
         recur for the plan to work. Reaching the goal ends the plan early.
+
+        Args:
+            steps: the plan.
+            store: store each step as a ``plan`` trial (False: nothing is stored, e.g. to
+                find where a plan fails).
+            record: the knowledge base the plan was made with: count each step as an
+                execution of its operator in its context (success or failure), which sets
+                the operator's cost by experience. None: count nothing.
         """
         self.sync()
         state = perceive(self.world)
         for index, step in enumerate(steps):
             spec = self.controller_call(step)
-            stored = self.snapshot() if store else None
-            trial, _ = self.execute(spec, source="plan", snapshot_id=stored)
-            state = trial.after
-            if self.scenario.goal_reached(state):
-                return state, None, None
-            failure = check_step(_relied_on(step, steps[index + 1 :], self.scenario), state)
+            if store:
+                stored = self.snapshot()
+                physics = self._states[stored]
+            else:
+                stored, physics = None, self.world.serialize_state()
+            trial, record_ = self.execute(spec, source="plan", snapshot_id=stored)
+            reached = self.scenario.goal_reached(trial.after)
+            failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], self.scenario), trial.after)
+            if record is not None and store:
+                context = record.context(step, trial.before)
+                self.record_execution(step.name, context, failure is None, record_.id if record_ is not None else None)
+            if reached:
+                return PlanRun(trial.after)
             if failure is not None:
-                return state, step, failure
-        return state, None, None
+                return PlanRun(trial.after, Failure(step, failure, trial.before, physics, stored))
+            state = trial.after
+        return PlanRun(state)
 
 
 def _relied_on(step: GroundAction, later: Sequence[GroundAction], scenario: Scenario) -> GroundAction:
@@ -228,7 +317,7 @@ def solve(
     gui: bool = False,
     gif: str | Path | None = None,
     progress: ProgressCallback | None = None,
-    memo: TrialMemo | None = None,
+    cache: PhysicsCache | None = None,
 ) -> SolveResult:
     """Solve one scenario on one branch; see the module docstring.
 
@@ -238,10 +327,13 @@ def solve(
         config: scenario, condition, world model, measure, seed, budget.
         command: the command line recorded with the run.
         gui: open a PyBullet GUI window (needs a display).
-        gif: write the plan's execution and the resolving trial to this GIF.
-        progress: optional callback for progress bars.
-        memo: trials already simulated (:mod:`llcps.sim.memo`), to answer repeats without
-            stepping the engine; what the episode records is the same with or without it.
+        gif: film the episode to this GIF afterwards (:func:`llcps.cps.film.film_episode`);
+            the episode's stored wall time does not include it.
+        progress: optional callback for progress bars (see :data:`ProgressCallback`).
+        cache: the physics cache (:mod:`llcps.store.physics_cache`), to answer trials
+            simulated before without stepping the engine; what the episode records is
+            the same with or without it, but for the trials marked ``cache_hit`` and
+            their wall seconds.
 
     Returns:
         The episode summary; ``status`` is ``solved``, ``budget_exhausted``,
@@ -272,9 +364,11 @@ def solve(
     )
     world: World | None = None
     try:
+        if progress is not None:
+            progress(f"fit world model {config.model}", 0, 0)
         records = list(store.visible_trials(branch_name))
         changes = store.visible_changes(branch_name)
-        model = fit_or_load(store, branch_name, config.model, config.seed, records=records, changes=changes)
+        model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes)
         kb = load_knowledge(store, branch_name)
         world = World.from_scene(scenario.scene(config.condition), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
@@ -286,14 +380,11 @@ def solve(
             config=config,
             result=result,
             records=records,
-            memo=memo,
+            cache=cache,
+            progress=progress,
             changes=changes,
         )
-        if gif is not None:
-            agent.recorder = GifRecorder(world, every=GIF_EVERY)
-        _episode(agent, kb, model, result, progress)
-        if agent.recorder is not None and agent.recorder.frames:
-            agent.recorder.save(gif, speedup=2.0)
+        _episode(agent, kb, model, result)
     except KeyboardInterrupt:
         result.status = "interrupted"
     finally:
@@ -301,70 +392,94 @@ def solve(
         result.sim_seconds = result.sim_steps * (world.time_step if world is not None else 1 / 240)
         if world is not None:
             world.close()
+        if cache is not None:
+            cache.flush()
         if result.status == "running":
             result.status = "error"
         store.finish_episode(result.episode_id, status=result.status, summary=result.as_json())
         store.finish_run(result.run_id, status=result.status)
+    if gif is not None and result.status != "interrupted":
+        from llcps.cps.film import film_episode
+
+        film_episode(store, result.episode_id, gif, progress=progress)
     return result
 
 
-@dataclass(frozen=True)
-class PlanOutcome:
-    """How executing K's plan went: ``solved``, ``no_plan``, or ``failed`` at ``failure``.
-
-    Attributes:
-        status: solved, no_plan or failed.
-        plan: the plan's step labels.
-        state: the symbolic state where execution stopped.
-        failure: the failed step and its missing effects (status ``failed``).
-    """
-
-    status: str
-    plan: tuple[str, ...] = ()
-    state: State = frozenset()
-    failure: StepFailure | None = None
-
-
-def plan_to_failure(agent: Agent, kb: KnowledgeBase, *, store: bool = True) -> PlanOutcome:
-    """Plan with K from what the robot perceives and execute under the monitor, up to
-    the first failing step: where exploration starts (the agent's path, also taken by
-    ``llcps inspect model`` without storing anything)."""
+def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult) -> None:
+    """Plan with K and repair the plan; only if no plan reaches the goal, explore."""
     state = perceive(agent.world)
     if agent.scenario.goal_reached(state):
-        return PlanOutcome("solved", state=state)
-    steps = plan(kb, agent.task(state))
-    if steps is None:
-        return PlanOutcome("no_plan", state=state)
-    labels = tuple(step.label for step in steps)
-    with agent.filmed():
-        state, failed_step, failure = agent.run_plan(kb, steps, store=store)
-    if failed_step is None:
-        return PlanOutcome("solved" if agent.scenario.goal_reached(state) else "no_plan", labels, state)
-    return PlanOutcome("failed", labels, state, failure)
-
-
-def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult, progress) -> None:
-    """Plan with K, execute with the monitor; at the first failure, explore (as the paper does)."""
-    outcome = plan_to_failure(agent, kb)
-    result.plan = list(outcome.plan)
-    if outcome.failure is None:
-        result.status = outcome.status
+        result.status = "solved"
         return
-    failure = outcome.failure
-    result.failed_action = failure.step.label
-    result.missing_effects = failure.describe()
-    _explore(agent, kb, model, failure.step, failure, outcome.state, result, progress)
+    failure = plan_and_repair(agent, kb, state, result)
+    if result.status == "solved":
+        return
+    if failure is None:
+        result.status = "no_plan"
+        return
+    _explore(agent, kb, model, failure, result)
 
 
-def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failure_state: State, result, progress):
+def plan_and_repair(
+    agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult, *, store: bool = True
+) -> Failure | None:
+    """Execute K's plan; on a failed step re-plan without it, up to MAX_PLAN_REPAIRS times.
+
+    Every executed step is a stored ``plan`` trial and counts as an execution of its
+    operator, so a step that fails is demoted before the re-plan. Sets ``result.plan``
+    (K's first plan), ``result.plan_repairs`` and, when a plan reaches the goal,
+    ``result.status``. With ``store=False`` nothing is stored or counted (the path
+    ``llcps inspect model`` takes to the failure point); the failed steps are still left
+    out of the re-plans.
+
+    Returns:
+        The first failure, or None when no step failed. Exploration looks for an
+        alternative to its step a_f from the state a_f was executed in.
+    """
+    first: Failure | None = None
+    excluded: set[tuple[str, tuple[str, ...]]] = set()
+    for attempt in range(1 + MAX_PLAN_REPAIRS):
+        agent.report("plan" if attempt == 0 else "re-plan")
+        known = agent.knowledge(kb)
+        steps = plan(known, agent.task(state), exclude=excluded)
+        if steps is None:
+            break
+        labels = [step.label for step in steps]
+        if attempt == 0:
+            result.plan = labels
+        run = agent.run_plan(steps, store=store, record=known)
+        state, failure = run.state, run.failure
+        if attempt > 0:
+            result.plan_repairs.append(
+                {
+                    "plan": labels,
+                    "failed_action": failure.step.label if failure is not None else None,
+                    "missing_effects": failure.monitor.describe() if failure is not None else None,
+                }
+            )
+        if failure is None:
+            if agent.scenario.goal_reached(state):
+                result.status = "solved"
+            return first
+        if first is None:
+            result.failed_action = failure.step.label
+            result.missing_effects = failure.monitor.describe()
+            first = failure
+        excluded.add((failure.step.name, failure.step.args))
+    return first
+
+
+def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: SolveResult) -> None:
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
     config = agent.config
-    snapshot = agent.snapshot()
-    point = failure_point(agent, failure, failure_state)
+    snapshot = failure.snapshot
+    agent.restore(snapshot)
+    point = failure_point(agent, failure.monitor, failure.state)
     candidates = point.candidates
     result.candidates = len(candidates)
     remaining = list(range(len(candidates)))
     order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
+    agent.report("explore", total=min(config.budget, len(candidates)))
     tried = 0
     while order and result.exploration_trials < config.budget:
         index = order.pop(0)
@@ -372,81 +487,81 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failed_step, failure, failu
         spec = candidates[index]
         trial, record = agent.execute(spec, source="exploration", snapshot_id=snapshot, start=snapshot)
         tried += 1
-        if progress is not None:
-            progress("explore", result.exploration_trials, min(config.budget, len(candidates)))
-        resolved, needed_plan = _resolves(agent, kb, trial, failed_step, failure_state)
-        if resolved:
-            learned = learn_operator(
-                spec=spec,
-                before=failure_state,
-                after=trial.after,
-                objects=agent.task(failure_state).objects,
-                focus=failed_step.args,
-            )
-            definition = {"operator": learned.to_json(), "refinement": None}
-            new_kb = kb.with_operator(learned)
-            if needed_plan:
-                new_kb = refine_failed_action(new_kb, failed_step, learned, failure_state)
-                definition["refinement"] = new_kb.refinement_of(failed_step.name)
-            agent.store.add_operator(
-                branch=agent.branch,
-                name=learned.name,
-                pddl=learned.to_pddl(),
-                definition=definition,
-                scenario=agent.scenario.name,
-                episode_id=result.episode_id,
-            )
-            result.learned_operators.append(learned.to_pddl())
-            result.resolving_trial_id = record.id
-            result.status = "solved"
-            if agent.recorder is not None:
-                _film_resolution(agent, kb, spec, snapshot)
-            return new_kb
+        agent.report("explore")
+        if resolves(agent, kb, trial, failure):
+            _learn(agent, kb, spec, trial, failure, record, result)
+            return
         if tried % config.refit_every == 0 and remaining:
             model.update(agent.records, agent.changes)
             order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     result.status = "budget_exhausted"
-    return kb
 
 
-def _film_resolution(agent: Agent, kb: KnowledgeBase, spec: TrialSpec, snapshot: int) -> None:
-    """Re-enact the resolving trial (and the plan it enabled) for the GIF; nothing is stored.
-
-    Physics is deterministic from the snapshot, so the film shows what was recorded.
-    """
-    agent.restore(snapshot)
-    with agent.filmed():
-        trial, _ = agent.execute(spec, source="exploration", snapshot_id=None)
-        if not agent.scenario.goal_reached(trial.after):
-            steps = plan(kb, agent.task(trial.after)) or ()
-            agent.run_plan(kb, steps, store=False)
-
-
-def _resolves(
+def _learn(
     agent: Agent,
     kb: KnowledgeBase,
+    spec: TrialSpec,
     trial: TrialResult,
-    failed_step: GroundAction,
-    failure_state: State,
-    *,
-    store: bool = True,
-) -> tuple[bool, bool]:
-    """Did this trial resolve the novelty? Returns (resolved, through a re-plan).
+    failure: Failure,
+    record: TrialRecord | None,
+    result: SolveResult,
+) -> None:
+    """K -> K': store the operator the resolving trial teaches.
 
-    The novelty is that a_f fails. A trial resolves it if the goal now holds, or if
-    it made a_f work: K plans from the new state through a_f, and that plan, executed,
-    reaches the goal. (A plan around a_f with K's other actions is not a resolution:
-    it would not need the trial.) A trial that changed no fluent is not re-planned.
+    Where a_f failed needs no lesson of its own: the failure, counted in a_f's context,
+    keeps the planner from a_f there (:meth:`KnowledgeBase.allowed`), so it reaches for the
+    learned operator, followed by the plan it enabled when the trial needed one.
+    """
+    learned = learn_operator(
+        spec=spec,
+        before=failure.state,
+        after=trial.after,
+        objects=agent.task(failure.state).objects,
+        predicates=kb.predicates,
+        focus=failure.step.args,
+        replaces=failure.step.name,
+    )
+    definition = {"operator": learned.to_json(), "refinement": None}
+    new_kb = kb.with_operator(learned)
+    agent.store.add_operator(
+        branch=agent.branch,
+        name=learned.name,
+        pddl=learned.to_pddl(cost=kb.nominal_cost(failure.step.name)),
+        definition=definition,
+        scenario=agent.scenario.name,
+        episode_id=result.episode_id,
+    )
+    known = new_kb.skill(learned)
+    step = new_kb.operator(known.name).ground(learned.source_arguments or ())
+    context = new_kb.context(step, failure.state) if step is not None else frozenset()
+    agent.record_execution(known.name, context, True, record.id if record is not None else None)
+    result.learned_operators.append(learned.to_pddl(cost=agent.knowledge(new_kb).cost(known.name)))
+    result.resolving_trial_id = record.id if record is not None else None
+    result.status = "solved"
+
+
+def resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
+    """Did this trial resolve the novelty?
+
+    A trial resolves it if the goal now holds, or if K (costed by experience) plans from
+    the new state and that plan, executed, reaches the goal: a plan K made from the
+    failure point itself started with a_f, which failed there, so a plan that works now
+    works because of the trial. Only a trial that changed a fact about an entity of a_f
+    or of the goal is followed by a re-plan: other changes cannot have made a plan work
+    that did not before.
     """
     if agent.scenario.goal_reached(trial.after):
-        return True, False
-    if trial.after == failure_state:
-        return False, False
-    steps = plan(kb, agent.task(trial.after))
-    if not steps or not any(s.name == failed_step.name and s.args == failed_step.args for s in steps):
-        return False, False
-    state, failed, _ = agent.run_plan(kb, steps, store=store)
-    return failed is None and agent.scenario.goal_reached(state), True
+        return True
+    focus = set(failure.step.args) | {t for atom in agent.scenario.goal_pos | agent.scenario.goal_neg for t in atom[1:]}
+    changed = trial.after ^ failure.state
+    if not any(focus.intersection(atom[1:]) for atom in changed):
+        return False
+    steps = plan(agent.knowledge(kb), agent.task(trial.after))
+    if not steps:
+        return False
+    agent.report("re-plan")
+    run = agent.run_plan(steps)
+    return run.failure is None and agent.scenario.goal_reached(run.state)
 
 
 def _config_json(config: SolveConfig) -> dict[str, object]:
@@ -456,9 +571,10 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
         "model": config.model,
         "measure": config.measure,
         "seed": config.seed,
+        "model_seed": config.fit_seed,
         "budget": config.budget,
         "refit_every": config.refit_every,
     }
 
 
-__all__ = ["PlanOutcome", "SolveConfig", "SolveResult", "load_knowledge", "plan_to_failure", "solve"]
+__all__ = ["Failure", "PlanRun", "SolveConfig", "SolveResult", "load_knowledge", "plan_and_repair", "solve"]

@@ -29,6 +29,13 @@ class SolveConfig:
     budget: int = DEFAULT_BUDGET
     refit_every: int = 1
     grid: Grid = Grid()
+    #: Seed of the world model's fit (None: the episode's ``seed``).
+    model_seed: int | None = None
+
+    @property
+    def fit_seed(self) -> int:
+        """The seed the world model is fitted (or loaded) with."""
+        return self.seed if self.model_seed is None else self.model_seed
 
     def validate(self) -> Scenario:
         """Check names and numbers before anything runs; returns the scenario."""
@@ -58,10 +65,13 @@ class SolveResult:
     branch: str
     status: str = "running"
     plan: list[str] = field(default_factory=list)
+    plan_repairs: list[dict[str, object]] = field(default_factory=list)
     failed_action: str | None = None
     missing_effects: str | None = None
     exploration_trials: int = 0
     plan_trials: int = 0
+    #: Trials answered from the physics cache instead of simulated.
+    cache_hits: int = 0
     candidates: int = 0
     sim_steps: int = 0
     sim_seconds: float = 0.0
@@ -86,10 +96,12 @@ class SolveResult:
             "solved": self.solved,
             "status": self.status,
             "plan": self.plan,
+            "plan_repairs": self.plan_repairs,
             "failed_action": self.failed_action,
             "missing_effects": self.missing_effects,
             "exploration_trials": self.exploration_trials,
             "plan_trials": self.plan_trials,
+            "cache_hits": self.cache_hits,
             "candidates": self.candidates,
             "sim_steps": self.sim_steps,
             "sim_seconds": round(self.sim_seconds, 4),

@@ -3,15 +3,16 @@ the training set's label frequencies, and optionally the top candidates of a
 scenario's failure point under each measure, with each candidate's predicted
 probability of the failure's missing atoms.
 
-The failure point is reached the way the agent reaches it (:func:`~llcps.cps.agent.plan_to_failure`
-and :func:`~llcps.cps.exploration.failure_point`), without storing anything (except the
-fitted models, stored by :func:`~llcps.models.persistence.fit_or_load`).
+The failure point is reached the way the agent reaches it (:func:`~llcps.cps.agent.plan_and_repair`,
+then :func:`~llcps.cps.exploration.failure_point` from the state a_f was executed in),
+without storing anything (except the fitted models, stored by
+:func:`~llcps.models.persistence.fit_or_load`).
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
@@ -112,14 +113,16 @@ def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top:
 
 
 def reach_failure(store: Store, *, branch: str, scenario: str, seed: int) -> FailurePoint:
-    """Run ``scenario``'s novelty plan (nothing stored) to its first failure, as the agent does.
+    """Run ``scenario``'s novelty plan and its repairs (nothing stored) to the failure
+    exploration starts from, as the agent does.
 
     Raises:
-        LlcpsError: unknown scenario, no plan, or a plan that does not fail.
+        LlcpsError: unknown scenario, no plan, or a plan (or a repair) that reaches the goal.
     """
     # The agent's machinery (PyBullet, planner) loads only when a scenario is asked for.
-    from llcps.cps.agent import SETTLE_STEPS, Agent, SolveConfig, SolveResult, load_knowledge, plan_to_failure
+    from llcps.cps.agent import SETTLE_STEPS, Agent, SolveConfig, SolveResult, load_knowledge, plan_and_repair
     from llcps.cps.exploration import failure_point
+    from llcps.sim.perception import perceive
     from llcps.sim.world import World
 
     config = SolveConfig(scenario=scenario, seed=seed)
@@ -129,10 +132,10 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
         world.settle(max_steps=SETTLE_STEPS)
         result = SolveResult(scenario=spec.name, condition="novelty", model="-", measure="-", seed=seed, branch=branch)
         agent = Agent(store=store, branch=branch, world=world, scenario=spec, config=config, result=result, records=[])
-        outcome = plan_to_failure(agent, load_knowledge(store, branch), store=False)
-        if outcome.status == "no_plan":
+        failure = plan_and_repair(agent, load_knowledge(store, branch), perceive(world), result, store=False)
+        if failure is None and result.status != "solved":
             raise LlcpsError(f"the knowledge base of {branch!r} has no plan for {spec.name}'s novelty condition")
-        if outcome.failure is None:
+        if failure is None or result.status == "solved":
             learned = bool(store.visible_operators(branch))
             raise LlcpsError(
                 f"the plan for {spec.name}'s novelty condition succeeds on {branch!r}: no failure state to rank",
@@ -140,7 +143,8 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
                 if learned
                 else "the novelty does not make the nominal plan fail (see docs/scenarios.md)",
             )
-        return failure_point(agent, outcome.failure, outcome.state)
+        world.restore_serialized(failure.physics)  # candidates start where a_f did
+        return failure_point(agent, failure.monitor, failure.state)
     finally:
         world.close()
 
@@ -154,6 +158,8 @@ def inspect_models(
     test_fraction: float = 0.25,
     scenario: str | None = None,
     top: int = 5,
+    model_seed: int | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> ModelInspection:
     """Evaluate ``models`` on the branch's trials and, with a scenario, rank its candidates.
 
@@ -161,15 +167,24 @@ def inspect_models(
         store: the experience store.
         branch: whose visible trials train and test the models.
         models: WORLD_MODELS names.
-        seed: seeds the held-out split, the models and tie-breaks.
+        seed: seeds the held-out split and tie-breaks (and the models, without ``model_seed``).
         test_fraction: share of trials held out for the metrics.
         scenario: a scenario whose failure point's candidates to rank (optional).
         top: candidates shown per measure.
+        model_seed: seed of the world models (None: ``seed``).
+        progress: called as ``progress(phase, done, total)`` as the work goes on.
     """
+    fit_seed = seed if model_seed is None else model_seed
+
+    def say(phase: str, done: int = 0, total: int = 0) -> None:
+        if progress is not None:
+            progress(phase, done, total)
+
     for name in models:
         world_model_entry(name)
     if top < 1:
         raise LlcpsError(f"--top must be at least 1, got {top}")
+    say("loading trials")
     records = store.visible_trials(branch)
     changes = store.visible_changes(branch)
     outcomes = outcome_matrix(records)
@@ -177,17 +192,23 @@ def inspect_models(
     evaluations: tuple[EvaluationReport, ...] = ()
     note = None
     try:
-        evaluations = tuple(
-            evaluate(name, records, seed=seed, test_fraction=test_fraction, changes=changes) for name in models
-        )
+        done = []
+        for index, name in enumerate(models):
+            say(f"held-out evaluation of {name}", index, len(models))
+            done.append(
+                evaluate(name, records, seed=seed, test_fraction=test_fraction, model_seed=fit_seed, changes=changes)
+            )
+        evaluations = tuple(done)
     except LlcpsError as exc:
         note = exc.message
     failure = None
     rankings: dict[str, dict[str, list[RankedCandidate]]] = {}
     if scenario is not None:
+        say(f"{scenario}: running the plan to its failure")
         failure = reach_failure(store, branch=branch, scenario=scenario, seed=seed)
-        for name in models:
-            model = fit_or_load(store, branch, name, seed, records=records, changes=changes)
+        for index, name in enumerate(models):
+            say(f"ranking {len(failure.candidates)} candidates with {name}", index, len(models))
+            model = fit_or_load(store, branch, name, fit_seed, records=records, changes=changes)
             rankings[name] = {
                 measure: top_candidates(model, failure, measure=measure, top=top, seed=seed) for measure in MEASURES
             }

@@ -1,14 +1,21 @@
-"""K' of a branch: the naive K plus everything the branch has learned."""
+"""K' of a branch: the naive K plus everything the branch has learned, costed by its experience."""
 
 from __future__ import annotations
 
 from llcps.store import Store
+from llcps.symbolic.experience import Experience
 from llcps.symbolic.knowledge import KnowledgeBase
 
 
 def load_knowledge(store: Store, branch: str) -> KnowledgeBase:
-    """The default K plus every learned operator (and refinement) ``branch`` sees, oldest first."""
+    """The default K plus every learned operator (and refinement) ``branch`` sees, oldest
+    first, costed by the operator executions ``branch`` sees."""
     kb = KnowledgeBase.default()
     for record in sorted(store.visible_operators(branch), key=lambda r: r.id):
         kb = kb.apply_learned(record.definition)
-    return kb
+    return kb.with_experience(load_experience(store, branch))
+
+
+def load_experience(store: Store, branch: str) -> Experience:
+    """The operator executions ``branch`` sees, counted per operator and context."""
+    return Experience.from_counts((c.operator, c.context, c.successes, c.failures) for c in store.operator_experience(branch))

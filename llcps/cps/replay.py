@@ -11,8 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from llcps.cps.film import PHASES, ProgressCallback, Shot, reenact
 from llcps.domain import Outcome, TrialRecord
-from llcps.errors import LlcpsError
 from llcps.store import Store
 
 
@@ -54,40 +54,32 @@ class ReplayReport:
         }
 
 
-def replay(store: Store, trial_id: int, *, gif: str | Path | None = None, gui: bool = False) -> ReplayReport:
+def replay(
+    store: Store,
+    trial_id: int,
+    *,
+    gif: str | Path | None = None,
+    gui: bool = False,
+    progress: ProgressCallback | None = None,
+) -> ReplayReport:
     """Re-execute stored trial ``trial_id`` from its start snapshot.
 
     Args:
         store: the experience store holding the trial and its snapshot.
         trial_id: the trial to replay.
-        gif: also render the replay to this GIF.
+        gif: also render the replay to this captioned GIF.
         gui: watch it in a PyBullet window (needs a display).
+        progress: ``progress(phase, done, total)`` in simulation steps.
 
     Raises:
         LlcpsError: the trial does not exist or has no stored start state.
     """
     from llcps.scenarios import get_scenario
-    from llcps.sim.render import GifRecorder
-    from llcps.sim.trial import run_trial
-    from llcps.sim.world import World
 
     trial = store.get_trial(trial_id)
-    if trial.snapshot_id is None:
-        raise LlcpsError(f"trial {trial_id} has no stored start state, so it cannot be replayed")
-    snapshot = store.get_snapshot(trial.snapshot_id)
-    world = World.from_scene(snapshot.scene, gui=gui)
-    try:
-        world.restore_serialized(snapshot.state)
-        recorder = GifRecorder(world) if gif is not None else None
-        if recorder is not None:
-            with recorder:
-                result = run_trial(world, trial.spec)
-            recorder.save(gif, speedup=2.0)
-        else:
-            result = run_trial(world, trial.spec)
-        solved = get_scenario(trial.scenario).goal_reached(result.after) if trial.scenario else False
-    finally:
-        world.close()
+    (done,) = reenact(store, [Shot(trial, PHASES.get(trial.source, trial.source))], gif=gif, gui=gui, progress=progress)
+    result = done.result
+    solved = get_scenario(trial.scenario).goal_reached(result.after) if trial.scenario else False
     return ReplayReport(
         trial=trial,
         outcome=result.outcome,

@@ -13,6 +13,8 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 import matplotlib
+import matplotlib.lines
+import matplotlib.patches
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import Normalize
@@ -32,7 +34,13 @@ from llcps.experiments.stats import (
     CumulativePoint,
     Figure2Row,
 )
+from llcps.experiments.survival import SurvivalCurve
 
+#: What the stars of Figure 2 mean, printed under the heatmap.
+STAR_NOTE = (
+    f"* p < {ALPHA} (paired Wilcoxon over seeds, uncorrected)   ** also after Holm's correction   "
+    "red: less exploration with updates, blue: more"
+)
 #: Colours of the two conditions, used by every plot.
 CONDITION_COLORS = {"update": "#1f77b4", "reset": "#ff7f0e"}
 #: Heatmap colours span update/reset ratios from 1/8 to 8 (log2 from -3 to 3).
@@ -138,7 +146,8 @@ def figure2_heatmap(rows: Iterable[Figure2Row], stem: str | Path, *, with_paper:
     row_names = [f"{m} / {me}" for m, me in pairs]
     col_names = [f"{s.replace('scenario', 'S')}\np{size}" for size, s in cols]
     width = 1.6 + 0.9 * len(cols)
-    fig = Figure(figsize=(width * (2 if show_paper else 1) + 1.5, 1.2 + 0.42 * len(pairs)), layout="constrained")
+    # At least 2.6 in tall: with one or two rows the colour bar's labels need the room.
+    fig = Figure(figsize=(width * (2 if show_paper else 1) + 1.5, max(2.6, 1.2 + 0.42 * len(pairs))), layout="constrained")
     axes = fig.subplots(1, 2 if show_paper else 1, squeeze=False)[0]
     n = max((r.n_seeds for r in shown), default=0)
     image = _heatmap_panel(fig, axes[0], ours, ours_text, row_names, col_names, f"ours (n <= {n} seeds per cell)")
@@ -150,6 +159,7 @@ def figure2_heatmap(rows: Iterable[Figure2Row], stem: str | Path, *, with_paper:
     bar.set_ticks(ticks, labels=[format_pct(100 * (2.0**t - 1)) for t in ticks])
     bar.set_label("exploration % change with updates", fontsize=8)
     fig.suptitle("% change in exploration with model updates vs reset (Figure 2)", fontsize=11)
+    fig.text(0.01, 0.0, STAR_NOTE, fontsize=7, ha="left", va="top")
     return save(fig, stem)
 
 
@@ -158,23 +168,30 @@ def _cell_order(keys: Iterable[tuple[str, str, int]]) -> list[tuple[str, str, in
 
 
 def exploration_distribution(
-    table: ResultsTable, stem: str | Path, *, metric: str = "exploration_trials"
+    table: ResultsTable, stem: str | Path, *, metric: str = "exploration_trials", budget: int | None = None
 ) -> tuple[Path, ...]:
-    """Box plot plus every seed's value, per cell and condition, one panel per scenario."""
+    """Box plot plus every seed's value, per cell and condition, one panel per scenario.
+
+    The panels share the value axis, so scenarios compare at a glance; with ``budget``
+    (exploration trials only) a dashed line marks the cap an unsolved episode stops at.
+    """
     cells = _cell_order((r.model, r.measure, r.pretrain_size) for r in table)
     scenarios = [s for s in SCENARIO_SEQUENCE if any(r.scenario == s for r in table)] or list(SCENARIO_SEQUENCE[:1])
     conditions = sorted({r.condition for r in table}, key=condition_rank) or ["update"]
     values: dict[tuple[str, str, int, str, str], list[float]] = {}
     for r in table:
         values.setdefault((r.model, r.measure, r.pretrain_size, r.condition, r.scenario), []).append(r.metric(metric))
-    height = 1.0 + 0.45 * max(len(cells), 1)
-    fig = Figure(figsize=(3.2 * len(scenarios) + 2.0, height))
-    axes = fig.subplots(1, len(scenarios), sharey=True, squeeze=False)[0]
-    fig.subplots_adjust(wspace=0.08, top=1 - 0.5 / height, bottom=0.5 / height)
+    show_budget = budget is not None and metric == "exploration_trials"
+    # Tall enough to read with one cell; the legend gets a row of its own beneath.
+    height = max(3.0, 1.4 + 0.5 * max(len(cells), 1) * max(1, len(conditions)) ** 0.5)
+    fig = Figure(figsize=(3.4 * len(scenarios) + 2.4, height))
+    axes = fig.subplots(1, len(scenarios), sharey=True, sharex=True, squeeze=False)[0]
+    fig.subplots_adjust(wspace=0.08, top=1 - 0.55 / height, bottom=1.05 / height)
     jitter = np.random.default_rng(0)
-    offsets = np.linspace(-0.2, 0.2, len(conditions))
+    offsets = np.linspace(-0.2, 0.2, len(conditions)) if len(conditions) > 1 else np.zeros(1)
     for ax, scenario in zip(axes, scenarios):
         for k, condition in enumerate(conditions):
+            color = CONDITION_COLORS.get(condition, "grey")
             data = [values.get((*cell, condition, scenario), []) for cell in cells]
             positions = [i + offsets[k] for i in range(len(cells))]
             present = [(p, d) for p, d in zip(positions, data) if d]
@@ -183,31 +200,32 @@ def exploration_distribution(
                     [d for _, d in present],
                     positions=[p for p, _ in present],
                     **_HORIZONTAL,
-                    widths=0.3 if len(conditions) > 1 else 0.6,
+                    widths=0.3 if len(conditions) > 1 else 0.5,
                     showfliers=False,
                     patch_artist=True,
-                    boxprops={"facecolor": CONDITION_COLORS.get(condition, "grey"), "alpha": 0.35},
+                    boxprops={"facecolor": color, "alpha": 0.35},
                     medianprops={"color": "black"},
                     manage_ticks=False,
                 )
             for p, d in present:
-                ax.scatter(
-                    d,
-                    p + jitter.uniform(-0.08, 0.08, len(d)),
-                    s=6,
-                    color=CONDITION_COLORS.get(condition, "grey"),
-                    label=condition if p == present[0][0] else None,
-                    zorder=3,
-                )
+                ax.scatter(d, p + jitter.uniform(-0.08, 0.08, len(d)), s=9, color=color, zorder=3)
+        if show_budget:
+            ax.axvline(budget, color="#555555", linestyle="--", linewidth=1)
         ax.set_title(scenario, fontsize=10)
         ax.set_xlabel(metric.replace("_", " "), fontsize=8)
         ax.grid(axis="x", alpha=0.3)
+        ax.set_xlim(left=0)
     axes[0].set_yticks(range(len(cells)), [f"{m} / {me} / p{s}" for m, me, s in cells], fontsize=8)
-    axes[0].invert_yaxis()
-    axes[-1].legend(fontsize=8, loc="best")
-    fig.suptitle(
-        f"{metric.replace('_', ' ')} per cell (boxes: quartiles; dots: seeds)", fontsize=11, y=1 - 0.15 / height
-    )
+    axes[0].set_ylim(len(cells) - 0.5, -0.5)
+    handles = [
+        matplotlib.patches.Patch(facecolor=CONDITION_COLORS.get(c, "grey"), alpha=0.5, label=f"{c}: box = quartiles, line = median")
+        for c in conditions
+    ]
+    handles.append(matplotlib.lines.Line2D([], [], marker="o", linestyle="", markersize=4, color="#444444", label="one seed"))
+    if show_budget:
+        handles.append(matplotlib.lines.Line2D([], [], color="#555555", linestyle="--", label=f"budget cap ({budget} trials)"))
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    fig.suptitle(f"{metric.replace('_', ' ')} per cell, one panel per scenario", fontsize=11, y=1 - 0.12 / height)
     return save(fig, stem)
 
 
@@ -225,7 +243,7 @@ def cumulative_plot(
     # grid) the layout solver costs far more than drawing.
     height = 0.6 + 1.7 * len(pairs)
     fig = Figure(figsize=(3.2 * len(sizes) + 0.8, height))
-    axes = fig.subplots(len(pairs), len(sizes), sharex=True, squeeze=False)
+    axes = fig.subplots(len(pairs), len(sizes), sharex=True, sharey=True, squeeze=False)  # one scale: panels compare
     fig.subplots_adjust(hspace=0.45, wspace=0.25, top=1 - 0.45 / height, bottom=0.35 / height)
     x = np.arange(len(SCENARIO_SEQUENCE))
     lines: dict[tuple[str, str, int, str], dict[str, CumulativePoint]] = {}
@@ -258,3 +276,52 @@ def cumulative_plot(
         "cumulative exploration over the scenario sequence (mean, 95% bootstrap CI)", fontsize=10, y=1 - 0.1 / height
     )
     return save(fig, stem)
+
+
+def survival_plot(curves: Sequence[SurvivalCurve], stem: str | Path, *, scenario: str) -> tuple[Path, ...]:
+    """Kaplan–Meier curves of trials to resolution in one scenario: one panel per condition,
+    one step line per model x measure x pretraining size, with 95% bands.
+
+    An unsolved episode is censored at its budget (a tick on its line), so a curve that
+    ends above 0 says how many episodes the budget did not resolve.
+    """
+    mine = [c for c in curves if c.scenario == scenario]
+    conditions = sorted({c.condition for c in mine}, key=condition_rank) or ["update"]
+    cells = _cell_order((c.model, c.measure, c.pretrain_size) for c in mine)
+    colors = matplotlib.colormaps["tab20"].resampled(max(len(cells), 1))
+    fig = Figure(figsize=(4.2 * len(conditions) + 1.6, 3.6))
+    axes = fig.subplots(1, len(conditions), sharey=True, squeeze=False)[0]
+    fig.subplots_adjust(wspace=0.08, right=0.72 if cells else 0.95)
+    for ax, condition in zip(axes, conditions):
+        for k, cell in enumerate(cells):
+            curve = next((c for c in mine if (c.model, c.measure, c.pretrain_size, c.condition) == (*cell, condition)), None)
+            if curve is None:
+                continue
+            km = curve.estimate
+            x = np.concatenate(([0.0], km.times, [km.tau])) if km.times else np.array([0.0, km.tau])
+            y = np.concatenate(([1.0], km.survival, [km.survival[-1] if km.survival else 1.0]))
+            low = np.concatenate(([1.0], km.ci_low, [km.ci_low[-1] if km.ci_low else 1.0]))
+            high = np.concatenate(([1.0], km.ci_high, [km.ci_high[-1] if km.ci_high else 1.0]))
+            color = colors(k)
+            label = f"{cell[0]} / {cell[1]} / p{cell[2]}"
+            ax.step(x, y, where="post", color=color, linewidth=1.2, label=label)
+            ax.fill_between(x, low, high, step="post", color=color, alpha=0.12, linewidth=0)
+            if km.events < km.n:  # censored at the budget
+                ax.plot([km.tau], [km.survival[-1] if km.survival else 1.0], marker="|", ms=9, color=color)
+        ax.set_title(f"{scenario}, {condition}", fontsize=10)
+        ax.set_xlabel("exploration trials", fontsize=8)
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+    axes[0].set_ylabel("P(not yet resolved)", fontsize=8)
+    if cells:
+        axes[-1].legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
+    fig.suptitle("Kaplan–Meier estimate of trials to resolution (95% band; | censored at the budget)", fontsize=10)
+    return save(fig, stem)
+
+
+def survival_plots(curves: Sequence[SurvivalCurve], directory: str | Path) -> dict[str, tuple[Path, ...]]:
+    """:func:`survival_plot` for every scenario of ``curves``, as ``survival_<scenario>`` in ``directory``."""
+    scenarios = [s for s in SCENARIO_SEQUENCE if any(c.scenario == s for c in curves)]
+    scenarios += sorted({c.scenario for c in curves} - set(scenarios))
+    return {s: survival_plot(curves, Path(directory) / f"survival_{s}", scenario=s) for s in scenarios}

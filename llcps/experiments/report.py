@@ -12,11 +12,12 @@ from __future__ import annotations
 import csv
 import json
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 from llcps.errors import LlcpsError
+from llcps.tabular import csv_value
 from llcps.experiments import plots
 from llcps.experiments.grid import SCENARIO_SEQUENCE, condition_rank, measure_rank, model_rank
 from llcps.experiments.results import METRICS, ResultsTable
@@ -39,7 +40,9 @@ from llcps.experiments.stats import (
     paper_cells,
     random_comparison,
     reduction_summary,
+    adjust,
 )
+from llcps.experiments.survival import SurvivalComparison, SurvivalCurve, survival_curves, survival_table
 
 format_pct = plots.format_pct
 
@@ -62,6 +65,15 @@ class Analysis:
     random: tuple[RandomComparison, ...]
     cumulative: tuple[CumulativePoint, ...]
     overview: Mapping[str, Any]
+    #: Update vs reset with unsolved episodes censored at the budget (log-rank, restricted means).
+    survival: tuple[SurvivalComparison, ...] = ()
+    #: Kaplan–Meier curve per cell, condition and scenario.
+    curves: tuple[SurvivalCurve, ...] = ()
+
+    @property
+    def comparisons(self) -> int:
+        """How many p-values the report corrects together."""
+        return sum(not math.isnan(r.p_value) for rows in (self.figure2, self.survival, self.random) for r in rows)
 
 
 @dataclass(frozen=True)
@@ -75,12 +87,20 @@ class ReportPaths:
     random_csv: Path | None
     report_md: Path
     plots: Mapping[str, tuple[Path, ...]]
+    survival_csv: Path | None = None
+    report_html: Path | None = None
+    films: Mapping[str, Path] = field(default_factory=dict)
 
     def all(self) -> tuple[Path, ...]:
         """Every file written, for listing or checking."""
         files = [self.results_csv, self.figure2_csv, self.figure2_json, self.report_md]
         if self.random_csv is not None:
             files.append(self.random_csv)
+        if self.survival_csv is not None:
+            files.append(self.survival_csv)
+        if self.report_html is not None:
+            files.append(self.report_html)
+        files.extend(self.films.values())
         for paths in self.plots.values():
             files.extend(paths)
         return tuple(files)
@@ -120,7 +140,13 @@ def analyse(
         raise LlcpsError(f"{resamples} bootstrap resamples are too few for a 95% interval", hint="use 1000 or more")
     if len(table) == 0:
         raise LlcpsError("the results table is empty: nothing to report", hint="run `llcps experiment run` first")
-    rows = figure2_table(table, metric=metric, resamples=resamples, seed=seed)
+    rows, survival, random = adjust(
+        [
+            figure2_table(table, metric=metric, resamples=resamples, seed=seed),
+            survival_table(table, resamples=max(resamples // 5, 100), seed=seed),
+            random_comparison(table, metric=metric),
+        ]
+    )
     return Analysis(
         metric=metric,
         resamples=resamples,
@@ -128,9 +154,11 @@ def analyse(
         figure2=rows,
         ours_reduction=reduction_summary(our_cells(rows)),
         paper_reduction=reduction_summary(paper_cells()),
-        random=random_comparison(table, metric=metric),
+        random=random,
         cumulative=cumulative_exploration(table, metric=metric, resamples=resamples, seed=seed),
         overview=_overview(table),
+        survival=survival,
+        curves=survival_curves(table),
     )
 
 
@@ -164,6 +192,7 @@ def analysis_json(analysis: Analysis) -> dict[str, Any]:
                 "method": "percentile",
             },
             "alpha": ALPHA,
+            "correction": {"method": "holm", "comparisons": analysis.comparisons},
             "overview": dict(analysis.overview),
             "figure2": [asdict(r) for r in analysis.figure2],
             "reduction": {
@@ -173,6 +202,8 @@ def analysis_json(analysis: Analysis) -> dict[str, Any]:
             },
             "random_comparison": [asdict(r) for r in analysis.random],
             "best_versus_random": [asdict(r) for r in best_versus_random(analysis.random)],
+            "survival": [asdict(r) for r in analysis.survival],
+            "kaplan_meier": [asdict(c) for c in analysis.curves],
         }
     )
 
@@ -191,7 +222,7 @@ def _write_rows_csv(path: Path, rows: Iterable[Any], columns: Iterable[str]) -> 
         writer.writeheader()
         for row in rows:
             record = asdict(row)
-            writer.writerow({k: "" if record[k] is None else record[k] for k in columns})
+            writer.writerow({k: csv_value(record[k]) for k in columns})
     return path
 
 
@@ -219,7 +250,7 @@ def _stars(row: Figure2Row) -> str:
     return "**" if row.p_holm < ALPHA else "*" if row.significant else ""
 
 
-def _table(header: list[str], body: Iterable[list[str]]) -> list[str]:
+def _table(header: list[str], body: Iterable[Iterable[str]]) -> list[str]:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines.extend("| " + " | ".join(cells) + " |" for cells in body)
     return lines
@@ -230,9 +261,18 @@ def _pretrain_title(size: int) -> str:
     return f"{size} pretraining points" + (f' (the paper\'s "{name}")' if name else "")
 
 
-def _figure2_side_by_side(rows: tuple[Figure2Row, ...]) -> list[str]:
+@dataclass(frozen=True)
+class TableBlock:
+    """A titled table as text cells, rendered alike to markdown and to HTML."""
+
+    title: str
+    header: tuple[str, ...]
+    body: tuple[tuple[str, ...], ...]
+
+
+def figure2_blocks(rows: tuple[Figure2Row, ...]) -> list[TableBlock]:
     """The paper's layout: one block per pretraining size, ours next to the paper's."""
-    out: list[str] = []
+    out: list[TableBlock] = []
     shown = [r for r in rows if r.in_figure2]
     for size in sorted({r.pretrain_size for r in shown}, reverse=True):
         block = [r for r in shown if r.pretrain_size == size]
@@ -257,7 +297,14 @@ def _figure2_side_by_side(rows: tuple[Figure2Row, ...]) -> list[str]:
                     paper,
                 ]
             body.append(cells)
-        out += [f"### {_pretrain_title(size)}", "", *_table(header, body), ""]
+        out.append(TableBlock(_pretrain_title(size), tuple(header), tuple(tuple(c) for c in body)))
+    return out
+
+
+def _figure2_side_by_side(rows: tuple[Figure2Row, ...]) -> list[str]:
+    out: list[str] = []
+    for block in figure2_blocks(rows):
+        out += [f"### {block.title}", "", *_table(list(block.header), block.body), ""]
     return out
 
 
@@ -278,7 +325,7 @@ def _figure2_long(rows: tuple[Figure2Row, ...]) -> list[str]:
             format_pct(r.pct_change),
             format_ci(r.ci_low, r.ci_high),
             format_p(r.p_value, r.p_reason),
-            format_p(r.p_holm) if r.in_figure2 else "-",
+            format_p(r.p_holm),
             f"{r.solved_update:.0%}",
             f"{r.solved_reset:.0%}",
         ]  # fmt: skip
@@ -315,7 +362,7 @@ def _reduction_table(analysis: Analysis) -> list[str]:
 def _random_table(comparisons: tuple[RandomComparison, ...]) -> list[str]:
     header = [
         "model", "measure", "pretraining", "condition", "scenario", "n", f"n {BASELINE_MODEL}",
-        "median", f"median {BASELINE_MODEL}", "% change of median", "test", "p",
+        "median", f"median {BASELINE_MODEL}", "% change of median", "test", "p", "Holm p",
     ]  # fmt: skip
     body = [
         [
@@ -331,8 +378,33 @@ def _random_table(comparisons: tuple[RandomComparison, ...]) -> list[str]:
             format_pct(c.pct_change_median),
             c.test,
             format_p(c.p_value, c.p_reason),
+            format_p(c.p_holm),
         ]  # fmt: skip
         for c in comparisons
+    ]
+    return _table(header, body)
+
+
+def _median(value: float | None, tau: float) -> str:
+    return f">{tau:g}" if value is None else f"{value:g}"
+
+
+def _survival_table(rows: tuple[SurvivalComparison, ...]) -> list[str]:
+    header = [
+        "model", "measure", "pretraining", "scenario", "n", "tau", "solved update", "solved reset",
+        "median update", "median reset", "RMST update", "RMST reset", "% change of RMST", "difference 95% CI",
+        "log-rank p", "Holm p",
+    ]  # fmt: skip
+    body = [
+        [
+            r.model, r.measure, str(r.pretrain_size), r.scenario, str(r.n_seeds), f"{r.tau:g}",
+            f"{r.solved_update}/{r.n_seeds}", f"{r.solved_reset}/{r.n_seeds}",
+            _median(r.median_update, r.tau), _median(r.median_reset, r.tau),
+            _num(r.rmst_update), _num(r.rmst_reset), format_pct(r.pct_change_rmst),
+            "n/a" if math.isnan(r.rmst_diff_ci_low) else f"[{r.rmst_diff_ci_low:+.1f}, {r.rmst_diff_ci_high:+.1f}]",
+            format_p(r.p_value, r.p_reason), format_p(r.p_adjusted),
+        ]  # fmt: skip
+        for r in rows
     ]
     return _table(header, body)
 
@@ -400,11 +472,20 @@ def summary_lines(analysis: Analysis) -> list[str]:
             f"the largest change is {format_pct(worst.pct_change)} ({worst.model}/{worst.measure}/p{worst.pretrain_size})."
         )
     if analysis.random:
-        better = [c for c in analysis.random if c.pct_change_median < 0 and c.p_value < ALPHA]
-        worse = [c for c in analysis.random if c.pct_change_median > 0 and c.p_value < ALPHA]
+        better = [c for c in analysis.random if c.pct_change_median < 0 and c.p_holm < ALPHA]
+        worse = [c for c in analysis.random if c.pct_change_median > 0 and c.p_holm < ALPHA]
         lines.append(
             f"Against the {BASELINE_MODEL} order, {len(better)} of {len(analysis.random)} model x measure x "
-            f"condition x scenario cells explore significantly less and {len(worse)} significantly more (p < {ALPHA}, uncorrected)."
+            f"condition x scenario cells explore significantly less and {len(worse)} significantly more "
+            f"(Holm-corrected p < {ALPHA})."
+        )
+    if analysis.survival:
+        sig = [r for r in analysis.survival if r.p_adjusted < ALPHA]
+        censored = sum((r.n_seeds - r.solved_update) + (r.n_seeds - r.solved_reset) for r in analysis.survival)
+        lines.append(
+            f"Censoring-aware (unsolved episodes censored at the budget, {censored} of them in the paired cells): "
+            f"{len(sig)} of {len(analysis.survival)} cells differ between update and reset by the log-rank test "
+            f"after Holm's correction."
         )
     unsolved = analysis.overview.get("unsolved_episodes", 0)
     if unsolved:
@@ -415,29 +496,79 @@ def summary_lines(analysis: Analysis) -> list[str]:
     return lines
 
 
-def render_markdown(analysis: Analysis, plot_paths: Mapping[str, tuple[Path, ...]], out_dir: Path) -> str:
-    """The report page; plots are linked relative to ``out_dir``."""
+def overview_text(analysis: Analysis) -> str:
+    """The report's first paragraph: what the results hold."""
     o = analysis.overview
-    metric = analysis.metric.replace("_", " ")
     seed_range = f" (seeds {o['seed_range'][0]}-{o['seed_range'][1]})" if o.get("seed_range") else ""
+    return (
+        f"Preset(s) {', '.join(o['presets'])}: {o['cells']} cells, {o['seeds']} seeds{seed_range}, "
+        f"{o['sequences']} sequences ({o['complete_sequences']} complete), {o['rows']} episodes, "
+        f"{o['unsolved_episodes']} unsolved. Simulated {o['sim_seconds']:.0f} s in {o['wall_seconds']:.0f} s of wall time."
+    )
+
+
+def method_text(analysis: Analysis) -> str:
+    """How the numbers are computed (one paragraph, markdown emphasis only on the metric)."""
+    metric = analysis.metric.replace("_", " ")
+    return (
+        f"Measure of exploration: **{metric}**. % change with updates = 100 x (mean update - mean reset) / mean reset "
+        f"over seeds run under both conditions (0% when both are 0). These are **capped means**: an unsolved "
+        f"episode counts the budget it spent, a lower bound on what solving would have taken; the censoring-aware "
+        f"comparison below treats it as censored instead. 95% intervals: percentile bootstrap over seeds "
+        f"resampled as update/reset pairs (`scipy.stats.bootstrap`, {analysis.resamples} resamples, seed {analysis.seed}). "
+        f"p: two-sided paired Wilcoxon signed-rank over seeds. Holm's correction (statsmodels) over every p-value "
+        f"of this report together ({analysis.comparisons}: update vs reset, log-rank, against {BASELINE_MODEL} order). "
+        f"`*` p < {ALPHA}, `**` also after Holm."
+    )
+
+
+def plot_caption(name: str, metric: str) -> str:
+    """The caption of a plot the report drew, by its name in ``ReportPaths.plots``."""
+    metric = metric.replace("_", " ")
+    captions = {
+        "figure2": "Figure 2 as a heatmap, ours beside the paper's",
+        "distribution": f"{metric} per cell and condition",
+        "cumulative": "cumulative exploration over the scenario sequence",
+    }
+    if name.startswith("survival_"):
+        return f"Kaplan–Meier curves of trials to resolution, {name.removeprefix('survival_')}"
+    return captions.get(name, name.replace("_", " "))
+
+
+def table_budget(table: ResultsTable) -> int | None:
+    """The exploration budget of the table's episodes, when its presets share one."""
+    from llcps.experiments.grid import PRESETS
+
+    budgets = {PRESETS[p].budget if p in PRESETS else None for p in table.unique("preset")}
+    return budgets.pop() if len(budgets) == 1 else None
+
+
+def render_markdown(
+    analysis: Analysis,
+    plot_paths: Mapping[str, tuple[Path, ...]],
+    out_dir: Path,
+    *,
+    provenance: Sequence[str] = (),
+    films: Mapping[str, Path] | None = None,
+) -> str:
+    """The report page; plots and films are linked relative to ``out_dir``."""
+    metric = analysis.metric.replace("_", " ")
     lines = [
         "# Experiment report",
         "",
-        f"Preset(s) {', '.join(o['presets'])}: {o['cells']} cells, {o['seeds']} seeds{seed_range}, "
-        f"{o['sequences']} sequences ({o['complete_sequences']} complete), {o['rows']} episodes, "
-        f"{o['unsolved_episodes']} unsolved. Simulated {o['sim_seconds']:.0f} s in {o['wall_seconds']:.0f} s of wall time.",
+        overview_text(analysis),
         "",
-        f"Measure of exploration: **{metric}**. % change with updates = 100 x (mean update - mean reset) / mean reset "
-        f"over seeds run under both conditions (0% when both are 0). 95% intervals: percentile bootstrap over seeds "
-        f"resampled as update/reset pairs ({analysis.resamples} resamples, seed {analysis.seed}). p: two-sided paired "
-        f"Wilcoxon signed-rank over seeds; Holm's correction over the scenario 2 and 3 cells. "
-        f"`*` p < {ALPHA}, `**` also after Holm.",
+        method_text(analysis),
         "",
+    ]
+    if provenance:
+        lines += ["## Where it ran", "", *[f"- {line}" for line in provenance], ""]
+    lines += [
         "## Summary (generated from the numbers)",
         "",
         *[f"- {line}" for line in summary_lines(analysis)],
         "",
-        "## Figure 2: % change in exploration with model updates, ours beside the paper's",
+        "## Figure 2: % change in exploration with model updates (capped means), ours beside the paper's",
         "",
         *_figure2_side_by_side(analysis.figure2),
     ]
@@ -455,6 +586,17 @@ def render_markdown(analysis: Analysis, plot_paths: Mapping[str, tuple[Path, ...
         *_figure2_long(analysis.figure2),
         "",
     ]
+    if analysis.survival:
+        lines += [
+            "## Censoring-aware: trials to resolution, unsolved episodes censored at the budget",
+            "",
+            "Kaplan–Meier medians (`>tau` when fewer than half resolved), restricted means up to the budget tau "
+            "(the area under the Kaplan–Meier curve) with a 95% interval of their difference from a bootstrap over "
+            "seeds resampled as pairs, and the log-rank test.",
+            "",
+            *_survival_table(analysis.survival),
+            "",
+        ]
     if analysis.random:
         lines += [f"## Model-guided vs {BASELINE_MODEL} order", "", *_random_table(analysis.random), ""]
         best = best_versus_random(analysis.random)
@@ -473,9 +615,16 @@ def render_markdown(analysis: Analysis, plot_paths: Mapping[str, tuple[Path, ...
         "distribution": f"{metric} per cell and condition",
         "cumulative": "cumulative exploration over the scenario sequence",
     }
+    for name in sorted(plot_paths):
+        if name.startswith("survival_"):
+            captions[name] = f"Kaplan–Meier curves of trials to resolution, {name.removeprefix('survival_')}"
     for name, caption in captions.items():
         if name in plot_paths:
-            lines += [f"### {caption.capitalize()}", "", f"![{caption}]({_rel(plot_paths[name][0], out_dir)})", ""]
+            lines += [f"### {caption[0].upper() + caption[1:]}", "", f"![{caption}]({_rel(plot_paths[name][0], out_dir)})", ""]
+    if films:
+        lines += ["## A resolving trial per scenario", ""]
+        lines += [f"![{scenario}]({_rel(path, out_dir)})" for scenario, path in films.items()]
+        lines.append("")
     return "\n".join(lines).rstrip() + "\n"
 
 
@@ -496,8 +645,12 @@ def build_report(
     metric: str = "exploration_trials",
     resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
+    provenance: Sequence[Mapping[str, Any]] | None = None,
+    films: Mapping[str, Path] | None = None,
+    html: bool = False,
 ) -> ReportPaths:
-    """Write results.csv, figure2.csv/json, random_comparison.csv, the plots and report.md.
+    """Write results.csv, figure2.csv/json, random_comparison.csv, survival.csv, the plots and
+    report.md (and report.html).
 
     Args:
         table: the results to report on.
@@ -505,7 +658,13 @@ def build_report(
         metric: which of :data:`~llcps.experiments.results.METRICS` counts as exploration.
         resamples: bootstrap resamples per interval.
         seed: seed of the bootstrap streams; same table and seed give identical files.
+        provenance: where the runs ran (:func:`~llcps.experiments.artifacts.table_provenance`);
+            written to provenance.json. None: what ``out_dir`` already holds, if anything.
+        films: scenario -> GIF of a resolving trial. None: the films ``out_dir`` already holds.
+        html: also write the self-contained report.html.
     """
+    from llcps.experiments import artifacts
+
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -521,12 +680,48 @@ def build_report(
         random_csv = _write_rows_csv(
             out / "random_comparison.csv", analysis.random, (f.name for f in fields(RandomComparison))
         )
+    if provenance is not None:
+        artifacts.write_provenance(out, provenance)
+    environments = [artifacts.provenance_line(p) for p in (provenance if provenance is not None else artifacts.read_provenance(out))]
+    film_paths = dict(films) if films is not None else artifacts.existing_films(out)
     plot_dir = out / "plots"
     plot_paths = {
         "figure2": plots.figure2_heatmap(analysis.figure2, plot_dir / "figure2"),
-        "distribution": plots.exploration_distribution(table, plot_dir / "distribution", metric=metric),
+        "distribution": plots.exploration_distribution(table, plot_dir / "distribution", metric=metric, budget=table_budget(table)),
         "cumulative": plots.cumulative_plot(analysis.cumulative, plot_dir / "cumulative", metric=metric),
     }
+    plot_paths.update({f"survival_{s}": paths for s, paths in plots.survival_plots(analysis.curves, plot_dir).items()})
+    survival_csv = None
+    if analysis.survival:
+        survival_csv = _write_rows_csv(out / "survival.csv", analysis.survival, (f.name for f in fields(SurvivalComparison)))
     report_md = out / "report.md"
-    report_md.write_text(render_markdown(analysis, plot_paths, out), encoding="utf-8")
-    return ReportPaths(out, results_csv, figure2_csv, figure2_json, random_csv, report_md, plot_paths)
+    report_md.write_text(
+        render_markdown(analysis, plot_paths, out, provenance=environments, films=film_paths), encoding="utf-8"
+    )
+    report_html = None
+    if html:
+        from llcps.experiments.html import render_html
+
+        report_html = out / "report.html"
+        pngs = {
+            name: (plot_caption(name, metric), next(p for p in paths if p.suffix == ".png"))
+            for name, paths in plot_paths.items()
+            if any(p.suffix == ".png" for p in paths)
+        }
+        report_html.write_text(
+            render_html(
+                analysis,
+                overview=overview_text(analysis),
+                method=method_text(analysis).replace("**", "").replace("`", ""),
+                summary=summary_lines(analysis),
+                figure2=figure2_blocks(analysis.figure2),
+                plots=pngs,
+                films=film_paths,
+                provenance=environments,
+                unfilmed=[s for s in SCENARIO_SEQUENCE if s in table.unique("scenario") and s not in film_paths],
+            ),
+            encoding="utf-8",
+        )
+    return ReportPaths(
+        out, results_csv, figure2_csv, figure2_json, random_csv, report_md, plot_paths, survival_csv, report_html, film_paths
+    )

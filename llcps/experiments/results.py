@@ -17,6 +17,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 import numpy as np
 
 from llcps.errors import LlcpsError
+from llcps.tabular import csv_value
 from llcps.experiments.grid import SCENARIO_SEQUENCE, Cell, Sequence, parse_branch
 
 #: Columns that can be analysed as "exploration" (the paper's Figure 2 uses time).
@@ -191,7 +192,7 @@ class ResultsTable:
                 record["episode_id"] = "" if record["episode_id"] is None else record["episode_id"]
                 record["sim_seconds"] = repr(record["sim_seconds"])
                 record["wall_seconds"] = repr(record["wall_seconds"])
-                writer.writerow(record)
+                writer.writerow({k: csv_value(v) for k, v in record.items()})  # booleans as every export writes them
         return path
 
     @classmethod

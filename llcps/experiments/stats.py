@@ -18,7 +18,7 @@ import math
 import warnings
 import zlib
 from dataclasses import dataclass, replace
-from typing import Callable, Iterable, TypeVar
+from typing import Any, Callable, Iterable, TypeVar
 
 import numpy as np
 from scipy import stats as sps
@@ -120,12 +120,23 @@ def cell_rng(seed: int, *key: object) -> np.random.Generator:
     return np.random.default_rng([int(seed), digest])
 
 
-def _percentile_interval(samples: np.ndarray, level: float) -> tuple[float, float]:
-    # "inverted_cdf" takes order statistics without interpolating, so a resample
-    # whose percent change is infinite stays infinite instead of turning into NaN.
-    tail = (1.0 - level) / 2.0
-    low, high = np.quantile(samples, [tail, 1.0 - tail], method="inverted_cdf")
-    return float(low), float(high)
+def _percentile_bootstrap(
+    data: tuple[np.ndarray, ...], statistic: Callable[..., Any], *, paired: bool, rng: np.random.Generator, resamples: int, level: float
+) -> tuple[float, float]:
+    """A percentile interval from ``scipy.stats.bootstrap`` (NaN bounds when the resamples are degenerate)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # degenerate or infinite resamples: the bounds say so themselves
+        result = sps.bootstrap(
+            data,
+            statistic,
+            paired=paired,
+            vectorized=True,
+            n_resamples=resamples,
+            confidence_level=level,
+            method="percentile",
+            rng=rng,
+        )
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 
 def bootstrap_pct_change_ci(
@@ -146,12 +157,16 @@ def bootstrap_pct_change_ci(
     r = np.asarray(reset, dtype=float)
     if u.shape != r.shape or u.ndim != 1:
         raise ValueError("update and reset must be 1-d arrays of equal length (one value per seed)")
-    n = u.size
-    if n < 2:
+    if u.size < 2:
         return (math.nan, math.nan)
-    idx = rng.integers(0, n, size=(resamples, n))
-    samples = pct_change(u[idx].mean(axis=1), r[idx].mean(axis=1))
-    return _percentile_interval(np.asarray(samples), level)
+    if np.all(u == u[0]) and np.all(r == r[0]):  # every resample is the estimate itself
+        value = float(pct_change(u[0], r[0]))
+        return (value, value)
+
+    def change(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+        return np.asarray(pct_change(a.mean(axis=axis), b.mean(axis=axis)))
+
+    return _percentile_bootstrap((u, r), change, paired=True, rng=rng, resamples=resamples, level=level)
 
 
 def bootstrap_mean_ci(
@@ -161,8 +176,9 @@ def bootstrap_mean_ci(
     v = np.asarray(values, dtype=float)
     if v.size < 2:
         return (math.nan, math.nan)
-    idx = rng.integers(0, v.size, size=(resamples, v.size))
-    return _percentile_interval(v[idx].mean(axis=1), level)
+    if np.all(v == v[0]):
+        return (float(v[0]), float(v[0]))
+    return _percentile_bootstrap((v,), np.mean, paired=False, rng=rng, resamples=resamples, level=level)
 
 
 def paired_wilcoxon(update: np.ndarray, reset: np.ndarray) -> tuple[float, str]:
@@ -199,15 +215,16 @@ def mann_whitney(a: np.ndarray, b: np.ndarray) -> tuple[float, str]:
 
 
 def holm(p_values: Iterable[float]) -> list[float]:
-    """Holm-Bonferroni adjusted p-values (NaN stays NaN and is not counted in the family)."""
+    """Holm-adjusted p-values (``statsmodels``); NaN stays NaN and is not counted in the family."""
+    from statsmodels.stats.multitest import multipletests
+
     p = [float(v) for v in p_values]
-    finite = sorted((v, i) for i, v in enumerate(p) if not math.isnan(v))
-    m = len(finite)
+    finite = [i for i, v in enumerate(p) if not math.isnan(v)]
     out = [math.nan] * len(p)
-    running = 0.0
-    for rank, (value, i) in enumerate(finite):
-        running = max(running, min(1.0, (m - rank) * value))
-        out[i] = running
+    if finite:
+        adjusted = multipletests([p[i] for i in finite], alpha=ALPHA, method="holm")[1]
+        for i, value in zip(finite, adjusted):
+            out[i] = float(value)
     return out
 
 
@@ -254,7 +271,7 @@ class Figure2Row:
     ci_high: float
     p_value: float
     p_reason: str
-    #: Holm-adjusted over the Figure-2 family (scenarios 2 and 3); NaN elsewhere.
+    #: Holm-adjusted over every comparison of the report (:func:`adjust`); NaN until then.
     p_holm: float
     #: Every paired seed has the same value under both conditions.
     identical: bool
@@ -327,10 +344,6 @@ def figure2_table(
                 paper_pct_change=PAPER_FIGURE2.get((model, measure, size, scenario)),
             )
         )
-    family = [i for i, row in enumerate(rows) if row.in_figure2]
-    adjusted = holm(rows[i].p_value for i in family)
-    for i, value in zip(family, adjusted):
-        rows[i] = replace(rows[i], p_holm=value)
     return tuple(rows)
 
 
@@ -409,6 +422,8 @@ class RandomComparison:
     test: str  # "wilcoxon" (paired by seed) or "mann-whitney"
     p_value: float
     p_reason: str
+    #: Holm-adjusted over every comparison of the report (:func:`adjust`); NaN until then.
+    p_holm: float = math.nan
 
 
 def random_comparison(
@@ -507,6 +522,27 @@ def best_versus_random(
     return tuple(
         best[k] for k in sorted(best, key=lambda k: (-k[0], scenario_rank(k[1])))
     )
+
+
+# --------------------------------------------------------------------------------------
+# One correction over every comparison a report makes
+# --------------------------------------------------------------------------------------
+def adjust(families: Iterable[tuple[Any, ...]]) -> list[tuple[Any, ...]]:
+    """Holm's correction over every p-value of several tuples of rows at once.
+
+    A report that tests many cells must correct over all of them together (update vs
+    reset, censoring-aware comparisons, model vs random order), or its significant
+    findings are mostly luck. Each row needs ``p_value`` and ``p_adjusted`` or ``p_holm``.
+
+    Returns:
+        The tuples in the same order, each row with its adjusted p-value set.
+    """
+    groups = [tuple(g) for g in families]
+    adjusted = iter(holm(row.p_value for g in groups for row in g))
+    return [
+        tuple(replace(row, **{"p_adjusted" if hasattr(row, "p_adjusted") else "p_holm": next(adjusted)}) for row in g)
+        for g in groups
+    ]
 
 
 # --------------------------------------------------------------------------------------

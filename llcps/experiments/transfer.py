@@ -33,6 +33,7 @@ from llcps.errors import StoreError
 from llcps.store import EpisodeRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
 from llcps.store.changes import change_row
 from llcps.store.schema import Branch, Episode, Operator, Run, Snapshot, Trial, TrialChangeRow
+from llcps.store.store import run_provenance_values
 from llcps.store.trials import trial_row
 
 #: Keys of an episode summary (``SolveResult.as_json()``) that hold store ids.
@@ -249,10 +250,10 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                     seed=run.seed,
                     config=dict(run.config),
                     branch=run.branch,
-                    llcps_version=run.llcps_version,
                     status=run.status,
                     started_at=_time(run.started_at),
                     finished_at=_time(run.finished_at),
+                    **run_provenance_values(run.provenance),  # where the worker ran it
                 )
             ).inserted_primary_key[0]
         episode_ids: dict[int, int] = {}

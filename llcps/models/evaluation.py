@@ -134,6 +134,7 @@ def evaluate(
     *,
     seed: int,
     test_fraction: float = 0.25,
+    model_seed: int | None = None,
     changes: Mapping[int, TrialChange] | None = None,
 ) -> EvaluationReport:
     """Fit ``name`` on a seeded training split of ``records`` and score it on the rest.
@@ -141,14 +142,15 @@ def evaluate(
     Args:
         name: a WORLD_MODELS name.
         records: the trials to split (e.g. a branch's visible trials).
-        seed: seeds the split and the model.
+        seed: seeds the split (and the model, without ``model_seed``).
         test_fraction: share of trials held out.
+        model_seed: seed of the model (None: ``seed``).
         changes: the trials' symbolic changes by id: also score the goal-aware head.
     """
     train_index, test_index = split(len(records), seed=seed, test_fraction=test_fraction)
     train = [records[i] for i in train_index]
     test = [records[i] for i in test_index]
-    model = make_world_model(name, seed).fit(train, changes)
+    model = make_world_model(name, seed if model_seed is None else model_seed).fit(train, changes)
     proba = model.predict_proba(test)
     truth, train_truth = outcome_matrix(test), outcome_matrix(train)
     labels = tuple(

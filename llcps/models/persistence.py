@@ -11,7 +11,9 @@ is refitted and replaced, with a warning.
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING, Mapping, Sequence
+import time
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 from llcps.domain import TrialChange, TrialRecord
 from llcps.errors import LlcpsError
@@ -70,3 +72,43 @@ def fit_or_load(
     meta["changes"] = known
     store.save_world_model(branch=branch, name=name, seed=seed, watermark=watermark, artifact=artifact, meta=meta)
     return model
+
+
+@dataclass(frozen=True)
+class FittedModel:
+    """One world model fitted (or found current) on a branch."""
+
+    name: str
+    seed: int
+    trials: int
+    fit_seconds: float
+
+    def as_json(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def fit_models(
+    store: Store,
+    branch: str,
+    names: Sequence[str],
+    seed: int,
+    *,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> list[FittedModel]:
+    """Fit (and store) each named world model on every trial ``branch`` sees.
+
+    Args:
+        progress: called as ``progress(name, done, total)`` before each fit and once at the end.
+    """
+    records = store.visible_trials(branch)
+    changes = store.visible_changes(branch)
+    fitted = []
+    for index, name in enumerate(names):
+        if progress is not None:
+            progress(name, index, len(names))
+        started = time.perf_counter()
+        fit_or_load(store, branch, name, seed, records=records, changes=changes)
+        fitted.append(FittedModel(name, seed, len(records), time.perf_counter() - started))
+    if progress is not None:
+        progress("done", len(names), len(names))
+    return fitted

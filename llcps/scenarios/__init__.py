@@ -18,8 +18,14 @@ if TYPE_CHECKING:
 
 # --------------------------------------------------------------------------- scenario 1
 # A light cube near the right (-y) edge of a narrow table, a bucket on the floor
-# beneath that edge. Original: push drops the cube in. Novelty: a lip along the
-# edge stops every push; lifting the cube over it (another action) still works.
+# beneath that edge. Original: push drops the cube in. Novelty: a fence along the edge,
+# taller than the cube, stops every push, and the hand lowering the cube into the
+# bucket from the top meets the fence; releasing the cube from above the bucket (a place
+# from the side, a parameterization K does not use) still drops it in.
+
+#: Height of scenario 1's fence (m): three times the cube, above the nominal carry.
+FENCE_HEIGHT = 0.15
+
 
 def _scenario1(condition: str) -> "SceneSpec":
     from llcps.sim.entities import TableSpec, bucket, edge_lip, solid
@@ -31,7 +37,7 @@ def _scenario1(condition: str) -> "SceneSpec":
         bucket("bucket", "blue", at=(0.4, -0.59), table=table, diameter=0.26, height=0.24),
         solid("ball", "sphere", "green", 0.05, at=(0.4, 0.15)),
     )
-    fixtures = (edge_lip(table, "right", height=0.07),) if condition == "novelty" else ()
+    fixtures = (edge_lip(table, "right", height=FENCE_HEIGHT, name="fence"),) if condition == "novelty" else ()
     return SceneSpec(entities=entities, fixtures=fixtures, table=table, name=f"scenario1/{condition}")
 
 
@@ -83,8 +89,9 @@ SCENARIOS: dict[str, Scenario] = {
             alias="bucket",
             title="push an object off the table into a bucket",
             story=(
-                "Push the cube off the table edge into the bucket on the floor. Novelty: a lip "
-                "along the edge stops every push; another action must get the cube over it."
+                "Push the cube off the table edge into the bucket on the floor. Novelty: a fence "
+                "along the edge stops every push and blocks lowering the cube into the bucket; "
+                "it must get over the fence another way."
             ),
             build_scene=_scenario1,
             goal_pos=frozenset({fluent("in", "cube", "bucket")}),

@@ -9,6 +9,12 @@ import os
 import sys
 from typing import Iterator
 
+#: Revision of llcps's own controllers, motion primitives, robot model and perception.
+#: Raise it with any change that alters what a trial computes from the same scene,
+#: state and call: the physics cache keys every trial by it (together with the
+#: engine's settings), so trials simulated by older code are never reused.
+CONTROLLERS_REVISION = 1
+
 
 @contextlib.contextmanager
 def native_output_silenced() -> Iterator[None]:

@@ -1,14 +1,21 @@
-"""Headless frames of a world: PNG stills and GIFs of trials (TinyRenderer, no display)."""
+"""Headless frames of a world: PNG stills and GIFs of trials (TinyRenderer, no display).
+
+A GIF frames the scene's objects (:func:`frame_camera`), not the whole room, and
+carries a caption under each frame: which trial, which phase of the episode, the
+action and its parameters. Captions are drawn when the GIF is written, so the
+capture itself is only the renderer's work.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 import pybullet as p
-from PIL import Image
+from PIL import Image, ImageDraw, ImageFont
 
 if TYPE_CHECKING:
     from llcps.sim.world import World
@@ -29,16 +36,52 @@ class Camera:
 VIEW = Camera(eye=(1.55, -0.95, 1.05), target=(0.45, 0.0, 0.12), fov=55.0)
 #: Closer on the arm's workspace on the table (the floor beyond the edge is out of frame).
 CLOSE = Camera(eye=(1.25, -0.75, 0.8), target=(0.42, 0.0, 0.15), fov=55.0)
+#: The direction :func:`frame_camera` looks from (that of ``VIEW``), eye minus target.
+FRAME_DIRECTION = (1.1, -0.95, 0.93)
+#: Bodies :func:`frame_camera` leaves out: they are larger than anything worth seeing.
+UNFRAMED = ("table", "floor")
+#: Pixels of the caption band under each GIF frame.
+CAPTION_HEIGHT = 34
 
 
-def capture(world: "World", *, width: int = 320, height: int = 240, camera: Camera = VIEW) -> np.ndarray:
+def frame_camera(
+    world: "World",
+    *,
+    fov: float = 45.0,
+    margin: float = 1.7,
+    min_radius: float = 0.25,
+    headroom: float = 0.2,
+) -> Camera:
+    """A camera that fits every entity and fixture of the scene (table and floor aside).
+
+    The box around them is raised by ``headroom`` (the gripper comes from above) and
+    viewed from :data:`FRAME_DIRECTION` at the distance that fits its bounding sphere,
+    times ``margin``, in the vertical field of view.
+    """
+    names = [*world.entities, *(n for n in world.fixtures if n not in UNFRAMED)]
+    if not names:
+        return VIEW
+    boxes = np.array([np.concatenate(world.aabb(n)) for n in names])
+    low, high = boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)
+    high[2] += headroom
+    center = (low + high) / 2
+    radius = max(min_radius, float(np.linalg.norm(high - low)) / 2)
+    distance = margin * radius / math.tan(math.radians(fov) / 2)
+    direction = np.asarray(FRAME_DIRECTION) / np.linalg.norm(FRAME_DIRECTION)
+    eye = center + direction * distance
+    return Camera(eye=tuple(eye.tolist()), target=tuple(center.tolist()), fov=fov, far=distance + 4 * radius)
+
+
+def capture(
+    world: "World", *, width: int = 320, height: int = 240, camera: Camera = VIEW, shadow: bool = True
+) -> np.ndarray:
     """One RGB frame (height x width x 3, uint8)."""
     world.ensure_visuals()
     c = world.client
     view = c.computeViewMatrix(camera.eye, camera.target, (0.0, 0.0, 1.0))
     proj = c.computeProjectionMatrixFOV(camera.fov, width / height, camera.near, camera.far)
     _, _, rgba, _, _ = c.getCameraImage(
-        width, height, view, proj, renderer=p.ER_TINY_RENDERER, shadow=1, lightDirection=(0.4, -0.6, 1.0)
+        width, height, view, proj, renderer=p.ER_TINY_RENDERER, shadow=int(shadow), lightDirection=(0.4, -0.6, 1.0)
     )
     return np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
 
@@ -51,6 +94,25 @@ def render_png(world: "World", path: str | Path, *, width: int = 320, height: in
     return path
 
 
+def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # pragma: no cover - Pillow < 10.1 has one bitmap size
+        return ImageFont.load_default()
+
+
+def captioned(frame: np.ndarray, caption: Sequence[str]) -> Image.Image:
+    """``frame`` with up to two caption lines in a band beneath it."""
+    image = Image.fromarray(frame)
+    out = Image.new("RGB", (image.width, image.height + CAPTION_HEIGHT), (250, 250, 250))
+    out.paste(image, (0, 0))
+    draw = ImageDraw.Draw(out)
+    font = _font(12)
+    for i, line in enumerate(list(caption)[:2]):
+        draw.text((6, image.height + 3 + 15 * i), line, fill=(20, 20, 20), font=font)
+    return out
+
+
 class GifRecorder:
     """Captures every ``every``-th simulation step of a world while active.
 
@@ -58,12 +120,24 @@ class GifRecorder:
     stepping), then :meth:`save`::
 
         with GifRecorder(world, every=8) as rec:
+            rec.caption = ("trial 12 · plan", "push(cube) ...")
             execute(world, spec)
         rec.save("docs/img/push.gif")
+
+    Attributes:
+        caption: lines drawn under the frames captured from now on (empty: no band).
+        on_frame: called after each captured frame (e.g. to move a progress bar).
     """
 
     def __init__(
-        self, world: "World", *, every: int = 8, width: int = 320, height: int = 240, camera: Camera = VIEW
+        self,
+        world: "World",
+        *,
+        every: int = 8,
+        width: int = 320,
+        height: int = 240,
+        camera: Camera | None = VIEW,
+        shadow: bool = True,
     ) -> None:
         if every < 1:
             raise ValueError("every must be >= 1")
@@ -71,24 +145,38 @@ class GifRecorder:
         self.every = every
         self.width = width
         self.height = height
-        self.camera = camera
+        self.camera = camera if camera is not None else frame_camera(world)
+        self.shadow = shadow
         self.frames: list[np.ndarray] = []
+        self.captions: list[tuple[str, ...]] = []
+        self.caption: tuple[str, ...] = ()
+        self.on_frame: Callable[[int], None] | None = None
         self._count = 0
+        self._active = False
+
+    def grab(self) -> None:
+        """Capture one frame now, with the current caption."""
+        self.frames.append(
+            capture(self.world, width=self.width, height=self.height, camera=self.camera, shadow=self.shadow)
+        )
+        self.captions.append(tuple(self.caption))
+        if self.on_frame is not None:
+            self.on_frame(len(self.frames))
 
     def _observe(self, world: "World") -> None:
         self._count += 1
         if self._count % self.every == 0:
-            self.frames.append(capture(world, width=self.width, height=self.height, camera=self.camera))
+            self.grab()
 
     def __enter__(self) -> "GifRecorder":
         self.world.ensure_visuals()
-        self.frames.append(capture(self.world, width=self.width, height=self.height, camera=self.camera))
+        self.grab()
         self.world.add_observer(self._observe)
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.world.remove_observer(self._observe)
-        self.frames.append(capture(self.world, width=self.width, height=self.height, camera=self.camera))
+        self.grab()
 
     def save(self, path: str | Path, *, speedup: float = 1.0, hold_last: int = 6) -> Path:
         """Write the frames as a looping GIF playing at ``speedup`` x real time."""
@@ -97,8 +185,12 @@ class GifRecorder:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         ms = max(20, int(round(1000 * self.every * self.world.time_step / speedup)))
-        frames = [Image.fromarray(f) for f in self.frames] + [Image.fromarray(self.frames[-1])] * hold_last
-        pal = [f.quantize(colors=128, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) for f in frames]
+        if any(self.captions):
+            images = [captioned(f, c) for f, c in zip(self.frames, self.captions)]
+        else:
+            images = [Image.fromarray(f) for f in self.frames]
+        images += [images[-1]] * hold_last
+        pal = [f.quantize(colors=128, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) for f in images]
         pal[0].save(path, save_all=True, append_images=pal[1:], duration=ms, loop=0, optimize=True)
         return path
 

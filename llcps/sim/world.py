@@ -15,14 +15,16 @@ import os
 import sys
 import tempfile
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as package_version
 from typing import Any, Callable, Mapping
 
 import pybullet as p
 from pybullet_utils import bullet_client
 
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.sim import native_output_silenced
+from llcps.sim import CONTROLLERS_REVISION, native_output_silenced
 from llcps.sim.entities import (
     Entity,
     EntitySpec,
@@ -46,6 +48,49 @@ REST_LINEAR = 0.005  # m/s
 REST_ANGULAR = 0.05  # rad/s
 REST_CHECK_EVERY = 8  # steps between rest checks
 REST_CHECKS = 3  # consecutive quiet checks that count as rest
+
+
+def _engine_version() -> str:
+    """PyBullet's package version and API date: a new engine may compute other physics."""
+    try:
+        release = package_version("pybullet")
+    except PackageNotFoundError:  # pragma: no cover - a source build
+        release = "unknown"
+    return f"pybullet {release} api {p.getAPIVersion()}"
+
+
+@dataclass(frozen=True)
+class PhysicsSettings:
+    """Everything besides the scene, the state and the call that a trial's physics depends on.
+
+    A :class:`World` owns one; the physics cache keys every trial by it, so a change
+    of any field (a new engine, other solver settings, a revised controller) can
+    never be answered from trials simulated under the old one.
+
+    Attributes:
+        time_step: seconds per simulation step.
+        solver_iterations: the constraint solver's iterations per step.
+        sub_steps: engine sub-steps per step (0: none).
+        deterministic_overlapping_pairs: sort broad-phase pairs (needed for bit-exact replay).
+        gravity: m/s^2 along x, y, z.
+        engine: the physics engine's version.
+        controllers: :data:`~llcps.sim.controllers.CONTROLLERS_REVISION`, the revision of
+            llcps's own controllers, motion primitives and perception.
+    """
+
+    time_step: float = 1.0 / 240.0
+    solver_iterations: int = 50
+    sub_steps: int = 0
+    deterministic_overlapping_pairs: bool = True
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    engine: str = field(default_factory=_engine_version)
+    controllers: int = CONTROLLERS_REVISION
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able form (the cache key hashes it)."""
+        data = asdict(self)
+        data["gravity"] = list(self.gravity)
+        return data
 
 
 @dataclass(frozen=True)
@@ -115,10 +160,10 @@ class World:
     Attributes:
         client: the BulletClient (DIRECT unless ``gui``).
         scene: the description this world was built from.
+        settings: the engine settings every rebuild applies.
         robot: the Panda.
         entities: entities by name (objects and containers).
         fixtures: static bodies by name: "table", "floor" and the scene's fixtures.
-        time_step: seconds per simulation step.
         visuals: whether the robot's visual meshes are loaded (only rendering needs them).
     """
 
@@ -126,7 +171,7 @@ class World:
         self,
         *,
         gui: bool = False,
-        time_step: float = 1.0 / 240.0,
+        settings: PhysicsSettings | None = None,
         scene: SceneSpec | Mapping[str, Any] | None = None,
         visuals: bool = False,
     ) -> None:
@@ -141,7 +186,7 @@ class World:
         self._velocity = functools.partial(p.getBaseVelocity, physicsClientId=cid)
         self.gui = gui
         self.visuals = visuals or gui
-        self.time_step = float(time_step)
+        self.settings = settings if settings is not None else PhysicsSettings()
         self.entities: dict[str, Entity] = {}
         self.fixtures: dict[str, int] = {}
         self.names: dict[int, str] = {}
@@ -158,14 +203,19 @@ class World:
         *,
         gui: bool = False,
         visuals: bool = False,
-        time_step: float = 1.0 / 240.0,
+        settings: PhysicsSettings | None = None,
     ) -> "World":
         """Build a world from a scene description (deterministic: same scene, same bodies).
 
         ``visuals`` loads the robot's visual meshes now; rendering loads them on demand
         anyway (:meth:`ensure_visuals`), and skipping them makes rebuilds four times faster.
         """
-        return cls(gui=gui, scene=scene, visuals=visuals, time_step=time_step)
+        return cls(gui=gui, scene=scene, visuals=visuals, settings=settings)
+
+    @property
+    def time_step(self) -> float:
+        """Seconds per simulation step."""
+        return self.settings.time_step
 
     # ------------------------------------------------------------------ building
 
@@ -175,10 +225,14 @@ class World:
             scene = SceneSpec.from_dict(scene)
         c = self.client
         c.resetSimulation()
+        settings = self.settings
         c.setPhysicsEngineParameter(
-            fixedTimeStep=self.time_step, numSubSteps=0, deterministicOverlappingPairs=1, numSolverIterations=50
+            fixedTimeStep=settings.time_step,
+            numSubSteps=settings.sub_steps,
+            deterministicOverlappingPairs=int(settings.deterministic_overlapping_pairs),
+            numSolverIterations=settings.solver_iterations,
         )
-        c.setGravity(0.0, 0.0, -9.81)
+        c.setGravity(*settings.gravity)
         if self.gui:
             c.configureDebugVisualizer(p.COV_ENABLE_GUI, 0)
         self.scene = scene
@@ -339,6 +393,18 @@ class World:
         them), so whatever runs next replays bit for bit from the stored state in
         any process. A grasp is not part of the state: take snapshots between trials.
         """
+        state = self.save_state()
+        self.restore_serialized(state)
+        return state
+
+    def save_state(self) -> bytes:
+        """The current physics state as :meth:`serialize_state` gives it, without continuing from it.
+
+        The world goes on from its live state, which is not the same as the one a
+        restore of these bytes gives (the engine keeps history a saved state does
+        not hold). For callers that restore next anyway: an agent whose next step
+        either restores another state or continues from exactly these bytes.
+        """
         fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
         os.close(fd)
         try:
@@ -347,9 +413,7 @@ class World:
                 raw = fh.read()
         finally:
             os.unlink(path)
-        state = zlib.compress(raw, STATE_COMPRESSION)
-        self.restore_serialized(state)
-        return state
+        return zlib.compress(raw, STATE_COMPRESSION)
 
     def restore_serialized(self, state: bytes) -> None:
         """Rebuild the scene and load a state made by :meth:`serialize_state` in a world

@@ -1,72 +1,133 @@
-"""The visible trials of a branch as CSV or JSON lines, for pandas and friends.
+"""The visible trials of a branch as CSV, JSON lines or parquet, for pandas and friends.
 
-CSV flattens a trial into one row: the argument slots become ``arg0_*`` and
-``arg1_*`` columns and the outcome its six Table-2 columns. JSON lines keep the
-shape of :meth:`llcps.domain.TrialRecord.as_json`, one trial per line.
+Every format holds the same flat columns (:mod:`llcps.store.flat`): one row per
+trial, one column per Table-1 feature per argument slot, one per outcome bit.
+Booleans are booleans everywhere: ``true``/``false`` in CSV and JSON lines, a
+boolean column in parquet; an absent value is an empty CSV field, ``null`` in JSON
+and a null in parquet.
 """
 
 from __future__ import annotations
 
 import csv
 import json
-from dataclasses import fields
-from typing import Any, TextIO
+from pathlib import Path
+from typing import Any, Iterator, Sequence, TextIO
 
-from llcps.domain import ACTION_ARITY, OUTCOME_NAMES, EntityFeatures, TrialRecord
 from llcps.errors import LlcpsError
+from llcps.store.flat import Column, flat_rows, trial_columns
 from llcps.store.store import Store
+from llcps.tabular import csv_value
 
-EXPORT_FORMATS: tuple[str, ...] = ("csv", "jsonl")
-
-_SLOTS = max(ACTION_ARITY.values())
-_ENTITY_FIELDS = tuple(f.name for f in fields(EntityFeatures))
-
-#: Columns of the CSV export, in order.
-CSV_COLUMNS: tuple[str, ...] = (
-    "id", "branch", "run_id", "episode_id", "scenario", "source", "action",
-    "rate", "movement_magnitude", "orientation",
-    *(f"arg{slot}" for slot in range(_SLOTS)),
-    *(f"arg{slot}_{name}" for slot in range(_SLOTS) for name in _ENTITY_FIELDS),
-    *OUTCOME_NAMES,
-    "solved", "sim_steps", "wall_seconds", "seed", "snapshot_id", "created_at",
-)  # fmt: skip
+EXPORT_FORMATS: tuple[str, ...] = ("csv", "jsonl", "parquet")
+#: Formats that are bytes, written to a file only.
+BINARY_FORMATS: tuple[str, ...] = ("parquet",)
 
 
-def csv_row(record: TrialRecord) -> dict[str, Any]:
-    """One trial as a flat CSV row (missing argument slots stay empty)."""
-    data = record.as_json()
-    row = {key: data[key] for key in CSV_COLUMNS if key in data}
-    for slot, (name, features) in enumerate(zip(record.spec.arguments, record.features, strict=True)):
-        row[f"arg{slot}"] = name
-        for field_name, value in features.as_dict().items():
-            row[f"arg{slot}_{field_name}"] = value
-    row.update(record.outcome.as_dict())
-    row["solved"] = int(record.solved)
-    return row
+def _batches(
+    store: Store, branch: str, *, source: str | None, scenario: str | None, episode: int | None, batch: int
+) -> Iterator[list[dict[str, Any]]]:
+    after = 0
+    while True:
+        records = store.visible_trials(branch, source=source, scenario=scenario, episode=episode, after_id=after, limit=batch)
+        if not records:
+            return
+        yield flat_rows(store, records)
+        after = records[-1].id
 
 
-def export_trials(store: Store, branch: str | None, fmt: str, out: TextIO, *, batch: int = 5000) -> int:
-    """Write the trials ``branch`` sees to ``out``, in id order, a batch at a time.
+def _arrow_schema(columns: Sequence[Column]) -> Any:
+    import pyarrow as pa
+
+    types = {
+        "int": pa.int64(),
+        "nullable_int": pa.int64(),
+        "float": pa.float64(),
+        "bool": pa.bool_(),
+        "nullable_bool": pa.bool_(),
+        "string": pa.string(),
+        "category": pa.dictionary(pa.int32(), pa.string()),
+        "timestamp": pa.timestamp("us"),
+    }
+    return pa.schema([pa.field(c.name, types[c.kind]) for c in columns])
+
+
+def _arrow_rows(rows: list[dict[str, Any]], columns: Sequence[Column]) -> list[dict[str, Any]]:
+    from datetime import datetime
+
+    stamps = [c.name for c in columns if c.kind == "timestamp"]
+    for row in rows:
+        for name in stamps:
+            if isinstance(row[name], str):
+                row[name] = datetime.fromisoformat(row[name])
+    return rows
+
+
+def export_trials(
+    store: Store,
+    *,
+    branch: str | None,
+    fmt: str,
+    out: TextIO | str | Path,
+    source: str | None = None,
+    scenario: str | None = None,
+    episode: int | None = None,
+    batch: int = 5000,
+) -> int:
+    """Write the trials ``branch`` sees (optionally filtered) to ``out``, in id order.
+
+    Args:
+        branch: the branch (None: the current one).
+        fmt: one of :data:`EXPORT_FORMATS`.
+        out: a text stream (csv, jsonl) or a file path (any format; parquet needs one).
+        source, scenario, episode: keep only trials with these values.
+        batch: trials read per query.
 
     Returns:
         The number of trials written.
     """
     if fmt not in EXPORT_FORMATS:
         raise LlcpsError(f"unknown export format {fmt!r}", hint=f"use one of: {', '.join(EXPORT_FORMATS)}")
-    branch = store.resolve_branch(branch).name
+    name = store.resolve_branch(branch).name
+    columns = trial_columns()
+    batches = _batches(store, name, source=source, scenario=scenario, episode=episode, batch=batch)
+    if fmt in BINARY_FORMATS:
+        if not isinstance(out, (str, Path)):
+            raise LlcpsError(f"{fmt} is binary: it is written to a file", hint="pass --out FILE")
+        return _write_parquet(Path(out), batches, columns)
+    if isinstance(out, (str, Path)):
+        with Path(out).open("w", newline="", encoding="utf-8") as fh:
+            return _write_text(fh, fmt, batches, columns)
+    return _write_text(out, fmt, batches, columns)
+
+
+def _write_text(out: TextIO, fmt: str, batches: Iterator[list[dict[str, Any]]], columns: Sequence[Column]) -> int:
+    names = [c.name for c in columns]
     writer = None
     if fmt == "csv":
-        writer = csv.DictWriter(out, fieldnames=CSV_COLUMNS, extrasaction="raise", lineterminator="\n")
+        writer = csv.DictWriter(out, fieldnames=names, extrasaction="raise", lineterminator="\n")
         writer.writeheader()
-    count, after = 0, 0
-    while True:
-        records = store.visible_trials(branch, after_id=after, limit=batch)
-        if not records:
-            return count
-        for record in records:
+    count = 0
+    for rows in batches:
+        for row in rows:
             if writer is not None:
-                writer.writerow(csv_row(record))
+                writer.writerow({k: csv_value(v) for k, v in row.items()})
             else:
-                out.write(json.dumps(record.as_json()) + "\n")
-        count += len(records)
-        after = records[-1].id
+                out.write(json.dumps(row) + "\n")
+        count += len(rows)
+    return count
+
+
+def _write_parquet(path: Path, batches: Iterator[list[dict[str, Any]]], columns: Sequence[Column]) -> int:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    schema = _arrow_schema(columns)
+    count = 0
+    with pq.ParquetWriter(path, schema) as writer:
+        for rows in batches:
+            writer.write_table(pa.Table.from_pylist(_arrow_rows(rows, columns), schema=schema))
+            count += len(rows)
+        if count == 0:
+            writer.write_table(schema.empty_table())
+    return count

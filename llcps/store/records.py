@@ -7,8 +7,10 @@ small record here. None of them holds a database session.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping
+
+from llcps.provenance import Provenance
 
 
 @dataclass(frozen=True)
@@ -63,17 +65,21 @@ class BranchChange:
 
 @dataclass(frozen=True)
 class RunRecord:
-    """One CLI invocation or experiment sequence."""
+    """One CLI invocation or experiment sequence, and the environment it ran in."""
 
     id: int
     command: str
     seed: int | None
     config: Mapping[str, Any]
     branch: str
-    llcps_version: str
     status: str
     started_at: str
     finished_at: str | None
+    provenance: Provenance = field(default_factory=Provenance)
+
+    @property
+    def llcps_version(self) -> str | None:
+        return self.provenance.llcps_version
 
     def as_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -126,6 +132,20 @@ class OperatorRecord:
 
     def as_json(self) -> dict[str, Any]:
         return asdict(self)
+
+
+@dataclass(frozen=True)
+class ExecutionCounts:
+    """How often an operator, executed as a plan step in one context, worked or failed.
+
+    Attributes:
+        context: lifted atoms (tuples of strings) that held of the step's arguments.
+    """
+
+    operator: str
+    context: tuple[tuple[str, ...], ...]
+    successes: int
+    failures: int
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from sqlalchemy import (
     SmallInteger,
     String,
     Text,
+    false,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
@@ -93,6 +94,16 @@ class Run(Base):
     status: Mapped[str] = mapped_column(String(32))
     started_at: Mapped[datetime] = mapped_column(DateTime)
     finished_at: Mapped[datetime | None] = mapped_column(DateTime)
+    # Provenance (llcps.provenance); NULL for runs stored before it was kept.
+    git_commit: Mapped[str | None] = mapped_column(String(64))
+    git_dirty: Mapped[bool | None] = mapped_column(Boolean)
+    python_version: Mapped[str | None] = mapped_column(String(32))
+    pybullet_version: Mapped[str | None] = mapped_column(String(32))
+    torch_version: Mapped[str | None] = mapped_column(String(32))
+    sklearn_version: Mapped[str | None] = mapped_column(String(32))
+    numpy_version: Mapped[str | None] = mapped_column(String(32))
+    host: Mapped[str | None] = mapped_column(String(255))
+    cpu_count: Mapped[int | None] = mapped_column(Integer)
 
 
 class Episode(Base):
@@ -148,7 +159,10 @@ class Trial(Base):
     rate: Mapped[float] = mapped_column(Float)
     movement_magnitude: Mapped[float] = mapped_column(Float)
     orientation: Mapped[str] = mapped_column(String(16))
-    features: Mapped[list[Any]]
+    # Table-1 features of the arguments, packed (llcps.store.trials.pack_features):
+    # one value per trial, so loading a training set neither decodes JSON nor
+    # fetches fourteen columns per row.
+    features: Mapped[bytes] = mapped_column(LargeBinary)
     positive_visibility: Mapped[int] = mapped_column(SmallInteger)
     negative_visibility: Mapped[int] = mapped_column(SmallInteger)
     positive_reachability: Mapped[int] = mapped_column(SmallInteger)
@@ -158,6 +172,10 @@ class Trial(Base):
     solved: Mapped[bool] = mapped_column(Boolean)
     sim_steps: Mapped[int] = mapped_column(Integer)
     wall_seconds: Mapped[float] = mapped_column(Float)
+    # Answered from the physics cache: wall_seconds is then this run's lookup, and
+    # simulation_wall_seconds the wall time of the simulation that computed it.
+    cache_hit: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
+    simulation_wall_seconds: Mapped[float | None] = mapped_column(Float)
     seed: Mapped[int] = mapped_column(BigInteger)
     snapshot_id: Mapped[int | None] = mapped_column(ForeignKey("snapshots.id"))
     created_at: Mapped[datetime] = mapped_column(DateTime)
@@ -203,6 +221,33 @@ class Operator(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
+class OperatorExecution(Base):
+    """One execution of an operator of K or K' as a plan step, whether it worked, and its
+    context: the facts over the step's arguments before it ran, lifted to the operator's
+    variables (a JSON list of atoms, each a list of strings).
+
+    The counts of these rows set an operator's plan cost on a branch (operators costed
+    by experience); like operators they carry the watermark of the branch when written,
+    so a branch forked earlier does not see later executions.
+    """
+
+    __tablename__ = "operator_executions"
+    __table_args__ = (
+        Index("ix_operator_executions_branch_id_id", "branch_id", "id"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    branch_id: Mapped[int] = mapped_column(ForeignKey("branches.id"))
+    operator: Mapped[str] = mapped_column(String(200))
+    success: Mapped[bool] = mapped_column(Boolean)
+    context: Mapped[list[Any]]
+    episode_id: Mapped[int | None] = mapped_column(ForeignKey("episodes.id"))
+    trial_id: Mapped[int | None] = mapped_column(ForeignKey("trials.id"))
+    watermark: Mapped[int] = mapped_column(BigInteger)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
 class WorldModel(Base):
     """A fitted world model as bytes in a format that cannot run code when loaded."""
 
@@ -222,3 +267,24 @@ class WorldModel(Base):
     meta: Mapped[dict[str, Any]]
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
+
+
+class PhysicsCacheEntry(Base):
+    """A simulated trial's result and end state, keyed by everything its physics depends on.
+
+    See :mod:`llcps.store.physics_cache`. Not experience: pruning it changes no
+    branch, only how much physics later runs must compute again.
+    """
+
+    __tablename__ = "physics_cache"
+    __table_args__ = (Index("ix_physics_cache_last_used", "last_used"),)
+
+    key: Mapped[str] = mapped_column(String(64), primary_key=True)
+    result: Mapped[bytes] = mapped_column(LargeBinary)
+    end_state: Mapped[bytes] = mapped_column(LargeBinary)
+    # sha256 of result, a NUL and end_state: checked before either is decoded.
+    sha256: Mapped[str] = mapped_column(String(64))
+    size: Mapped[int] = mapped_column(Integer)
+    hits: Mapped[int] = mapped_column(Integer, default=0)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    last_used: Mapped[datetime] = mapped_column(DateTime)

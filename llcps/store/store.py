@@ -16,7 +16,7 @@ import re
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from sqlalchemy import (
     URL,
@@ -34,8 +34,9 @@ from sqlalchemy import (
 )
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 
-import llcps
 from llcps.domain import TrialChange, TrialRecord
+from llcps.provenance import Provenance
+from llcps.provenance import current as provenance_of_process
 from llcps.errors import LlcpsError, StoreError, UnknownNameError
 from llcps.store import engine as engines
 from llcps.store import migrations
@@ -43,6 +44,7 @@ from llcps.store.records import (
     BranchChange,
     BranchInfo,
     EpisodeRecord,
+    ExecutionCounts,
     ModelArtifact,
     OperatorRecord,
     RunRecord,
@@ -54,6 +56,7 @@ from llcps.store.schema import (
     Branch,
     Episode,
     Operator,
+    OperatorExecution,
     Run,
     Setting,
     Snapshot,
@@ -119,6 +122,57 @@ def _db_error(exc: SQLAlchemyError) -> StoreError:
     return StoreError(f"database error: {detail}", hint=hint)
 
 
+def run_provenance_values(provenance: Provenance) -> dict[str, Any]:
+    """The ``runs`` columns that hold a run's provenance."""
+    values = provenance.as_json()
+    values["llcps_version"] = values["llcps_version"] or "unknown"  # the column predates provenance and is NOT NULL
+    return values
+
+
+def run_record(row: Any) -> RunRecord:
+    """A ``runs`` row as a :class:`RunRecord` (the one place runs are read)."""
+    return RunRecord(
+        id=row.id,
+        command=row.command,
+        seed=row.seed,
+        config=row.config,
+        branch=row.branch,
+        status=row.status,
+        started_at=iso_timestamp(row.started_at) or "",
+        finished_at=iso_timestamp(row.finished_at),
+        provenance=Provenance(
+            llcps_version=row.llcps_version,
+            git_commit=row.git_commit,
+            git_dirty=None if row.git_dirty is None else bool(row.git_dirty),
+            python_version=row.python_version,
+            pybullet_version=row.pybullet_version,
+            torch_version=row.torch_version,
+            sklearn_version=row.sklearn_version,
+            numpy_version=row.numpy_version,
+            host=row.host,
+            cpu_count=row.cpu_count,
+        ),
+    )
+
+
+def _episode_record(row: Any) -> EpisodeRecord:
+    """An ``episodes`` row joined with its branch name, as an :class:`EpisodeRecord`."""
+    return EpisodeRecord(
+        id=row.id,
+        run_id=row.run_id,
+        branch=row.branch_name,
+        scenario=row.scenario,
+        condition=row.condition,
+        model=row.model,
+        measure=row.measure,
+        seed=row.seed,
+        status=row.status,
+        summary=row.summary if isinstance(row.summary, Mapping) else {},
+        started_at=iso_timestamp(row.started_at) or "",
+        finished_at=iso_timestamp(row.finished_at),
+    )
+
+
 @dataclass(frozen=True)
 class _Link:
     """One branch of a visibility chain and the largest id visible from it (None: all)."""
@@ -135,6 +189,23 @@ def _visible(chain: Sequence[_Link], branch_col: Any, id_col: Any) -> ColumnElem
             for link in chain
         )
     )
+
+
+def _context_atoms(row_id: int, context: Any) -> tuple[tuple[str, ...], ...]:
+    """A stored execution context, checked: a list of atoms, each a list of 2 to 4 strings."""
+    if isinstance(context, str):
+        try:
+            context = json.loads(context)
+        except ValueError:
+            context = None
+    if not isinstance(context, list) or not all(
+        isinstance(atom, list) and 2 <= len(atom) <= 4 and all(isinstance(t, str) for t in atom) for atom in context
+    ):
+        raise StoreError(
+            f"operator execution {row_id} has a malformed context",
+            hint="the row was not written by llcps; delete it or restore the store from a backup",
+        )
+    return tuple(sorted(tuple(atom) for atom in context))
 
 
 class Store:
@@ -257,8 +328,11 @@ class Store:
         """The newest schema revision this llcps knows."""
         return migrations.head_revision()
 
-    def upgrade(self) -> tuple[str | None, str]:
-        """Migrate the schema to the newest revision.
+    def upgrade(self, *, progress: Callable[[str, int, int], None] | None = None) -> tuple[str | None, str]:
+        """Migrate the schema to the newest revision, one revision at a time, in one transaction.
+
+        Args:
+            progress: called as ``progress(revision, done, total)`` before each revision.
 
         Returns:
             (revision before, revision after).
@@ -267,6 +341,8 @@ class Store:
         head = migrations.head_revision()
         if before == head:
             return before, head
+        known = migrations.known_revisions()
+        pending = known[known.index(before) + 1 :] if before in known else [head]
         file_backed = engines.sqlite_path(self._url) is not None
         # SQLite needs foreign keys off while batch operations rebuild tables.
         engine = engines.make_engine(self._url, foreign_keys=False, pooled=False) if file_backed else self._engine
@@ -274,7 +350,10 @@ class Store:
             with engine.connect() as conn:
                 conn.execution_options(**{engines.WRITE_OPTION: True})
                 with conn.begin():
-                    migrations.upgrade(conn)
+                    for done, revision in enumerate(pending):
+                        if progress is not None:
+                            progress(revision, done, len(pending))
+                        migrations.upgrade(conn, revision)
         except SQLAlchemyError as exc:
             raise _db_error(exc) from exc
         finally:
@@ -458,10 +537,12 @@ class Store:
             keep = self._max_visible(conn, chain, Trial.source == PRETRAIN)
             trial_clause = and_(Trial.branch_id == bid, Trial.id > keep)
             op_clause = and_(Operator.branch_id == bid, Operator.watermark > keep)
+            execution_clause = and_(OperatorExecution.branch_id == bid, OperatorExecution.watermark > keep)
             model_clause = and_(WorldModel.branch_id == bid, WorldModel.watermark > keep)
         else:  # everything the branch owns, whatever its watermark
             trial_clause = Trial.branch_id == bid
             op_clause = Operator.branch_id == bid
+            execution_clause = OperatorExecution.branch_id == bid
             model_clause = WorldModel.branch_id == bid
         if to != PRETRAIN:
             episode_clause = Episode.branch_id == bid
@@ -480,6 +561,7 @@ class Store:
                 for v in (
                     conn.scalar(select(func.min(Trial.id)).where(trial_clause)),
                     conn.scalar(select(func.min(Operator.watermark)).where(op_clause)),
+                    conn.scalar(select(func.min(OperatorExecution.watermark)).where(execution_clause)),
                     conn.scalar(select(func.min(WorldModel.watermark)).where(model_clause)),
                 )
                 if v is not None
@@ -503,14 +585,24 @@ class Store:
             episodes=conn.scalar(select(func.count()).select_from(Episode).where(episode_clause)) or 0,
             kept_until=keep if action == "reset" else None,
         )
-        clauses = {"trial": trial_clause, "operator": op_clause, "model": model_clause, "episode": episode_clause, "branch_id": bid}
+        clauses = {"trial": trial_clause, "operator": op_clause, "execution": execution_clause, "model": model_clause, "episode": episode_clause, "branch_id": bid}
         return change, clauses
 
     def _apply_removal(self, conn: Connection, clauses: Mapping[str, Any]) -> None:
         episode_ids = select(Episode.id).where(clauses["episode"])
         conn.execute(delete(Operator).where(or_(clauses["operator"], Operator.episode_id.in_(episode_ids))))
+        trial_ids = select(Trial.id).where(clauses["trial"])
+        conn.execute(
+            delete(OperatorExecution).where(
+                or_(
+                    clauses["execution"],
+                    OperatorExecution.episode_id.in_(episode_ids),
+                    OperatorExecution.trial_id.in_(trial_ids),
+                )
+            )
+        )
         conn.execute(delete(WorldModel).where(clauses["model"]))
-        conn.execute(delete(TrialChangeRow).where(TrialChangeRow.trial_id.in_(select(Trial.id).where(clauses["trial"]))))
+        conn.execute(delete(TrialChangeRow).where(TrialChangeRow.trial_id.in_(trial_ids)))
         conn.execute(delete(Trial).where(clauses["trial"]))
         conn.execute(delete(Episode).where(clauses["episode"]))
 
@@ -555,8 +647,21 @@ class Store:
 
     # ------------------------------------------------------------- provenance
 
-    def start_run(self, *, command: str, seed: int | None, config: Mapping[str, Any], branch: str) -> int:
-        """Record the start of a CLI invocation or experiment sequence."""
+    def start_run(
+        self,
+        *,
+        command: str,
+        seed: int | None,
+        config: Mapping[str, Any],
+        branch: str,
+        provenance: Provenance | None = None,
+    ) -> int:
+        """Record the start of a CLI invocation or experiment sequence.
+
+        Args:
+            provenance: where the run runs (default: this process, :func:`llcps.provenance.current`).
+        """
+        env = provenance_of_process() if provenance is None else provenance
         with self._write() as conn:
             self._chain(conn, branch)
             return conn.execute(
@@ -565,9 +670,9 @@ class Store:
                     seed=seed,
                     config=dict(config),
                     branch=branch,
-                    llcps_version=llcps.__version__,
                     status="running",
                     started_at=_now(),
+                    **run_provenance_values(env),
                 )
             ).inserted_primary_key[0]
 
@@ -613,26 +718,44 @@ class Store:
             if conn.execute(stmt).rowcount == 0:
                 raise LlcpsError(f"unknown episode {episode_id}", hint="see `llcps inspect runs`")
 
-    def list_runs(self, *, branch: str | None = None, limit: int | None = None) -> list[RunRecord]:
-        """Runs, newest first."""
+    def list_runs(
+        self, *, branch: str | None = None, limit: int | None = None, ids: Sequence[int] | None = None
+    ) -> list[RunRecord]:
+        """Runs, newest first (``ids``: only these runs)."""
         stmt = select(Run).order_by(Run.id.desc()).limit(limit)
         if branch is not None:
             stmt = stmt.where(Run.branch == branch)
+        if ids is not None:
+            stmt = stmt.where(Run.id.in_(list(ids)))
         with self._read() as conn:
-            return [
-                RunRecord(
-                    id=r.id,
-                    command=r.command,
-                    seed=r.seed,
-                    config=r.config,
-                    branch=r.branch,
-                    llcps_version=r.llcps_version,
-                    status=r.status,
-                    started_at=iso_timestamp(r.started_at) or "",
-                    finished_at=iso_timestamp(r.finished_at),
-                )
-                for r in conn.execute(stmt)
-            ]
+            return [run_record(r) for r in conn.execute(stmt)]
+
+    def run_activity(self, run_ids: Sequence[int]) -> dict[int, dict[str, int]]:
+        """Per run: its episodes and its trials by source (``{"episodes": 3, "pretrain": 0, ...}``)."""
+        ids = list(run_ids)
+        out: dict[int, dict[str, int]] = {i: {"episodes": 0, "trials": 0} for i in ids}
+        if not ids:
+            return out
+        with self._read() as conn:
+            episodes = conn.execute(
+                select(Episode.run_id, func.count()).where(Episode.run_id.in_(ids)).group_by(Episode.run_id)
+            ).all()
+            trials = conn.execute(
+                select(Trial.run_id, Trial.source, func.count()).where(Trial.run_id.in_(ids)).group_by(Trial.run_id, Trial.source)
+            ).all()
+        for run_id, count in episodes:
+            out[run_id]["episodes"] = int(count)
+        for run_id, source, count in trials:
+            out[run_id][str(source)] = int(count)
+            out[run_id]["trials"] += int(count)
+        return out
+
+    def get_run(self, run_id: int) -> RunRecord:
+        """One run by id."""
+        found = self.list_runs(ids=[run_id])
+        if not found:
+            raise LlcpsError(f"unknown run {run_id}", hint="see `llcps inspect runs` for run ids")
+        return found[0]
 
     def list_episodes(
         self,
@@ -656,23 +779,20 @@ class Store:
         if scenario is not None:
             stmt = stmt.where(Episode.scenario == scenario)
         with self._read() as conn:
-            return [
-                EpisodeRecord(
-                    id=r.id,
-                    run_id=r.run_id,
-                    branch=r.branch_name,
-                    scenario=r.scenario,
-                    condition=r.condition,
-                    model=r.model,
-                    measure=r.measure,
-                    seed=r.seed,
-                    status=r.status,
-                    summary=r.summary,
-                    started_at=iso_timestamp(r.started_at) or "",
-                    finished_at=iso_timestamp(r.finished_at),
-                )
-                for r in conn.execute(stmt)
-            ]
+            return [_episode_record(r) for r in conn.execute(stmt)]
+
+    def get_episode(self, episode_id: int) -> EpisodeRecord:
+        """One episode by id, on whatever branch it ran."""
+        stmt = (
+            select(Episode, Branch.name.label("branch_name"))
+            .join(Branch, Branch.id == Episode.branch_id)
+            .where(Episode.id == episode_id)
+        )
+        with self._read() as conn:
+            row = conn.execute(stmt).first()
+        if row is None:
+            raise LlcpsError(f"unknown episode {episode_id}", hint="see `llcps inspect episodes` for episode ids")
+        return _episode_record(row)
 
     # -------------------------------------------------------------- snapshots
 
@@ -774,9 +894,16 @@ class Store:
         return TrialDecoder(names).decode([row])[0]
 
     def _trial_filters(
-        self, source: str | None, scenario: str | None, solved: bool | None, after_id: int | None
+        self,
+        source: str | None,
+        scenario: str | None,
+        solved: bool | None,
+        after_id: int | None,
+        episode: int | None = None,
     ) -> list[ColumnElement[bool]]:
         filters: list[ColumnElement[bool]] = []
+        if episode is not None:
+            filters.append(Trial.episode_id == episode)
         if source is not None:
             filters.append(Trial.source == source)
         if scenario is not None:
@@ -794,6 +921,7 @@ class Store:
         source: str | None = None,
         scenario: str | None = None,
         solved: bool | None = None,
+        episode: int | None = None,
         limit: int | None = None,
         after_id: int | None = None,
         newest_first: bool = False,
@@ -801,6 +929,7 @@ class Store:
         """The trials ``branch`` sees (None: the current branch), in id order.
 
         Args:
+            source, scenario, solved, episode: keep only trials with these values.
             after_id: only trials with a larger id (incremental loading).
             limit: at most this many, taken from the start of the order.
             newest_first: descending id order.
@@ -809,7 +938,7 @@ class Store:
             chain = self._chain(conn, self._name(conn, branch))
             stmt = (
                 select(*TRIAL_COLUMNS)
-                .where(_visible(chain, Trial.branch_id, Trial.id), *self._trial_filters(source, scenario, solved, after_id))
+                .where(_visible(chain, Trial.branch_id, Trial.id), *self._trial_filters(source, scenario, solved, after_id, episode))
                 .order_by(Trial.id.desc() if newest_first else Trial.id)
                 .limit(limit)
             )
@@ -960,6 +1089,57 @@ class Store:
                 )
                 for r in conn.execute(stmt)
             ]
+
+    def add_operator_execution(
+        self,
+        *,
+        branch: str,
+        operator: str,
+        success: bool,
+        context: Sequence[Sequence[str]] = (),
+        episode_id: int | None = None,
+        trial_id: int | None = None,
+    ) -> int:
+        """Record that ``operator`` ran as a plan step on ``branch``, whether its effects
+        held, and its context (the lifted facts over its arguments before it ran).
+
+        Stamped with the branch's watermark, so that it is seen by the branch and by
+        branches forked from it later, like the trial it followed.
+        """
+        atoms = sorted([str(term) for term in atom] for atom in context)
+        with self._write() as conn:
+            chain = self._chain(conn, branch)
+            return conn.execute(
+                insert(OperatorExecution).values(
+                    branch_id=chain[0].branch_id,
+                    operator=operator,
+                    success=bool(success),
+                    context=atoms,
+                    episode_id=episode_id,
+                    trial_id=trial_id,
+                    watermark=self._max_visible(conn, chain),
+                    created_at=_now(),
+                )
+            ).inserted_primary_key[0]
+
+    def operator_experience(self, branch: str | None) -> list[ExecutionCounts]:
+        """Successes and failures of every operator per context, over what ``branch`` sees.
+
+        Raises:
+            StoreError: a stored context is not a list of atoms (lists of strings).
+        """
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            stmt = (
+                select(OperatorExecution.id, OperatorExecution.operator, OperatorExecution.context, OperatorExecution.success)
+                .where(_visible(chain, OperatorExecution.branch_id, OperatorExecution.watermark))
+                .order_by(OperatorExecution.id)
+            )
+            counts: dict[tuple[str, tuple[tuple[str, ...], ...]], list[int]] = {}
+            for row_id, name, context, success in conn.execute(stmt):
+                key = (str(name), _context_atoms(row_id, context))
+                counts.setdefault(key, [0, 0])[0 if success else 1] += 1
+        return [ExecutionCounts(name, context, s, f) for (name, context), (s, f) in sorted(counts.items())]
 
     # ----------------------------------------------------------- world models
 

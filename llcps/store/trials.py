@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import gc
 import json
+import struct
 from contextlib import contextmanager
 from dataclasses import fields
 from datetime import datetime
 from typing import Any, Iterable, Iterator, Mapping, Sequence
 
-from sqlalchemy import String, Text, type_coerce
+from sqlalchemy import Integer, String, Text, cast, type_coerce
 
 from llcps.domain import (
     ACTIONS,
@@ -29,6 +30,70 @@ from llcps.domain import (
 )
 from llcps.errors import LlcpsError
 from llcps.store.schema import Trial
+
+
+#: Packed features: a layout byte, the entity count, per entity five little-endian doubles
+#: (volume, vector_magnitude, unit_x, unit_y, unit_z), then the shapes and colours as UTF-8
+#: text, each entity's "shape<US>colour", joined by US (0x1f).
+FEATURES_LAYOUT = 1
+_NUMBERS = ("volume", "vector_magnitude", "unit_x", "unit_y", "unit_z")
+_SEPARATOR = "\x1f"
+#: Most arguments a trial has.
+MAX_ARGUMENTS = 2
+_DOUBLES = [struct.Struct(f"<{5 * n}d") for n in range(MAX_ARGUMENTS + 1)]
+
+
+def pack_features(features: Sequence[EntityFeatures]) -> bytes:
+    """The stored form of a trial's Table-1 features (see :data:`FEATURES_LAYOUT`)."""
+    if len(features) > MAX_ARGUMENTS:
+        raise LlcpsError(f"a trial has at most {MAX_ARGUMENTS} arguments, not {len(features)}")
+    names = []
+    for f in features:
+        if _SEPARATOR in f.shape or _SEPARATOR in f.color:
+            raise LlcpsError(f"an entity's shape or colour cannot hold control characters: {f.shape!r}, {f.color!r}")
+        names += [f.shape, f.color]
+    numbers = [float(getattr(f, name)) for f in features for name in _NUMBERS]
+    return bytes((FEATURES_LAYOUT, len(features))) + _DOUBLES[len(features)].pack(*numbers) + _SEPARATOR.join(names).encode()
+
+
+_names: dict[bytes, list[str]] = {}  # the text part of packed features, decoded once per process
+
+
+def _decode_names(data: bytes) -> list[str] | None:
+    try:
+        names = data.decode().split(_SEPARATOR) if data else []
+    except UnicodeDecodeError:
+        return None
+    if len(_names) < 10_000:
+        _names[data] = names
+    return names
+
+
+def unpack_features(data: bytes) -> tuple[EntityFeatures, ...]:
+    """Read :func:`pack_features`'s bytes back, checking their layout (they come from a database)."""
+    try:
+        n = data[1] if data[0] == FEATURES_LAYOUT else -1
+        doubles = _DOUBLES[n]
+        numbers = doubles.unpack_from(data, 2)
+    except (IndexError, TypeError, struct.error):
+        n, numbers = -1, ()
+    tail = data[2 + 40 * n :] if n >= 0 else b""
+    names = _names.get(tail) or _decode_names(tail)
+    if n < 0 or names is None or len(names) != 2 * n or not all(names):
+        raise LlcpsError("stored trial features are malformed", hint="the store may be damaged; `llcps db status`")
+    new, set_dict = object.__new__, object.__setattr__
+    if n == 1:  # the common case, unrolled; see _frozen: complete, valid values only
+        entity = new(EntityFeatures)
+        v, m, x, y, z = numbers
+        set_dict(entity, "__dict__", {"shape": names[0], "volume": v, "color": names[1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
+        return (entity,)
+    out = []
+    for i in range(n):
+        entity = new(EntityFeatures)
+        v, m, x, y, z = numbers[5 * i : 5 * i + 5]
+        set_dict(entity, "__dict__", {"shape": names[2 * i], "volume": v, "color": names[2 * i + 1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
+        out.append(entity)
+    return tuple(out)
 
 
 def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> dict[str, Any]:
@@ -53,10 +118,12 @@ def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> di
         "rate": float(params.rate),
         "movement_magnitude": float(params.movement_magnitude),
         "orientation": params.orientation,
-        "features": [f.as_dict() for f in trial.features],
+        "features": pack_features(trial.features),
         "solved": bool(trial.solved),
         "sim_steps": int(trial.sim_steps),
         "wall_seconds": float(trial.wall_seconds),
+        "cache_hit": bool(trial.cache_hit),
+        "simulation_wall_seconds": None if trial.simulation_wall_seconds is None else float(trial.simulation_wall_seconds),
         "seed": int(trial.seed),
         "snapshot_id": trial.snapshot_id,
         "created_at": created_at,
@@ -64,6 +131,19 @@ def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> di
     }
     row.update(trial.outcome.as_dict())
     return row
+
+
+def _flags() -> Any:
+    """The six outcome bits, ``solved`` and ``cache_hit`` as one integer, computed by the database.
+
+    Bit i (0..5) is Omega's i-th bit, bit 6 ``solved``, bit 7 ``cache_hit``: one value
+    per row instead of eight, which is most of what fetching a row costs.
+    """
+    parts = [getattr(Trial, name) for name in OUTCOME_NAMES] + [Trial.solved, Trial.cache_hit]
+    flags = cast(parts[0], Integer)
+    for bit, column in enumerate(parts[1:], start=1):
+        flags = flags.op("|")(cast(column, Integer).op("<<")(bit))
+    return flags
 
 
 #: Columns read for a TrialRecord, in the order :class:`TrialDecoder` unpacks them.
@@ -79,15 +159,15 @@ TRIAL_COLUMNS = (
     Trial.rate,
     Trial.movement_magnitude,
     Trial.orientation,
-    type_coerce(Trial.features, Text),
-    *(getattr(Trial, name) for name in OUTCOME_NAMES),
-    Trial.solved,
+    Trial.features,
+    _flags(),
     Trial.sim_steps,
     Trial.wall_seconds,
     Trial.seed,
     Trial.snapshot_id,
     type_coerce(Trial.created_at, String),
     type_coerce(Trial.extra, Text),
+    Trial.simulation_wall_seconds,
 )
 
 
@@ -127,7 +207,6 @@ def gc_paused() -> Iterator[None]:
 
 
 _TRIAL_RECORD_FIELDS = frozenset(f.name for f in fields(TrialRecord))
-_ENTITY_FEATURE_FIELDS = frozenset(f.name for f in fields(EntityFeatures))
 
 
 def _frozen(cls: type[Any], values: dict[str, Any]) -> Any:
@@ -151,8 +230,8 @@ class TrialDecoder:
     def __init__(self, branch_names: Mapping[int, str]) -> None:
         self._names = branch_names
         self._specs: dict[tuple[Any, ...], TrialSpec] = {}
-        self._features: dict[Any, tuple[EntityFeatures, ...]] = {}
-        self._outcomes: dict[tuple[int, ...], Outcome] = {}
+        self._features: dict[bytes, tuple[EntityFeatures, ...]] = {}
+        self._outcomes: dict[int, Outcome] = {}  # by the flags' low six bits
 
     def _spec(self, action: str, arguments: Any, rate: float, magnitude: float, orientation: str) -> TrialSpec:
         key = (action, _key(arguments), rate, magnitude, orientation)
@@ -164,23 +243,18 @@ class TrialDecoder:
             self._specs[key] = spec
         return spec
 
-    def _feature_tuple(self, features: Any) -> tuple[EntityFeatures, ...]:
-        key = _key(features)
-        found = self._features.get(key)
+    def _feature_tuple(self, data: bytes) -> tuple[EntityFeatures, ...]:
+        found = self._features.get(data)
         if found is None:
-            decoded = _json(features)
-            for entity in decoded:
-                if entity.keys() != _ENTITY_FEATURE_FIELDS:
-                    raise LlcpsError(f"stored features have fields {sorted(entity)}", hint="upgrade llcps")
-            found = tuple(_frozen(EntityFeatures, entity) for entity in decoded)
-            self._features[key] = found
+            found = unpack_features(data)
+            self._features[bytes(data)] = found
         return found
 
-    def _outcome(self, bits: tuple[int, ...]) -> Outcome:
-        found = self._outcomes.get(bits)
+    def _outcome(self, flags: int) -> Outcome:
+        found = self._outcomes.get(flags)
         if found is None:
-            found = Outcome.from_bits(bits)
-            self._outcomes[bits] = found
+            found = Outcome.from_bits([(flags >> bit) & 1 for bit in range(len(OUTCOME_NAMES))])
+            self._outcomes[flags] = found
         return found
 
     def decode(self, rows: Iterable[Sequence[Any]]) -> list[TrialRecord]:
@@ -189,24 +263,26 @@ class TrialDecoder:
         specs, spec_of = self._specs, self._spec
         features_cache, features_of = self._features, self._feature_tuple
         outcomes, outcome_of = self._outcomes, self._outcome
-        new, record_cls = object.__new__, TrialRecord
+        new, record_cls, set_dict = object.__new__, TrialRecord, object.__setattr__
         out: list[TrialRecord] = []
         append = out.append
         for (
             id_, branch_id, run_id, episode_id, source, scenario, action, arguments, rate, magnitude,
-            orientation, features, b0, b1, b2, b3, b4, b5, solved, sim_steps, wall_seconds, seed,
-            snapshot_id, created_at, extra,
+            orientation, features, flags, sim_steps, wall_seconds, seed, snapshot_id, created_at, extra,
+            simulation_wall_seconds,
         ) in rows:
             spec = specs.get((action, arguments, rate, magnitude, orientation)) if isinstance(arguments, str) else None
             if spec is None:
                 spec = spec_of(action, arguments, rate, magnitude, orientation)
-            entity_features = features_cache.get(features) if isinstance(features, str) else None
+            entity_features = features_cache.get(features)
             if entity_features is None:
                 entity_features = features_of(features)
-            bits = (b0, b1, b2, b3, b4, b5)
+            bits = flags & 63
             outcome = outcomes.get(bits) or outcome_of(bits)
             record = new(record_cls)  # see _frozen: complete, valid values only
-            record.__dict__.update(
+            set_dict(
+                record,
+                "__dict__",
                 {
                     "id": id_,
                     "branch": names[branch_id],
@@ -214,7 +290,7 @@ class TrialDecoder:
                     "spec": spec,
                     "features": entity_features,
                     "outcome": outcome,
-                    "solved": bool(solved),
+                    "solved": flags & 64 != 0,
                     "sim_steps": sim_steps,
                     "wall_seconds": wall_seconds,
                     "seed": seed,
@@ -224,7 +300,9 @@ class TrialDecoder:
                     "scenario": scenario,
                     "created_at": created_at if created_at is None or isinstance(created_at, str) else iso_timestamp(created_at),
                     "extra": {} if extra in ("{}", None) else _json(extra),
-                }
+                    "cache_hit": flags & 128 != 0,
+                    "simulation_wall_seconds": simulation_wall_seconds,
+                },
             )
             append(record)
         return out
@@ -233,7 +311,9 @@ class TrialDecoder:
 # The fast constructor must fill every field of the records it builds.
 _DECODED_FIELDS = frozenset(
     {"id", "branch", "source", "spec", "features", "outcome", "solved", "sim_steps", "wall_seconds", "seed",
-     "run_id", "episode_id", "snapshot_id", "scenario", "created_at", "extra"}
+     "run_id", "episode_id", "snapshot_id", "scenario", "created_at", "extra", "cache_hit", "simulation_wall_seconds"}
 )
 if _DECODED_FIELDS != _TRIAL_RECORD_FIELDS:  # pragma: no cover - guards a change in llcps.domain
     raise ImportError(f"llcps.store.trials decodes {sorted(_DECODED_FIELDS)} but TrialRecord has {sorted(_TRIAL_RECORD_FIELDS)}")
+if frozenset(f.name for f in fields(EntityFeatures)) != {"shape", "color", *_NUMBERS}:  # pragma: no cover
+    raise ImportError("llcps.store.trials packs fields that EntityFeatures does not have")

@@ -6,6 +6,13 @@ actions. Exploration expands it into K' with learned operators
 needs (:meth:`KnowledgeBase.with_refinement`). A knowledge base is a value: every change
 returns a new one, so the K of a branch and its K' can be held side by side.
 
+Operators are costed by experience (:meth:`KnowledgeBase.with_experience`): each step's
+plan cost is its operator's nominal cost divided by the Laplace-smoothed rate at which
+its executions achieved their effects, in the context the step would run in where it
+ran there before (:mod:`llcps.symbolic.experience`). An operator that fails is demoted,
+never deleted, and one that keeps working is preferred; so what the robot learns cannot
+shadow what worked before without paying for its failures.
+
 All PDDL is read and written with the `pddl` library (AI-Planning).
 """
 
@@ -28,12 +35,14 @@ from pddl.requirements import Requirements
 
 from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, State, fluent
 from llcps.errors import LlcpsError, UnknownNameError
+from llcps.symbolic.experience import Context, Experience, step_context
 from llcps.symbolic.operators import LearnedOperator, parse_operator_name
 from llcps.symbolic.pddl_text import parse_domain_text
 from llcps.symbolic.schema import (
     PDDL_NAME,
     TOTAL_COST,
     Controller,
+    GroundAction,
     Operator,
     operator_parts_from_pddl,
     operator_to_pddl,
@@ -77,8 +86,11 @@ class KnowledgeBase:
         type_parents: ``(type, parent)`` pairs; ``parent`` None means ``object``.
         constant_types: ``(constant, type)`` pairs (``table``).
         predicate_signatures: ``(predicate, ((variable, type), ...))`` pairs.
-        actions: the domain's actions, as refined so far.
+        actions: the domain's actions, as refined so far, at their nominal costs.
         learned: operators learned from exploration, in the order they were learned.
+        experience: executions as plan steps, per operator and context; a step's plan
+            cost is :meth:`Experience.cost` of its operator's nominal cost. A learned
+            operator's nominal cost is that of the action it was learned to replace.
     """
 
     name: str
@@ -87,10 +99,15 @@ class KnowledgeBase:
     predicate_signatures: tuple[tuple[str, tuple[tuple[str, str], ...]], ...]
     actions: tuple[Operator, ...]
     learned: tuple[LearnedOperator, ...] = ()
+    experience: Experience = Experience()
     _types: dict[str, str | None] = field(init=False, repr=False, compare=False)
+    _variables: dict[str, tuple[str, ...]] = field(init=False, repr=False, compare=False)
+    _nominal: dict[str, float] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_types", dict(self.type_parents))
+        object.__setattr__(self, "_variables", {op.name.lower(): op.variables for op in (*self.actions, *self.learned)})
+        object.__setattr__(self, "_nominal", {})
         names = [op.name.lower() for op in self.operators()]
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
@@ -144,12 +161,18 @@ class KnowledgeBase:
         """K' = K plus a learned operator.
 
         Adding an operator that teaches nothing new (same settings, parameters,
-        preconditions and effects as one already known) returns K unchanged; a
-        different operator with a taken name is renamed ``<name>_2``, ``_3``, ...
+        preconditions and effects as one already known) returns K unchanged; the same
+        skill seen to work in another context generalizes the known operator to what both
+        contexts share (:meth:`LearnedOperator.generalized`); a different operator with a
+        taken name is renamed ``<name>_2``, ``_3``, ...
         """
-        for known in self.learned:
+        for index, known in enumerate(self.learned):
             if op.same_knowledge(known):
                 return self
+            if op.same_skill(known):
+                learned = list(self.learned)
+                learned[index] = known.generalized(op)
+                return replace(self, learned=tuple(learned))
         taken = {o.name.lower() for o in self.operators()}
         if op.name.lower() in taken:
             parsed = parse_operator_name(op.name)
@@ -178,24 +201,12 @@ class KnowledgeBase:
         )
         return replace(self, learned=learned)
 
-    def refinement_of(self, action: str) -> dict[str, object] | None:
-        """What K' learned about a domain action beyond the naive K, as JSON for the store.
-
-        Returns:
-            ``{"action": name, "preconditions": [[predicate, term, ...], ...]}`` or None
-            when the action needs nothing beyond its preconditions in the default K.
-        """
-        op = self.operator(action)
-        naive = {a.name: a for a in KnowledgeBase.default().actions}.get(op.name)
-        if naive is None:
-            return None
-        extra = op.preconditions - naive.preconditions
-        if not extra:
-            return None
-        return {"action": op.name, "preconditions": [list(a) for a in sort_fluents(extra)]}
-
     def apply_learned(self, definition: Mapping[str, object]) -> KnowledgeBase:
-        """Replay one stored expansion: ``{"operator": LearnedOperator.to_json(), "refinement": refinement_of(...) or None}``.
+        """Replay one stored expansion: ``{"operator": LearnedOperator.to_json(), "refinement": ...}``.
+
+        A refinement (extra preconditions of a domain action, ``{"action": name,
+        "preconditions": [[predicate, term, ...], ...]}``) is written by no current llcps;
+        stores from versions that learned them keep them.
 
         Raises:
             LlcpsError: the record is malformed.
@@ -207,7 +218,7 @@ class KnowledgeBase:
                 action = str(refinement["action"])  # type: ignore[index]
                 extra = [tuple(map(str, a)) for a in refinement["preconditions"]]  # type: ignore[index]
             except (KeyError, TypeError) as exc:
-                raise LlcpsError(f"malformed refinement record: {exc}", hint="the record must come from KnowledgeBase.refinement_of()") from exc
+                raise LlcpsError(f"malformed refinement record: {exc}", hint="a refinement is {\"action\": name, \"preconditions\": [[predicate, term, ...], ...]}") from exc
             kb = kb.with_refinement(action, extra)
         return kb
 
@@ -223,9 +234,74 @@ class KnowledgeBase:
         """Predicate -> arity."""
         return {name: len(params) for name, params in self.predicate_signatures}
 
+    def skill(self, op: LearnedOperator) -> LearnedOperator:
+        """The learned operator of this K' that holds ``op``'s skill (``op`` itself, renamed
+        or generalized by :meth:`with_operator`).
+
+        Raises:
+            UnknownNameError: no learned operator has that skill.
+        """
+        for known in self.learned:
+            if known.same_skill(op):
+                return known
+        raise UnknownNameError("learned operator", op.name, [o.name for o in self.learned])
+
+    def with_experience(self, experience: Experience) -> KnowledgeBase:
+        """K with plan costs set by ``experience`` (it replaces any experience K had)."""
+        return replace(self, experience=experience)
+
+    def counts(self, name: str) -> tuple[int, int]:
+        """(successes, failures) of the operator called ``name`` over every context."""
+        return self.experience.counts(name)
+
+    def nominal_cost(self, name: str) -> float:
+        """The cost of an operator before experience: K's own for a domain action; for a
+        learned operator, that of the action it was learned to replace (else that of K's
+        action with the same controller)."""
+        key = name.lower()
+        if key not in self._nominal:
+            self._nominal[key] = self._nominal_cost(key)
+        return self._nominal[key]
+
+    def _nominal_cost(self, key: str) -> float:
+        domain = {op.name.lower(): op.cost for op in self.actions}
+        seen: set[str] = set()
+        while key not in domain and key not in seen:  # follow what each learned operator replaced
+            seen.add(key)
+            learned = self.learned_operator(key)
+            targets = [t.lower() for t in (learned.replaces, learned.action) if t is not None]
+            key = next((t for t in targets if t in self._variables and t not in seen), key)
+        return domain.get(key, 1.0)
+
+    def cost(self, name: str) -> float:
+        """The plan cost of an operator by its experience in every context."""
+        return self.experience.cost(name, self.nominal_cost(name))
+
+    def context(self, step: GroundAction, state: State) -> Context:
+        """What holds of ``step``'s arguments in ``state``, lifted to its operator's variables."""
+        variables = self._variables.get(step.name.lower())
+        if variables is None:
+            raise UnknownNameError("operator", step.name, [op.name for op in self.operators()])
+        return step_context(variables, step.args, state, self.constants)
+
+    def allowed(self, step: GroundAction, state: State) -> bool:
+        """Whether experience allows ``step`` in ``state``: not where its operator has failed
+        in the same context and never worked there (the planner then looks elsewhere)."""
+        if not self.experience.entries:
+            return True
+        successes, failures = self.experience.counts(step.name, self.context(step, state))
+        return successes > 0 or failures == 0
+
+    def step_cost(self, step: GroundAction, state: State) -> float:
+        """The plan cost of ``step`` taken in ``state``: by its operator's experience in that
+        context where it ran there before, else in every context."""
+        return self.experience.cost(step.name, self.nominal_cost(step.name), self.context(step, state))
+
     def operators(self) -> list[Operator]:
-        """Every operator the planner may use: the domain's actions, then the learned ones."""
-        return [*self.actions, *(op.as_operator() for op in self.learned)]
+        """Every operator the planner may use, at its cost by experience: the domain's
+        actions, then the learned ones."""
+        ops = [replace(op, cost=self.cost(op.name)) for op in self.actions]
+        return ops + [op.as_operator(self.cost(op.name)) for op in self.learned]
 
     def operator(self, name: str) -> Operator:
         """The operator called ``name``.

@@ -1,39 +1,38 @@
 """Knowledge-base expansion K -> K': operators learned from exploration trials.
 
 A trial that resolves a novelty (an action controller with fixed settings, run on some
-entities) becomes a :class:`LearnedOperator`: its preconditions are what held among the
-entities involved before the trial, its effects what the trial was actually observed to
-change. The planner can then use it like any action of K (it is cheaper, so a plan
-prefers what the robot has learned), and the executor maps it back to the controller
+entities) becomes a :class:`LearnedOperator`: its effects are what the trial was observed
+to change, and its preconditions the *context* it was observed in (see
+:func:`learn_operator`), so that it is chosen only where its effect on its arguments was
+seen. The planner uses it like any action of K at a cost set by experience
+(:mod:`llcps.symbolic.knowledge`), and the executor maps it back to the controller
 settings that produced it.
 
-:func:`refine_failed_action` teaches K why the failed action a_f failed: effects of the
-learned operator that a_f needed but lacked become preconditions of a_f.
+Where a_f itself failed is remembered by experience (:mod:`llcps.symbolic.experience`):
+a step is not planned again in a context where its operator has failed and never
+worked, so the planner reaches for what was learned there instead.
 """
 
 from __future__ import annotations
 
+import itertools
 import re
 from dataclasses import fields, dataclass, replace
-from typing import TYPE_CHECKING, Collection, Mapping, Sequence
+from typing import Collection, Mapping, Sequence
 
 from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, TrialSpec, fluent
 from llcps.errors import LlcpsError
 from llcps.symbolic.schema import (
+    EQUALITY,
     Controller,
-    GroundAction,
     Operator,
-    is_variable,
     operator_to_pddl,
     sort_fluents,
     substitute,
 )
 
-if TYPE_CHECKING:
-    from llcps.symbolic.knowledge import KnowledgeBase
-
-#: What a plan pays for a learned operator (domain actions cost 1 or 2).
-LEARNED_COST = 0.5
+#: Predicates left out of a learned operator's context: the hand holds nothing between trials.
+CONTEXT_IGNORED: frozenset[str] = frozenset({"holding"})
 
 #: Variable stems for parameter types; other types use their first letter.
 _TYPE_STEMS = {"item": "o", "container": "c", "surface": "s", "entity": "e"}
@@ -100,7 +99,9 @@ class LearnedOperator:
         preconditions: lifted fluents that held among the parameters before the trial.
         add: lifted fluents the trial was observed to make true.
         delete: lifted fluents the trial was observed to make false.
-        cost: what a plan pays for it.
+        negative_preconditions: lifted fluents over the parameters that did not hold.
+        replaces: the operator whose failure it was learned to get around (a_f), whose
+            nominal cost it takes; None when unknown (read back from PDDL).
         source_arguments: the objects the parameters were lifted from, in parameter order
             (None when read back from PDDL, which does not record them).
     """
@@ -113,11 +114,12 @@ class LearnedOperator:
     preconditions: frozenset[Fluent]
     add: frozenset[Fluent]
     delete: frozenset[Fluent]
-    cost: float = LEARNED_COST
+    negative_preconditions: frozenset[Fluent] = frozenset()
+    replaces: str | None = None
     source_arguments: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
-        self.as_operator()  # validates names, variables and the controller binding
+        self.as_operator(1.0)  # validates names, variables and the controller binding
         if self.source_arguments is not None and len(self.source_arguments) != len(self.parameters):
             raise ValueError(f"{self.name}: source_arguments {self.source_arguments} do not match parameters {self.parameters}")
 
@@ -125,16 +127,16 @@ class LearnedOperator:
     def variables(self) -> tuple[str, ...]:
         return tuple(v for v, _ in self.parameters)
 
-    def as_operator(self) -> Operator:
-        """The operator the planner searches with."""
+    def as_operator(self, cost: float) -> Operator:
+        """The operator the planner searches with, at ``cost`` (set by the knowledge base)."""
         return Operator(
             name=self.name,
             parameters=self.parameters,
             preconditions=self.preconditions,
-            negative_preconditions=frozenset(),
+            negative_preconditions=self.negative_preconditions,
             add=self.add,
             delete=self.delete,
-            cost=self.cost,
+            cost=cost,
             controller=Controller(action=self.action, arguments=self.arguments, params=self.params),
         )
 
@@ -148,7 +150,6 @@ class LearnedOperator:
             negative_preconditions=op.negative_preconditions,
             add=op.add,
             delete=op.delete,
-            cost=op.cost,
         )
 
     @classmethod
@@ -161,16 +162,17 @@ class LearnedOperator:
         negative_preconditions: frozenset[Fluent],
         add: frozenset[Fluent],
         delete: frozenset[Fluent],
-        cost: float,
+        cost: float = 0.0,
     ) -> LearnedOperator:
         """A learned operator from an action's parts; the controller comes from the name.
 
         The controller's physical arguments are the first parameters, as many as the
-        controller takes.
+        controller takes. ``cost`` is accepted for PDDL round trips and ignored: a learned
+        operator's cost comes from the knowledge base's experience.
 
         Raises:
             LlcpsError: the name does not encode controller settings, there are too few
-                parameters, or there are negative preconditions (learned operators have none).
+                parameters, or a precondition is an equality test.
         """
         parsed = parse_operator_name(name)
         if parsed is None:
@@ -178,8 +180,8 @@ class LearnedOperator:
                 f"action {name} is neither one of {ACTIONS} nor a learned operator",
                 hint="learned operators are named like push_front_r0p2_m0p3",
             )
-        if negative_preconditions:
-            raise LlcpsError(f"learned operator {name} has negative preconditions", hint="learned operators have positive preconditions only")
+        if any(a[0] == EQUALITY for a in preconditions | negative_preconditions):
+            raise LlcpsError(f"learned operator {name} has an equality test", hint="learned operators test fluents only")
         action, params, _ = parsed
         arity = ACTION_ARITY[action]
         if len(parameters) < arity:
@@ -193,7 +195,7 @@ class LearnedOperator:
             preconditions=preconditions,
             add=add,
             delete=delete,
-            cost=cost,
+            negative_preconditions=negative_preconditions,
         )
 
     def renamed(self, name: str) -> LearnedOperator:
@@ -201,14 +203,37 @@ class LearnedOperator:
 
     def same_knowledge(self, other: LearnedOperator) -> bool:
         """Equal up to its name and where it was learned: adding it again teaches nothing."""
-        ignored = {"name", "source_arguments"}
+        return self.same_skill(other) and self.context == other.context
+
+    def same_skill(self, other: LearnedOperator) -> bool:
+        """The same controller settings with the same effects, whatever the context."""
+        ignored = {"name", "source_arguments", "preconditions", "negative_preconditions", "replaces"}
         return all(
             getattr(self, f.name) == getattr(other, f.name) for f in fields(self) if f.name not in ignored
         )
 
-    def to_pddl(self, constant_types: Mapping[str, str] | None = None) -> str:
+    @property
+    def context(self) -> tuple[frozenset[Fluent], frozenset[Fluent]]:
+        """(positive, negative) preconditions: where the operator was seen to work."""
+        return self.preconditions, self.negative_preconditions
+
+    def generalized(self, other: LearnedOperator) -> LearnedOperator:
+        """This operator applicable wherever either was seen to work: the contexts' intersection.
+
+        Raises:
+            ValueError: ``other`` is not the same skill.
+        """
+        if not self.same_skill(other):
+            raise ValueError(f"{other.name} is not the same skill as {self.name}")
+        return replace(
+            self,
+            preconditions=self.preconditions & other.preconditions,
+            negative_preconditions=self.negative_preconditions & other.negative_preconditions,
+        )
+
+    def to_pddl(self, constant_types: Mapping[str, str] | None = None, *, cost: float = 1.0) -> str:
         """The operator as a PDDL ``:action`` (rendered by the `pddl` library)."""
-        return str(operator_to_pddl(self.as_operator(), constant_types))
+        return str(operator_to_pddl(self.as_operator(cost), constant_types))
 
     def controller_spec(self, binding: Mapping[str, str] | Sequence[str]) -> TrialSpec:
         """The trial that executes this operator on concrete objects.
@@ -235,9 +260,10 @@ class LearnedOperator:
             },
             "parameters": [list(p) for p in self.parameters],
             "preconditions": [list(a) for a in sort_fluents(self.preconditions)],
+            "negative_preconditions": [list(a) for a in sort_fluents(self.negative_preconditions)],
             "add": [list(a) for a in sort_fluents(self.add)],
             "delete": [list(a) for a in sort_fluents(self.delete)],
-            "cost": self.cost,
+            "replaces": self.replaces,
             "source_arguments": list(self.source_arguments) if self.source_arguments is not None else None,
         }
 
@@ -264,7 +290,8 @@ class LearnedOperator:
                 preconditions=frozenset(fluent(*a) for a in data["preconditions"]),  # type: ignore[union-attr]
                 add=frozenset(fluent(*a) for a in data["add"]),  # type: ignore[union-attr]
                 delete=frozenset(fluent(*a) for a in data["delete"]),  # type: ignore[union-attr]
-                cost=float(data.get("cost", LEARNED_COST)),  # type: ignore[arg-type]
+                negative_preconditions=frozenset(fluent(*a) for a in data.get("negative_preconditions", ())),  # type: ignore[union-attr]
+                replaces=None if data.get("replaces") is None else str(data["replaces"]),
                 source_arguments=tuple(source) if source is not None else None,  # type: ignore[arg-type]
             )
         except (KeyError, TypeError, ValueError) as exc:
@@ -288,15 +315,28 @@ def learn_operator(
     after: State,
     objects: Mapping[str, str],
     focus: Collection[str] = (),
+    replaces: str | None = None,
     constants: Collection[str] | None = None,
+    predicates: Mapping[str, int] | None = None,
 ) -> LearnedOperator:
     """Turn one executed trial into an operator of K'.
 
     Parameters are the trial's arguments plus every entity of an observed change that
     matters: one that is an argument, in ``focus``, or related to one of them by a fluent
     before or after the trial (pushing the tray matters to the cube in it). Constants
-    of the domain (``table``) stay constants. Preconditions are the fluents of ``before``
-    that mention only parameters; effects are the observed differences, restricted alike.
+    of the domain (``table``) stay constants. Effects are the observed differences that
+    mention only parameters and constants.
+
+    Preconditions are the *context* the trial was observed in, and nothing else: every
+    fact over the parameters (and constants) as it was before the trial, both the ones
+    that held (positive preconditions) and, under the closed-world assumption, the ones
+    that did not (negative preconditions) — for each predicate of K but ``holding``,
+    over distinct terms. Facts about other entities are left out: they do not matter to
+    what the controller does to its arguments. So the operator is chosen only where its
+    arguments stand as they stood when its effect was seen; a push learned for a can and
+    an unreachable bin says nothing about a bin within reach, nor about a cup holding a
+    ball. Where the same skill resolves a novelty again in another context, the knowledge
+    base keeps what the two contexts share (:meth:`LearnedOperator.generalized`).
 
     Args:
         spec: the trial (controller, arguments, settings).
@@ -304,12 +344,17 @@ def learn_operator(
         after: the perceived state after it.
         objects: object -> type for every entity that can become a parameter.
         focus: extra entities that matter, e.g. the failed action's arguments.
+        replaces: the failed action a_f the trial gets around (see :class:`LearnedOperator`).
         constants: names that stay constants; defaults to the default domain's constants.
+        predicates: predicate -> arity of the knowledge base the context is written in;
+            defaults to the default domain's predicates.
     """
-    if constants is None:
+    if constants is None or predicates is None:
         from llcps.symbolic.knowledge import KnowledgeBase
 
-        constants = KnowledgeBase.default().constants.keys()
+        default = KnowledgeBase.default()
+        constants = default.constants.keys() if constants is None else constants
+        predicates = default.predicates if predicates is None else predicates
     constants = set(constants)
     before, after = frozenset(before), frozenset(after)
     changed = (after - before) | (before - after)
@@ -339,57 +384,32 @@ def learn_operator(
         keep = {a for a in atoms if all(t in binding or t in constants for t in a[1:])}
         return frozenset(substitute(a, binding) for a in keep)
 
+    holds = lift(before)
+    possible = _context_atoms(entities, sorted(constants), predicates)
     return LearnedOperator(
         name=operator_name(spec.action, spec.params),
         action=spec.action,
         arguments=tuple(binding[a] for a in spec.arguments),
         params=spec.params,
         parameters=tuple(parameters),
-        preconditions=lift(before),
+        preconditions=frozenset(a for a in holds if a[0] not in CONTEXT_IGNORED),
         add=lift(after - before),
         delete=lift(before - after),
+        negative_preconditions=frozenset(substitute(a, binding) for a in possible if a not in before),
+        replaces=replaces,
         source_arguments=tuple(entities),
     )
 
 
-def refine_failed_action(kb: KnowledgeBase, failed: GroundAction, learned: LearnedOperator, failure_state: State) -> KnowledgeBase:
-    """K': add the learned operator and teach the failed action a_f what it lacked.
-
-    Each positive effect of the learned operator (as observed, on the objects it was
-    learned from) that mentions only a_f's arguments, was false in the failure state and
-    is not something a_f achieves itself becomes an extra precondition of a_f's operator.
-    Where the learned effect already holds the planner still plans a_f alone; where it
-    does not, it chains the learned operator before a_f.
-
-    Args:
-        kb: the knowledge base a_f was planned with.
-        failed: the step that failed (from the monitor).
-        learned: the operator learned while resolving the failure.
-        failure_state: the perceived state in which a_f failed.
-
-    Returns:
-        K' holding ``learned`` and the refined a_f (unchanged a_f when nothing applies).
-
-    Raises:
-        ValueError: ``learned`` does not record the objects it was learned from.
-    """
-    if learned.source_arguments is None:
-        raise ValueError(f"{learned.name} does not record the objects it was learned from; cannot relate it to {failed}")
-    kb = kb.with_operator(learned)
-    op = kb.operator(failed.name)
-    constants = set(kb.constants)
-    source = dict(zip(learned.variables, learned.source_arguments))
-    failed_vars: dict[str, str] = {}
-    for var, obj in zip(op.variables, failed.args):
-        failed_vars.setdefault(obj, var)
-    extra: set[Fluent] = set()
-    for atom in sort_fluents(substitute(a, source) for a in learned.add):
-        if atom in failure_state:
+def _context_atoms(entities: Sequence[str], constants: Sequence[str], predicates: Mapping[str, int]) -> set[Fluent]:
+    """Every ground fact over distinct ``entities`` (a constant allowed in any position but
+    the first) that a context records: the predicates of K but :data:`CONTEXT_IGNORED`."""
+    atoms: set[Fluent] = set()
+    for predicate, arity in sorted(predicates.items()):
+        if predicate in CONTEXT_IGNORED or arity < 1:
             continue
-        if not all(t in failed_vars or (t in constants and not is_variable(t)) for t in atom[1:]):
-            continue
-        lifted = substitute(atom, failed_vars)
-        if lifted in op.add or lifted in op.preconditions or lifted in op.negative_preconditions:
-            continue
-        extra.add(lifted)
-    return kb.with_refinement(failed.name, extra) if extra else kb
+        pools = [list(entities)] + [list(entities) + list(constants)] * (arity - 1)
+        for terms in itertools.product(*pools):
+            if len(set(terms)) == len(terms) and any(t in entities for t in terms):
+                atoms.add(fluent(predicate, *terms))
+    return atoms

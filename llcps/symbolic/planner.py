@@ -6,6 +6,10 @@ uniform-cost search on the ground problem. Maintained pure-Python planners do no
 pyperplan handles STRIPS only (no negative preconditions, no action costs), and
 unified-planning would need a compilation step and a heavy dependency for this size.
 
+Steps are costed by K's experience in the context they would run in, and a step is
+left out where its operator has failed in that context and never worked there
+(:meth:`KnowledgeBase.step_cost`, :meth:`KnowledgeBase.allowed`).
+
 Ties between plans of equal cost are broken deterministically: fewer steps first, then
 the order in which operators and their arguments sort.
 """
@@ -14,6 +18,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+from typing import Collection
 
 from llcps.errors import LlcpsError
 from llcps.symbolic.knowledge import KnowledgeBase, Task
@@ -49,12 +54,20 @@ def ground(kb: KnowledgeBase, task: Task) -> list[GroundAction]:
     return actions
 
 
-def plan(kb: KnowledgeBase, task: Task, *, max_expansions: int = MAX_EXPANSIONS) -> Plan | None:
+def plan(
+    kb: KnowledgeBase,
+    task: Task,
+    *,
+    exclude: Collection[tuple[str, tuple[str, ...]]] = (),
+    max_expansions: int = MAX_EXPANSIONS,
+) -> Plan | None:
     """The cheapest plan from the task's initial state to its goal.
 
     Args:
         kb: the knowledge base K.
         task: objects, initial state and goal.
+        exclude: ground actions ``(operator name, args)`` the plan may not use, e.g.
+            a step that just failed (plan repair).
         max_expansions: how many states the search may expand before giving up.
 
     Returns:
@@ -66,7 +79,8 @@ def plan(kb: KnowledgeBase, task: Task, *, max_expansions: int = MAX_EXPANSIONS)
         PlanningLimitError: the budget ran out first.
     """
     task.check(kb)
-    actions = ground(kb, task)
+    banned = {(name.lower(), tuple(args)) for name, args in exclude}
+    actions = [a for a in ground(kb, task) if (a.name.lower(), a.args) not in banned]
     start = task.init
     # (cost, steps, insertion order, state); the insertion order makes ties deterministic.
     counter = itertools.count()
@@ -89,12 +103,12 @@ def plan(kb: KnowledgeBase, task: Task, *, max_expansions: int = MAX_EXPANSIONS)
                 hint="raise max_expansions or give the task fewer objects",
             )
         for action in actions:
-            if not action.applicable(state):
+            if not action.applicable(state) or not kb.allowed(action, state):
                 continue
             successor = action.apply(state)
             if successor in closed:
                 continue
-            key = (cost + action.cost, steps + 1)
+            key = (cost + kb.step_cost(action, state), steps + 1)
             if key < best.get(successor, (float("inf"), 0)):
                 best[successor] = key
                 parent[successor] = (state, action)
@@ -113,5 +127,6 @@ def _extract(parent: dict[frozenset, tuple[frozenset, GroundAction] | None], sta
 
 
 def plan_cost(steps: Plan) -> float:
-    """The metric value of a plan: the sum of its steps' costs."""
+    """The metric value of a plan in PDDL: the sum of its steps' costs by their operators'
+    experience in every context (the cost a PDDL validator adds up)."""
     return sum(step.cost for step in steps)

@@ -6,7 +6,7 @@ the stored start state where there is one, and marks it ``unknown`` otherwise
 (docs/store.md).
 
 Revision ID: 0004
-Revises: 0002
+Revises: 0006
 Create Date: 2026-11-23
 """
 
@@ -16,7 +16,7 @@ import sqlalchemy as sa
 from alembic import op
 
 revision = "0004"
-down_revision = "0002"
+down_revision = "0006"
 branch_labels = None
 depends_on = None
 

@@ -1,0 +1,325 @@
+"""The Python API for analysis and for the main jobs: ``llcps.open(...)`` returns a
+:class:`Workbench` over one experience store.
+
+Reads return pandas DataFrames with tidy, typed columns: :meth:`Workbench.trials`
+has one row per trial and one column per Table-1 feature per argument slot, per
+outcome bit and per further column source (:mod:`llcps.store.flat`); episodes, runs
+(with their provenance) and learned operators have their own frames. The jobs the
+CLI runs (pretrain, solve, replay, an experiment grid) are methods too, returning
+the same result objects the CLI prints. Nothing here imports typer or rich; pandas
+loads when this module does, and ``import llcps`` does not load this module.
+
+    import llcps
+    wb = llcps.open("llcps.db")
+    trials = wb.trials(source="exploration")
+    trials.groupby("scenario").size()
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
+
+import pandas as pd
+
+from llcps.errors import LlcpsError
+from llcps.provenance import FIELDS as PROVENANCE_FIELDS
+from llcps.store import Store
+from llcps.store.flat import KINDS, Column, flat_rows, trial_columns
+
+if TYPE_CHECKING:
+    from llcps.cps.episode import SolveResult
+    from llcps.cps.replay import ReplayReport
+    from llcps.experiments.runner import RunSummary
+    from llcps.models.persistence import FittedModel
+    from llcps.pretrain import PretrainSummary
+
+#: Columns of :meth:`Workbench.episodes`: name -> (kind, meaning); kinds are keys of llcps.store.flat.KINDS.
+EPISODE_COLUMNS: Mapping[str, tuple[str, str]] = {
+    "id": ("int", "episode id"),
+    "run_id": ("nullable_int", "the run it belongs to"),
+    "branch": ("string", "the branch it ran on"),
+    "scenario": ("string", "scenario name"),
+    "condition": ("string", "original or novelty"),
+    "model": ("string", "world model that ranked exploration"),
+    "measure": ("string", "measure that ordered candidates"),
+    "seed": ("nullable_int", "the episode's seed"),
+    "status": ("string", "solved, budget_exhausted, no_plan, interrupted, error or running"),
+    "solved": ("bool", "status is solved"),
+    "exploration_trials": ("nullable_int", "exploration trials the episode made"),
+    "plan_trials": ("nullable_int", "plan trials the episode made"),
+    "candidates": ("nullable_int", "size of the candidate space at the failure"),
+    "sim_seconds": ("float", "simulated seconds"),
+    "wall_seconds": ("float", "wall seconds (rendering excluded)"),
+    "failed_action": ("string", "the plan step that failed"),
+    "resolving_trial_id": ("nullable_int", "the exploration trial that resolved the novelty"),
+    "learned_operators": ("nullable_int", "operators learned"),
+    "started_at": ("timestamp", "start (UTC)"),
+    "finished_at": ("timestamp", "end (UTC)"),
+}
+
+#: Columns of :meth:`Workbench.runs`.
+RUN_COLUMNS: Mapping[str, tuple[str, str]] = {
+    "id": ("int", "run id"),
+    "command": ("string", "the command that ran"),
+    "branch": ("string", "the branch it ran on"),
+    "seed": ("nullable_int", "the run seed"),
+    "status": ("string", "how it ended"),
+    "started_at": ("timestamp", "start (UTC)"),
+    "finished_at": ("timestamp", "end (UTC)"),
+    "config": ("string", "its configuration, as JSON"),
+    "llcps_version": ("string", "llcps version"),
+    "git_commit": ("string", "commit of llcps's source tree, if any"),
+    "git_dirty": ("nullable_bool", "the tree had uncommitted changes"),
+    "python_version": ("string", "Python version"),
+    "pybullet_version": ("string", "PyBullet version"),
+    "torch_version": ("string", "torch version"),
+    "sklearn_version": ("string", "scikit-learn version"),
+    "numpy_version": ("string", "numpy version"),
+    "host": ("string", "host name"),
+    "cpu_count": ("nullable_int", "CPUs available to it"),
+}
+
+#: Columns of :meth:`Workbench.operators`.
+OPERATOR_COLUMNS: Mapping[str, tuple[str, str]] = {
+    "id": ("int", "operator id"),
+    "branch": ("string", "the branch that learned it"),
+    "name": ("string", "operator name"),
+    "scenario": ("string", "the scenario it was learned in"),
+    "episode_id": ("nullable_int", "the episode that learned it"),
+    "watermark": ("int", "the largest trial id visible when it was learned"),
+    "created_at": ("timestamp", "when (UTC)"),
+    "pddl": ("string", "the operator in PDDL"),
+}
+
+def _convert(series: pd.Series, kind: str, categories: Sequence[str] = ()) -> pd.Series:
+    """One column to its documented dtype (values read from the database are untrusted)."""
+    if kind == "category":
+        seen = [v for v in dict.fromkeys(series.dropna()) if v not in categories]
+        return series.astype(pd.CategoricalDtype([*categories, *sorted(map(str, seen))]))
+    if kind == "timestamp":
+        return pd.to_datetime(series, format="ISO8601", errors="coerce").astype("datetime64[ns]")
+    if kind in ("float",):
+        return pd.to_numeric(series, errors="coerce").astype("float64")
+    if kind == "bool":
+        return series.fillna(False).astype(bool)
+    return series.astype(KINDS[kind])
+
+
+def _frame(rows: list[dict[str, Any]], columns: Iterable[tuple[str, str, Sequence[str]]]) -> pd.DataFrame:
+    spec = list(columns)
+    frame = pd.DataFrame.from_records(rows, columns=[name for name, _, _ in spec])
+    for name, kind, categories in spec:
+        frame[name] = _convert(frame[name], kind, categories)
+    return frame
+
+
+def trial_frame(store: Store, records: Sequence[Any]) -> pd.DataFrame:
+    """Trials as the tidy DataFrame of :meth:`Workbench.trials`."""
+    columns: Sequence[Column] = trial_columns()
+    return _frame(flat_rows(store, records), ((c.name, c.kind, c.categories) for c in columns))
+
+
+def _number(value: Any) -> Any:
+    """A summary value that must be a number (anything else read from the database is dropped)."""
+    return value if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+class Workbench:
+    """One experience store, for analysis in pandas and for running the main jobs.
+
+    Open it with :func:`llcps.open`; close it (or use ``with``) when done.
+    """
+
+    def __init__(self, store: Store) -> None:
+        self.store = store
+
+    @classmethod
+    def open(cls, url_or_path: str | Path = "llcps.db", *, create: bool = False) -> Workbench:
+        """Open a store by SQLite path or SQLAlchemy URL (see :meth:`llcps.store.Store.open`)."""
+        return cls(Store.open(str(url_or_path), create=create))
+
+    def close(self) -> None:
+        self.store.close()
+
+    def __enter__(self) -> Workbench:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Workbench({self.store.url!r})"
+
+    # ------------------------------------------------------------------ reads
+
+    def trials(
+        self,
+        *,
+        branch: str | None = None,
+        source: str | None = None,
+        scenario: str | None = None,
+        episode: int | None = None,
+        solved: bool | None = None,
+    ) -> pd.DataFrame:
+        """The trials ``branch`` sees (default: the current branch), oldest first, one row each.
+
+        The columns are those of ``llcps db export`` (:func:`llcps.store.flat.trial_columns`):
+        ids, the controller call, ``arg<k>_<feature>`` per argument slot, the six outcome
+        bits and ``solved`` as booleans, and what the store records.
+        """
+        records = self.store.visible_trials(branch, source=source, scenario=scenario, episode=episode, solved=solved)
+        return trial_frame(self.store, records)
+
+    def episodes(
+        self, *, branch: str | None = None, scenario: str | None = None, run: int | None = None
+    ) -> pd.DataFrame:
+        """Episodes (scenario solves), oldest first; ``branch`` None means every branch."""
+        rows = []
+        for e in reversed(self.store.list_episodes(branch=branch, scenario=scenario, run_id=run)):
+            summary = e.summary
+            operators = summary.get("learned_operators")
+            rows.append(
+                {
+                    "id": e.id,
+                    "run_id": e.run_id,
+                    "branch": e.branch,
+                    "scenario": e.scenario,
+                    "condition": e.condition,
+                    "model": e.model,
+                    "measure": e.measure,
+                    "seed": e.seed,
+                    "status": e.status,
+                    "solved": e.status == "solved",
+                    **{k: _number(summary.get(k)) for k in ("exploration_trials", "plan_trials", "candidates", "sim_seconds", "wall_seconds", "resolving_trial_id")},
+                    "failed_action": summary.get("failed_action") if isinstance(summary.get("failed_action"), str) else None,
+                    "learned_operators": len(operators) if isinstance(operators, list) else None,
+                    "started_at": e.started_at or None,
+                    "finished_at": e.finished_at,
+                }
+            )
+        return _frame(rows, ((n, k, ()) for n, (k, _) in EPISODE_COLUMNS.items()))
+
+    def runs(self, *, branch: str | None = None) -> pd.DataFrame:
+        """Runs with their provenance, oldest first; ``branch`` None means every branch."""
+        rows = []
+        for r in reversed(self.store.list_runs(branch=branch)):
+            row = {
+                "id": r.id,
+                "command": r.command,
+                "branch": r.branch,
+                "seed": r.seed,
+                "status": r.status,
+                "started_at": r.started_at or None,
+                "finished_at": r.finished_at,
+                "config": json.dumps(dict(r.config), sort_keys=True, default=str),
+            }
+            row.update({name: getattr(r.provenance, name) for name in PROVENANCE_FIELDS})
+            rows.append(row)
+        return _frame(rows, ((n, k, ()) for n, (k, _) in RUN_COLUMNS.items()))
+
+    def operators(self, *, branch: str | None = None) -> pd.DataFrame:
+        """The learned operators ``branch`` sees (default: the current branch), oldest first."""
+        rows = [
+            {
+                "id": o.id,
+                "branch": o.branch,
+                "name": o.name,
+                "scenario": o.scenario,
+                "episode_id": o.episode_id,
+                "watermark": o.watermark,
+                "created_at": o.created_at or None,
+                "pddl": o.pddl,
+            }
+            for o in self.store.visible_operators(branch)
+        ]
+        return _frame(rows, ((n, k, ()) for n, (k, _) in OPERATOR_COLUMNS.items()))
+
+    def compare_runs(self, a: int, b: int) -> pd.DataFrame:
+        """Runs ``a`` and ``b`` side by side: one row per field, with whether they agree."""
+        from llcps.store.runs import compare_runs
+
+        comparison = compare_runs(self.store, a, b)
+        return pd.DataFrame(
+            {
+                "field": [f.name for f in comparison.fields],
+                f"run {a}": [f.a for f in comparison.fields],
+                f"run {b}": [f.b for f in comparison.fields],
+                "same": [f.same for f in comparison.fields],
+            }
+        )
+
+    # ------------------------------------------------------------------- jobs
+
+    def pretrain(
+        self,
+        *,
+        trials: int = 200,
+        seed: int = 0,
+        branch: str | None = None,
+        models: Sequence[str] | None = None,
+        model_seed: int = 0,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> tuple[PretrainSummary, list[FittedModel]]:
+        """``llcps pretrain``: random interactions stored as trials, then world models fitted."""
+        from llcps.models import PAPER_MODELS
+        from llcps.models.persistence import fit_models
+        from llcps.pretrain import pretrain
+
+        summary = pretrain(self.store, branch=branch, n=trials, seed=seed, progress=progress)
+        fitted = fit_models(self.store, summary.branch, list(models or PAPER_MODELS), model_seed)
+        return summary, fitted
+
+    def solve(
+        self,
+        scenario: str,
+        *,
+        branch: str | None = None,
+        gif: str | Path | None = None,
+        progress: Callable[[str, int, int], None] | None = None,
+        **config: Any,
+    ) -> SolveResult:
+        """``llcps solve``: one episode. ``config`` takes the fields of
+        :class:`~llcps.cps.episode.SolveConfig` (condition, model, measure, seed, model_seed, budget, ...)."""
+        from llcps.cps.agent import solve
+        from llcps.cps.episode import SolveConfig
+
+        try:
+            settings = SolveConfig(scenario=scenario, **config)
+        except TypeError as exc:
+            raise LlcpsError(f"bad solve setting: {exc}", hint="see llcps.cps.episode.SolveConfig") from None
+        return solve(self.store, branch=branch, config=settings, gif=gif, progress=progress)
+
+    def replay(self, trial_id: int, *, gif: str | Path | None = None) -> ReplayReport:
+        """``llcps replay``: re-execute a stored trial; ``.matches`` says whether it reproduced."""
+        from llcps.cps.replay import replay
+
+        return replay(self.store, trial_id, gif=gif)
+
+    def experiment(
+        self,
+        preset: str = "smoke",
+        *,
+        seeds: int | Iterable[int] | None = None,
+        workers: int = 1,
+        out_dir: str | Path | None = None,
+        html: bool = False,
+        progress: Callable[[int, int, str], None] | None = None,
+    ) -> RunSummary:
+        """``llcps experiment run``: every missing sequence of a grid, then its report in ``out_dir``."""
+        from llcps.experiments.runner import default_out_dir, results_table, run_experiment, write_report
+
+        summary = run_experiment(self.store, preset=preset, seeds=seeds, workers=workers, progress=progress)
+        table = results_table(self.store, summary.preset, summary.seeds)
+        if len(table):
+            write_report(table, out_dir if out_dir is not None else default_out_dir(summary.preset), store=self.store, html=html)
+        return summary
+
+
+def open(url_or_path: str | Path = "llcps.db", *, create: bool = False) -> Workbench:  # noqa: A001 - llcps.open
+    """A :class:`Workbench` on the store at ``url_or_path`` (a SQLite path or an SQLAlchemy URL)."""
+    return Workbench.open(url_or_path, create=create)
+
+
+__all__ = ["EPISODE_COLUMNS", "OPERATOR_COLUMNS", "RUN_COLUMNS", "Workbench", "open", "trial_frame"]

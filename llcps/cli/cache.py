@@ -1,0 +1,102 @@
+"""``llcps cache``: the store's physics cache — how big it is, its bound, and pruning it."""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated, Optional
+
+import typer
+
+from llcps.cli._common import JsonFlag, message, new_app, open_store, print_json, print_table
+from llcps.cli._conventions import examples
+from llcps.errors import LlcpsError
+from llcps.store import physics_cache
+
+app = new_app(
+    "The physics cache: simulated trials kept in the store, answered again instead of simulated "
+    "(see `llcps experiment run --no-cache`).",
+    epilog=examples("llcps cache status", "llcps cache limit 4GB && llcps cache prune"),
+)
+
+_UNITS = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "KIB": 1 << 10, "MIB": 1 << 20, "GIB": 1 << 30}
+_SIZE = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([A-Za-z]*)\s*$")
+
+
+def parse_size(text: str) -> int:
+    """Bytes in a size such as ``500MB``, ``2GiB`` or ``0``."""
+    match = _SIZE.match(text)
+    unit = match.group(2).upper() if match else ""
+    if match is None or unit not in _UNITS:
+        raise LlcpsError(f"not a size: {text!r}", hint="write a number of bytes with an optional unit: 500MB, 2GB, 1GiB, 0")
+    return int(float(match.group(1)) * _UNITS[unit])
+
+
+def _human(n: int) -> str:
+    for unit, size in (("GB", 10**9), ("MB", 10**6), ("kB", 10**3)):
+        if n >= size:
+            return f"{n / size:.1f} {unit}"
+    return f"{n} B"
+
+
+@app.command("status", epilog=examples("llcps cache status", "llcps cache status --json"))
+def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
+    """Entries, bytes and the size bound of the physics cache."""
+    with open_store(ctx) as store:
+        status = physics_cache.status(store)
+    if as_json:
+        print_json(status.as_json())
+        return
+    print_table(
+        None,
+        ("", ""),
+        [
+            ("entries", status.entries),
+            ("size", f"{_human(status.bytes)} of {_human(status.max_bytes)} allowed"),
+            ("hits recorded", status.hits),
+            ("last used", f"{status.oldest_use or '-'} .. {status.newest_use or '-'}"),
+        ],
+        show_header=False,
+    )
+
+
+@app.command(
+    "prune",
+    epilog=examples("llcps cache prune --dry-run", "llcps cache prune --to 500MB", "llcps cache prune --to 0  # empty it"),
+)
+def prune_cli(
+    ctx: typer.Context,
+    to: Annotated[
+        Optional[str],
+        typer.Option("--to", metavar="SIZE", help="Keep at most this much (500MB, 2GB; 0 empties the cache). Default: the store's bound (`llcps cache limit`).", show_default=False),
+    ] = None,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="Only report what would be removed.")] = False,
+    as_json: JsonFlag = False,
+) -> None:
+    """Remove the least recently used entries until the cache fits its bound.
+
+    An experiment run does this when it ends; no branch loses anything, later runs
+    simulate the removed trials again.
+    """
+    limit = parse_size(to) if to is not None else None
+    with open_store(ctx) as store:
+        result = physics_cache.prune(store, limit=limit, dry_run=dry_run)
+    if as_json:
+        print_json(result.as_json())
+    verb = "would remove" if dry_run else "removed"
+    message(f"{verb} {result.removed} entries ({_human(result.removed_bytes)}); {result.kept} kept ({_human(result.kept_bytes)})")
+
+
+@app.command("limit", epilog=examples("llcps cache limit 4GB && llcps cache prune"))
+def limit_cli(
+    ctx: typer.Context,
+    size: Annotated[str, typer.Argument(metavar="SIZE", help="The bound, e.g. 500MB or 4GB.", show_default=False)],
+    as_json: JsonFlag = False,
+) -> None:
+    """Set the size bound the cache is pruned to (stored in the store; default 2 GiB)."""
+    limit = parse_size(size)
+    with open_store(ctx) as store:
+        physics_cache.set_max_bytes(store, limit)
+        status = physics_cache.status(store)
+    if as_json:
+        print_json(status.as_json())
+    message(f"physics cache bound: {_human(limit)} (holds {_human(status.bytes)}; `llcps cache prune` trims it now)")

@@ -1,0 +1,109 @@
+"""A sweep of a novelty's candidate space: which candidates resolve it, and where the
+first of them sits in the default order.
+
+It is the yardstick of a scenario (docs/scenarios.md): K's plan is executed and repaired
+as an episode would, then every candidate of the exploration space is tried, in the
+default order, from the state the failed step a_f was executed in, and judged by the
+agent's own definition of a resolution. Everything runs in real physics and is recorded
+in a throwaway in-memory store, so nothing reaches the experience store.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+from llcps.cps.agent import SETTLE_STEPS, Agent, plan_and_repair, resolves
+from llcps.cps.candidates import enumerate_candidates
+from llcps.cps.episode import SolveConfig, SolveResult
+from llcps.cps.knowledge import load_knowledge
+from llcps.scenarios.base import Scenario
+from llcps.sim.perception import perceive
+from llcps.sim.world import World
+from llcps.store import Store
+
+
+@dataclass
+class Sweep:
+    """What a sweep found.
+
+    Attributes:
+        scenario: the scenario's name.
+        plan: K's first plan; ``plan_repairs`` the repairs tried, as in ``solve --json``.
+        failed_action: the step a_f whose alternatives were swept (None: the plan worked).
+        candidates: the size of the candidate space.
+        tried: candidates executed (all of them unless the sweep stopped at the first).
+        resolving: 0-based positions, in the default order, of the candidates that resolve.
+        labels: the resolving candidates, as text.
+    """
+
+    scenario: str
+    plan: list[str] = field(default_factory=list)
+    plan_repairs: list[dict[str, object]] = field(default_factory=list)
+    failed_action: str | None = None
+    candidates: int = 0
+    tried: int = 0
+    resolving: list[int] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)
+
+    @property
+    def first_position(self) -> int | None:
+        """1-based position of the first resolving candidate in the default order."""
+        return self.resolving[0] + 1 if self.resolving else None
+
+    def as_json(self) -> dict[str, object]:
+        return {
+            "scenario": self.scenario,
+            "plan": self.plan,
+            "plan_repairs": self.plan_repairs,
+            "failed_action": self.failed_action,
+            "candidates": self.candidates,
+            "tried": self.tried,
+            "resolving": len(self.resolving),
+            "first_position": self.first_position,
+            "resolving_candidates": self.labels,
+        }
+
+
+def sweep(
+    scenario: Scenario,
+    *,
+    stop_at_first: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> Sweep:
+    """Sweep ``scenario``'s novelty (see the module docstring).
+
+    Args:
+        scenario: the scenario (its novelty condition is swept).
+        stop_at_first: stop at the first resolving candidate.
+        progress: called as ``progress(done, total)`` after every candidate.
+    """
+    config = SolveConfig(scenario=scenario.name)
+    found = Sweep(scenario=scenario.name)
+    with Store.open("sqlite://", create=True) as store:
+        branch = store.current_branch()
+        result = SolveResult(scenario=scenario.name, condition="novelty", model="-", measure="-", seed=0, branch=branch)
+        world = World.from_scene(scenario.scene("novelty"))
+        try:
+            world.settle(max_steps=SETTLE_STEPS)
+            agent = Agent(store=store, branch=branch, world=world, scenario=scenario, config=config, result=result, records=[])
+            kb = load_knowledge(store, branch)
+            failure = plan_and_repair(agent, kb, perceive(world), result)
+            found.plan, found.plan_repairs, found.failed_action = result.plan, result.plan_repairs, result.failed_action
+            if failure is None or failure.snapshot is None:
+                return found
+            candidates = enumerate_candidates(failed=agent.controller_call(failure.step), entities=agent.kinds, grid=config.grid)
+            found.candidates = len(candidates)
+            for index, spec in enumerate(candidates):
+                trial, _ = agent.execute(spec, source="exploration", snapshot_id=failure.snapshot, start=failure.snapshot)
+                found.tried += 1
+                if resolves(agent, kb, trial, failure):
+                    found.resolving.append(index)
+                    found.labels.append(spec.label)
+                if progress is not None:
+                    progress(index + 1, len(candidates))
+                if stop_at_first and found.resolving:
+                    break
+        finally:
+            world.close()
+    return found

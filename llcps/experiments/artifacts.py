@@ -1,0 +1,110 @@
+"""What a report needs from the store beyond the results table: where the runs ran
+(provenance) and a film of a resolving trial per scenario.
+
+Both are written into the report directory (``provenance.json``, ``films/``), so a
+report rebuilt later from that directory alone still shows them.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+from llcps.experiments.grid import SCENARIO_SEQUENCE
+from llcps.experiments.results import ResultRow, ResultsTable
+from llcps.provenance import Provenance
+from llcps.store import Store
+
+PROVENANCE_FILE = "provenance.json"
+FILMS_DIR = "films"
+
+
+def table_provenance(store: Store, table: ResultsTable) -> list[dict[str, Any]]:
+    """The distinct environments the table's episodes ran in, with how many runs each."""
+    wanted = {r.episode_id for r in table if r.episode_id is not None}
+    run_ids = {e.run_id for e in store.list_episodes() if e.id in wanted and e.run_id is not None}
+    counts: dict[Provenance, int] = {}
+    for run in store.list_runs(ids=sorted(run_ids)):
+        counts[run.provenance] = counts.get(run.provenance, 0) + 1
+    ordered = sorted(counts.items(), key=lambda kv: (-kv[1], json.dumps(kv[0].as_json(), sort_keys=True, default=str)))
+    return [{**env.as_json(), "runs": n} for env, n in ordered]
+
+
+def write_provenance(out_dir: Path, provenance: Sequence[Mapping[str, Any]]) -> Path:
+    path = out_dir / PROVENANCE_FILE
+    path.write_text(json.dumps(list(provenance), indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    return path
+
+
+def read_provenance(out_dir: Path) -> list[dict[str, Any]]:
+    """The provenance a report directory holds; empty when it has none or it is unreadable."""
+    path = out_dir / PROVENANCE_FILE
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return []
+    known = set(Provenance.__dataclass_fields__) | {"runs"}
+    return [{k: v for k, v in item.items() if k in known} for item in data if isinstance(item, dict)] if isinstance(data, list) else []
+
+
+def provenance_line(item: Mapping[str, Any]) -> str:
+    """One environment for people, with its run count."""
+    env = Provenance(**{k: v for k, v in item.items() if k in Provenance.__dataclass_fields__})
+    runs = item.get("runs")
+    return env.summary() + (f" — {runs} run(s)" if isinstance(runs, int) else "")
+
+
+def typical_resolution(rows: Sequence[ResultRow]) -> ResultRow | None:
+    """The solved episode with the median exploration (ties: the lower episode id)."""
+    solved = sorted((r for r in rows if r.solved and r.episode_id is not None), key=lambda r: (r.exploration_trials, r.episode_id))
+    return solved[len(solved) // 2] if solved else None
+
+
+def film_resolutions(
+    store: Store,
+    table: ResultsTable,
+    out_dir: Path,
+    *,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> dict[str, Path]:
+    """Film, per scenario, the resolving trial of a typical solved episode and the plan it enabled.
+
+    Returns:
+        scenario -> GIF path, for the scenarios with a solved episode.
+    """
+    from llcps.cps.film import episode_shots, reenact
+
+    films: dict[str, Path] = {}
+    target = out_dir / FILMS_DIR
+    for scenario in [s for s in SCENARIO_SEQUENCE if any(r.scenario == s for r in table)]:
+        row = typical_resolution([r for r in table if r.scenario == scenario])
+        if row is None or row.episode_id is None:
+            continue
+        shots = episode_shots(store, row.episode_id)
+        resolution = [s for s in shots if s.phase in ("explore", "re-plan")] or shots
+        target.mkdir(parents=True, exist_ok=True)
+        path = target / f"{scenario}.gif"
+        report = None if progress is None else (lambda phase, done, total, s=scenario: progress(f"film {s}", done, total))
+        reenact(store, resolution, gif=path, progress=report)
+        films[scenario] = path
+    return films
+
+
+def existing_films(out_dir: Path) -> dict[str, Path]:
+    """The films a report directory already holds, by scenario."""
+    folder = out_dir / FILMS_DIR
+    return {s: folder / f"{s}.gif" for s in SCENARIO_SEQUENCE if (folder / f"{s}.gif").is_file()}
+
+
+__all__ = [
+    "FILMS_DIR",
+    "PROVENANCE_FILE",
+    "existing_films",
+    "film_resolutions",
+    "provenance_line",
+    "read_provenance",
+    "table_provenance",
+    "typical_resolution",
+    "write_provenance",
+]

@@ -1,0 +1,101 @@
+"""Which results a report covers, and where it is written: the glue between a run and its report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+from llcps.errors import LlcpsError
+from llcps.experiments.results import ResultsTable, table_from_episodes
+from llcps.store import Store
+
+#: Where ``llcps experiment run`` writes a preset's report unless told otherwise.
+RESULTS_DIR = Path("results")
+
+
+def results_table(store: Store, preset: str, seeds: Iterable[int] | None = None) -> ResultsTable:
+    """The results of one preset (optionally some seeds) from the store's episodes."""
+    wanted = None if seeds is None else set(seeds)
+    table = table_from_episodes(store.list_episodes()).table
+    return ResultsTable(r for r in table if r.preset == preset and (wanted is None or r.seed in wanted))
+
+
+def one_preset(table: ResultsTable, preset: str | None = None) -> tuple[str, ResultsTable]:
+    """The rows of ``preset``, or of the table's only preset when none is named.
+
+    Presets share model and measure names, so a report over two of them would mix
+    their cells; a table holding several needs a choice.
+    """
+    presets = table.unique("preset")
+    if preset is None:
+        if len(presets) > 1:
+            raise LlcpsError(
+                f"the results hold {len(presets)} presets: {', '.join(presets)}", hint="choose one with --preset"
+            )
+        if not presets:
+            raise LlcpsError("there are no experiment results", hint="run `llcps experiment run` first")
+        preset = str(presets[0])
+    if preset not in presets:
+        raise LlcpsError(
+            f"no results of preset {preset!r}",
+            hint=f"the results hold: {', '.join(presets)}" if presets else "run `llcps experiment run` first",
+        )
+    return preset, table.filter(preset=preset)
+
+
+def with_baseline(table: ResultsTable, source: ResultsTable, baseline_preset: str) -> ResultsTable:
+    """``table`` plus the random-order rows of ``baseline_preset`` from ``source``.
+
+    A grid without the random model (``paper``) gets its baseline from a preset run
+    beside it in the same store (``random``); the random order uses no training data,
+    so its rows stand for any pretraining size.
+    """
+    from llcps.experiments.stats import BASELINE_MODEL
+
+    extra = source.filter(preset=baseline_preset, model=BASELINE_MODEL)
+    if len(extra) == 0:
+        raise LlcpsError(
+            f"no {BASELINE_MODEL}-model results of preset {baseline_preset!r}",
+            hint=f"run `llcps experiment run --preset {baseline_preset}` on the same store first",
+        )
+    return ResultsTable([*table, *extra])
+
+
+def default_out_dir(preset: str) -> Path:
+    """``results/<preset>``."""
+    return RESULTS_DIR / preset
+
+
+def write_report(
+    table: ResultsTable,
+    out_dir: str | Path,
+    *,
+    store: Store | None = None,
+    html: bool = False,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> tuple[Path, dict[str, Any]]:
+    """Build every report file into ``out_dir``; returns it and the analysis as JSON data.
+
+    With the ``store`` the results came from, the report records where their runs ran
+    and, with ``html``, films a resolving trial per scenario for report.html.
+    """
+    import json
+
+    from llcps.experiments import artifacts
+    from llcps.experiments.report import build_report
+
+    provenance = films = None
+    if store is not None:
+        provenance = artifacts.table_provenance(store, table)
+        if html:
+            films = artifacts.film_resolutions(store, table, Path(out_dir), progress=progress)
+    if progress is not None:
+        progress("statistics and plots", 0, 0)
+    paths = build_report(table, out_dir, provenance=provenance, films=films, html=html)
+    analysis = json.loads(paths.figure2_json.read_text(encoding="utf-8"))
+    analysis["provenance"] = provenance if provenance is not None else artifacts.read_provenance(paths.out_dir)
+    analysis["report_html"] = None if paths.report_html is None else str(paths.report_html)
+    return paths.out_dir, analysis
+
+
+__all__ = ["RESULTS_DIR", "default_out_dir", "one_preset", "results_table", "with_baseline", "write_report"]

@@ -1,0 +1,204 @@
+"""Scheduling an experiment run: keep every worker busy, import results as they arrive.
+
+The parent process is the only writer of a run's results: it imports each task's
+payload in one transaction on the grid's deterministic branch names, so a kill
+loses only the tasks in flight, a re-run skips every task whose branches exist,
+and two runners sharing a store (PostgreSQL) never import a task twice.
+A sequence task waits for its seed's pretraining to be imported, then carries
+that pretraining branch's trials to its worker.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Iterable
+
+from llcps.errors import LlcpsError, StoreError, UnknownNameError
+from llcps.experiments.engines import Engine, EngineError
+from llcps.experiments.tasks import PretrainTask, SequenceTask, Task
+from llcps.experiments.transfer import Payload, export_branches, import_payload
+from llcps.store import Store
+
+#: Seconds between checks for Ctrl-C and finished tasks.
+POLL_SECONDS = 0.5
+
+ProgressCallback = Callable[[int, int, str], None]
+"""Called as ``progress(done, total, label)`` after each task is imported (or fails)."""
+
+
+@dataclass
+class RunSummary:
+    """What a run did; ``status`` is ``ok``, ``failed`` (some task raised) or ``interrupted``."""
+
+    preset: str
+    seeds: tuple[int, ...]
+    engine: str
+    workers: int
+    tasks: int = 0
+    done: int = 0
+    skipped: int = 0
+    failed: list[tuple[str, str]] = field(default_factory=list)
+    blocked: int = 0
+    status: str = "running"
+    wall_seconds: float = 0.0
+    task_seconds: dict[str, float] = field(default_factory=dict)
+    run_id: int | None = None
+    #: Physics-cache counts summed over the tasks (None: the run used no cache).
+    cache: dict[str, int] | None = None
+
+    def count_cache(self, counts: dict[str, int] | None) -> None:
+        """Add one task's physics-cache counts."""
+        if counts is None:
+            return
+        if self.cache is None:
+            self.cache = {}
+        for key, value in counts.items():
+            self.cache[key] = self.cache.get(key, 0) + int(value)
+
+    @property
+    def cache_hit_rate(self) -> float | None:
+        """Trials answered from the cache over trials asked of it."""
+        if not self.cache:
+            return None
+        asked = self.cache.get("hits", 0) + self.cache.get("misses", 0)
+        return None if asked == 0 else self.cache.get("hits", 0) / asked
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "preset": self.preset,
+            "seeds": list(self.seeds),
+            "engine": self.engine,
+            "workers": self.workers,
+            "status": self.status,
+            "tasks": self.tasks,
+            "tasks_done": self.done,
+            "tasks_skipped": self.skipped,
+            "tasks_failed": [{"task": label, "error": error} for label, error in self.failed],
+            "tasks_blocked": self.blocked,
+            "wall_seconds": round(self.wall_seconds, 3),
+            "task_seconds": {k: round(v, 3) for k, v in self.task_seconds.items()},
+            "run_id": self.run_id,
+            "cache": None if self.cache is None else {**self.cache, "hit_rate": self.cache_hit_rate},
+        }
+
+
+
+def existing_branches(store: Store) -> set[str]:
+    return {b.name for b in store.list_branches()}
+
+
+def check_partial(tasks: Iterable[Task], existing: set[str]) -> None:
+    partial = [t for t in tasks if 0 < sum(b in existing for b in t.branches) < len(t.branches)]
+    if partial:
+        names = ", ".join(b for t in partial[:3] for b in t.branches if b in existing)
+        raise LlcpsError(
+            f"{len(partial)} task(s) have only some of their branches ({names}{', ...' if len(partial) > 3 else ''})",
+            hint="a run imports a task's branches together; delete these with `llcps db delete NAME --yes` and run again",
+        )
+
+
+def twin_key(task: Task) -> tuple[object, ...] | None:
+    """What a sequence shares with its other-condition twin: both start scenario 1 alike."""
+    if not isinstance(task, SequenceTask):
+        return None
+    cell = task.sequence.cell
+    return (task.sequence.preset, task.sequence.seed, cell.model, cell.measure, cell.pretrain_size)
+
+
+def schedule(
+    store: Store,
+    runner: Engine,
+    todo: list[Task],
+    existing: set[str],
+    summary: RunSummary,
+    in_flight: dict[Any, Task],
+    progress: ProgressCallback | None,
+) -> None:
+    """Keep every worker busy with the first ready task; import results as they arrive.
+
+    Of the ready tasks, one whose twin is not in flight goes first (see :func:`twin_key`).
+    """
+    pending = list(todo)
+    bases: dict[str, Payload] = {}
+    failed_pretraining: set[str] = set()
+    finished = 0
+
+    def ready(task: Task) -> bool:
+        return isinstance(task, PretrainTask) or task.pretrain_branch in existing
+
+    def blocked(task: Task) -> bool:
+        return isinstance(task, SequenceTask) and task.pretrain_branch in failed_pretraining
+
+    def refill() -> None:
+        for task in [t for t in pending if blocked(t)]:
+            summary.blocked += 1
+            pending.remove(task)
+        while len(in_flight) < runner.workers:
+            candidates = [t for t in pending if ready(t)]
+            busy = {twin_key(t) for t in in_flight.values()} - {None}
+            # A sequence whose twin (same seed and cell, other condition) is running would
+            # simulate the same first scenario at the same time; run something else first,
+            # and the twin's trials come from the physics cache when it starts.
+            task = next((t for t in candidates if twin_key(t) not in busy), None) or next(iter(candidates), None)
+            if task is None:
+                return
+            pending.remove(task)
+            if isinstance(task, SequenceTask):
+                base = bases.get(task.pretrain_branch)
+                if base is None:
+                    base = export_branches(store, [task.pretrain_branch], snapshots=False, provenance=False)
+                    bases[task.pretrain_branch] = base
+                task = replace(task, base=base)
+            in_flight[runner.submit(task)] = task
+
+    refill()
+    while in_flight:
+        for handle in runner.wait(in_flight, timeout=POLL_SECONDS):
+            task = in_flight.pop(handle)
+            try:
+                output = runner.result(handle)
+            except EngineError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - one failed task must not end the run
+                summary.failed.append((task.label, f"{type(exc).__name__}: {exc}"))
+                if isinstance(task, PretrainTask):
+                    failed_pretraining.update(task.branches)
+            else:
+                refill()  # keep the workers busy while the parent writes
+                if _import(store, output.payload, task):
+                    summary.done += 1
+                    summary.task_seconds[task.label] = output.wall_seconds
+                    summary.count_cache(output.cache)
+                else:
+                    summary.skipped += 1  # imported meanwhile by another run on the same store
+                existing.update(task.branches)
+            finished += 1
+            if progress is not None:
+                progress(finished, len(todo), task.label)
+            refill()
+    summary.blocked += len(pending)
+
+
+def _import(store: Store, payload: Payload, task: Task) -> bool:
+    """Import a task's payload; False when another runner on the same store got there first."""
+    if _exists(store, task.branches):
+        return False
+    try:
+        import_payload(store, payload)
+    except StoreError:
+        if _exists(store, task.branches):  # lost the race; the transaction wrote nothing
+            return False
+        raise
+    return True
+
+
+def _exists(store: Store, branches: Iterable[str]) -> bool:
+    try:
+        for name in branches:
+            store.resolve_branch(name)
+    except UnknownNameError:
+        return False
+    return True
+
+
+__all__ = ["POLL_SECONDS", "ProgressCallback", "RunSummary", "check_partial", "existing_branches", "schedule"]

@@ -1,0 +1,202 @@
+"""What runs inside a worker: one task against a private store, and the worker's lifecycle.
+
+A worker runs a task against a private temporary SQLite store seeded with exactly
+what the task reads (a sequence: the trials of its pretraining branch) and returns
+a :class:`~llcps.experiments.tasks.TaskOutput`. Nothing a task computes depends on
+which worker ran it, when, or after what: its private store, its ids and its seeds
+are the same in every schedule. The one thing workers share is the physics cache
+of the real store (:mod:`llcps.store.physics_cache`), which changes how much
+physics is computed, never what a trial records (besides ``cache_hit`` and wall
+seconds).
+
+The same :func:`execute_task` runs in a local pool process and as a Ray task; a
+local pool worker also starts with :func:`init_local_worker`: it ignores Ctrl-C
+(the parent stops it), leaves at once on SIGTERM, exits when its parent is gone,
+and tells the parent its process id so the parent can stop it.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from llcps.errors import LlcpsError
+from llcps.experiments.grid import SCENARIO_SEQUENCE
+from llcps.experiments.tasks import PretrainTask, SequenceTask, Task, TaskOutput, pretrain_subset
+from llcps.experiments.transfer import Payload, export_branches, import_payload, inverse
+from llcps.store import MAIN_BRANCH, PRETRAIN, Store
+
+#: Thread pools a worker limits to one thread: results must not depend on core counts,
+#: and two workers on two cores should not fight over them.
+THREAD_VARIABLES: tuple[str, ...] = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+#: Private branch of a pretraining pool that is not itself one of the preset's sets.
+POOL_BRANCH = "pool"
+#: The command recorded with every experiment run and episode.
+COMMAND = "experiment run"
+
+_limited = False
+_scratch: str | None = None  # the private store's directory of the task in progress
+_caches: dict[str, Any] = {}  # this worker's physics caches by store URL, kept across its tasks
+
+
+def limit_threads() -> None:
+    """One thread for OpenMP/BLAS and torch in this process (idempotent)."""
+    global _limited
+    if _limited:
+        return
+    for name in THREAD_VARIABLES:
+        os.environ[name] = "1"
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        pass
+    if "torch" in sys.modules:  # else it starts with OMP_NUM_THREADS=1
+        sys.modules["torch"].set_num_threads(1)
+    _limited = True
+
+
+def _stop_worker(*_: object) -> None:
+    """Leave at once (the parent dropped this task), without a task directory behind."""
+    if _scratch is not None:
+        shutil.rmtree(_scratch, ignore_errors=True)
+    os._exit(1)
+
+
+def _exit_with_parent(parent: int) -> None:
+    """End this worker when the run that started it is gone (e.g. killed with -9)."""
+    while True:
+        time.sleep(1.0)
+        if os.getppid() != parent:
+            _stop_worker()
+
+
+def init_local_worker(pids: Any = None) -> None:
+    """Initializer of local pool workers; ``pids`` is a queue that learns this process's id."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    signal.signal(signal.SIGTERM, _stop_worker)
+    try:
+        sys.stdout.flush()
+        os.dup2(2, 1)  # native code prints to fd 1; the parent's stdout is for data
+    except (OSError, ValueError):  # pragma: no cover - no real stdout
+        pass
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
+    limit_threads()
+    if pids is not None:
+        pids.put(os.getpid())
+    warm_up()
+
+
+def warm_up() -> None:
+    """Import what every task needs while the worker would otherwise wait for its first task."""
+    import llcps.cps.agent  # noqa: F401  (the agent, the simulator, the models' registry)
+    import llcps.pretrain  # noqa: F401
+
+
+def worker_cache(url: str) -> Any:
+    """This worker's handle on the physics cache of the store at ``url``, kept across tasks."""
+    cache = _caches.get(url)
+    if cache is None:
+        from llcps.store.physics_cache import StorePhysicsCache
+
+        store = Store.open(url)
+        cache = StorePhysicsCache(store.engine)
+        _caches[url] = cache
+    return cache
+
+
+def execute_task(task: Task) -> TaskOutput:
+    """Run one task against a private temporary store and return its payload.
+
+    The same function runs in a local pool process and as a Ray task.
+    """
+    global _scratch
+    limit_threads()
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="llcps-task-") as tmp:
+        _scratch = tmp
+        try:
+            with Store.open(str(Path(tmp) / "task.db"), create=True) as store:
+                if isinstance(task, PretrainTask):
+                    payload, statuses, cache = _run_pretrain(store, task), (), None
+                else:
+                    payload, statuses, cache = _run_sequence(store, task)
+        finally:
+            _scratch = None
+    return TaskOutput(task.label, payload, time.perf_counter() - started, statuses, cache)
+
+
+def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
+    from dataclasses import replace
+
+    from llcps.pretrain import pretrain
+
+    own = {size: name for size, name in zip(task.sizes, task.branches)}
+    pool_branch = own.get(task.pool, POOL_BRANCH)
+    store.create_branch(pool_branch, from_branch=MAIN_BRANCH, at=0)
+    pretrain(store, branch=pool_branch, n=task.pool, seed=task.seed, control_loop_every=0)
+    pool = store.visible_trials(pool_branch)
+    pool_changes = store.visible_changes(pool_branch)
+    for size, name in own.items():
+        if name == pool_branch:
+            continue
+        store.create_branch(name, from_branch=MAIN_BRANCH, at=0)
+        chosen = pretrain_subset(pool, size, seed=task.seed)
+        config = {"pool": task.pool, "size": size, "pool_indices": [t.extra.get("index") for t in chosen]}
+        run_id = store.start_run(command=f"{COMMAND} (pretraining subset)", seed=task.seed, config=config, branch=name)
+        store.add_trials(
+            [
+                replace(t, id=None, created_at=None, branch=name, run_id=run_id, episode_id=None, extra={**t.extra, "pool": task.pool})
+                for t in chosen
+            ],
+            changes=[pool_changes.get(t.id) for t in chosen],  # type: ignore[arg-type]
+        )
+        store.finish_run(run_id, status="ok")
+    return export_branches(store, task.branches)
+
+
+def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str, ...], dict[str, Any] | None]:
+    from llcps.cps.agent import solve
+    from llcps.cps.episode import SolveConfig
+
+    if task.base is None:
+        raise LlcpsError(f"task {task.label} was sent without its pretraining trials")
+    seeded = import_payload(store, task.base)
+    seq = task.sequence
+    cache = worker_cache(task.cache_url) if task.cache_url is not None else None
+    before = None if cache is None else dict(cache.counts.as_json())
+    statuses: list[str] = []
+    for scenario in SCENARIO_SEQUENCE:
+        branch = seq.episode_branch(scenario)
+        if scenario == SCENARIO_SEQUENCE[0] or seq.cell.condition == "reset":
+            store.create_branch(branch, from_branch=seq.pretrain_branch, at=PRETRAIN)
+        config = SolveConfig(
+            scenario=scenario,
+            condition="novelty",
+            model=seq.cell.model,
+            measure=seq.cell.measure,
+            seed=seq.seed,
+            budget=task.budget,
+            refit_every=task.refit_every,
+        )
+        result = solve(store, branch=branch, config=config, command=f"{COMMAND} --preset {seq.preset}", cache=cache)
+        if result.status == "interrupted":
+            raise RuntimeError(f"{task.label}: {scenario} was interrupted")
+        statuses.append(result.status)
+    counts = None
+    if cache is not None and before is not None:
+        after = cache.counts.as_json()
+        counts = {k: after[k] - before[k] for k in ("hits", "misses", "rejected", "stored")}
+    payload = export_branches(store, task.branches, external=inverse(seeded.trials))
+    return payload, tuple(statuses), counts
+
+
+__all__ = ["COMMAND", "POOL_BRANCH", "THREAD_VARIABLES", "execute_task", "init_local_worker", "limit_threads", "worker_cache"]

@@ -1,0 +1,361 @@
+"""The persistent physics cache: simulated trials, kept in the experience store.
+
+An entry maps :func:`llcps.sim.cache.trial_key` (a digest of the physics settings,
+the scene, the start state, the controller call and the step cap) to the trial's
+result and the physics state it ended in. Every worker of an experiment run opens
+the same store, so a trial one worker simulated is answered for the others, and
+for every later run on the store. It is a cache, not experience: no branch refers
+to it, and pruning it only means later runs compute some physics again.
+
+Everything read back is untrusted: an entry's size is capped and its content hash
+checked before anything is decoded, the result is decoded field by field, and the
+end state must pass :func:`validate_state` before a world restores it (once per
+digest and process). An entry that fails is ignored as a miss and replaced by the
+next simulation of its key.
+
+Size: each entry is about 40 kB (the compressed end state dominates). The cache is
+bounded by :data:`DEFAULT_MAX_BYTES` unless a store setting says otherwise; an
+experiment run prunes it back to the bound when it ends, least recently used
+first, and ``llcps cache prune`` does so on demand.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import zlib
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from typing import Any, Callable
+
+from sqlalchemy import delete, func, insert, select, update
+from sqlalchemy.exc import IntegrityError, SQLAlchemyError
+
+from llcps.errors import LlcpsError, StoreError
+from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, decode_result, encode_result
+from llcps.sim.trial import TrialResult
+from llcps.store import engine as engines
+from llcps.store.schema import PhysicsCacheEntry
+
+#: Default bound of the cache's size (result and end-state bytes), 2 GiB: about 50,000 trials.
+DEFAULT_MAX_BYTES = 2 << 30
+#: Store setting that overrides :data:`DEFAULT_MAX_BYTES` (bytes, as text).
+MAX_BYTES_SETTING = "physics_cache_max_bytes"
+#: Largest compressed end state accepted (a scene's state is ~40 kB).
+MAX_STATE_BYTES = 8 << 20
+#: Largest end state once decompressed (a scene's state is ~90 kB).
+MAX_RAW_STATE_BYTES = 64 << 20
+#: Hits remembered before their use is written back (``last_used``, ``hits``).
+_FLUSH_EVERY = 64
+
+StateValidator = Callable[[bytes], None]
+"""Raises ValueError when bytes are not a physics state a world may restore."""
+
+
+def validate_state(state: bytes) -> None:
+    """Check that ``state`` is a bounded, well-formed serialized physics state.
+
+    A state is a zlib stream of a ``.bullet`` file (or the raw file). The stream
+    is inflated with a cap, so a crafted entry cannot exhaust memory, and must
+    hold a Bullet file header.
+
+    Raises:
+        ValueError: it is not one.
+    """
+    if not isinstance(state, (bytes, bytearray)) or not state:
+        raise ValueError("an end state is non-empty bytes")
+    if len(state) > MAX_STATE_BYTES:
+        raise ValueError(f"an end state is at most {MAX_STATE_BYTES} bytes")
+    if state.startswith(b"BULLET"):
+        return
+    inflater = zlib.decompressobj()
+    try:
+        raw = inflater.decompress(bytes(state), MAX_RAW_STATE_BYTES)
+    except zlib.error as exc:
+        raise ValueError(f"not a compressed physics state: {exc}") from None
+    if inflater.unconsumed_tail or not inflater.eof:
+        raise ValueError("a compressed physics state is truncated or inflates beyond the cap")
+    if not raw.startswith(b"BULLET"):
+        raise ValueError("not a Bullet physics state")
+
+
+def content_hash(result: bytes, end_state: bytes) -> str:
+    """sha256 of an entry's result, a NUL and its end state."""
+    digest = hashlib.sha256(result)
+    digest.update(b"\x00")
+    digest.update(end_state)
+    return digest.hexdigest()
+
+
+def _now() -> datetime:
+    return datetime.now(timezone.utc).replace(tzinfo=None)
+
+
+@dataclass
+class CacheCounts:
+    """What one process asked of the cache."""
+
+    hits: int = 0
+    misses: int = 0
+    rejected: int = 0
+    stored: int = 0
+
+    @property
+    def hit_rate(self) -> float | None:
+        asked = self.hits + self.misses
+        return None if asked == 0 else self.hits / asked
+
+    def as_json(self) -> dict[str, Any]:
+        return {"hits": self.hits, "misses": self.misses, "rejected": self.rejected, "stored": self.stored, "hit_rate": self.hit_rate}
+
+
+#: Digests of end states this process has validated already.
+_validated: set[str] = set()
+
+
+class StorePhysicsCache:
+    """The physics cache of one store, as :class:`llcps.sim.cache.PhysicsCache`.
+
+    Safe to use from several processes at once (each with its own instance):
+    entries are written in short transactions of their own, and a key written by
+    two processes keeps the first.
+
+    Args:
+        engine: the store's SQLAlchemy engine (``Store.engine``).
+        validator: the end-state check (default :func:`validate_state`).
+    """
+
+    def __init__(self, engine: Any, *, validator: StateValidator = validate_state) -> None:
+        self._engine = engine
+        self._validator = validator
+        self.counts = CacheCounts()
+        self._used: dict[str, int] = {}
+        self._rejected: set[str] = set()
+
+    def get(self, key: str) -> CachedTrial | None:
+        """The entry under ``key``, or None when absent or when it fails validation."""
+        try:
+            with self._engine.connect() as conn:
+                row = conn.execute(
+                    select(
+                        PhysicsCacheEntry.result,
+                        PhysicsCacheEntry.end_state,
+                        PhysicsCacheEntry.sha256,
+                        func.length(PhysicsCacheEntry.result),
+                        func.length(PhysicsCacheEntry.end_state),
+                    ).where(PhysicsCacheEntry.key == key)
+                ).first()
+        except SQLAlchemyError as exc:
+            raise StoreError(f"cannot read the physics cache: {str(getattr(exc, 'orig', exc)).splitlines()[0]}",
+                             hint="run with --no-cache, or check `llcps db status`") from exc  # fmt: skip
+        if row is None:
+            self.counts.misses += 1
+            return None
+        entry = self._check(row)
+        if entry is None:
+            self.counts.misses += 1
+            self.counts.rejected += 1
+            self._rejected.add(key)
+            return None
+        self.counts.hits += 1
+        self._used[key] = self._used.get(key, 0) + 1
+        if len(self._used) >= _FLUSH_EVERY:
+            self.flush()
+        return entry
+
+    def _check(self, row: Any) -> CachedTrial | None:
+        result, state, sha, result_size, state_size = row
+        if result_size is None or state_size is None or result_size > MAX_RESULT_BYTES or state_size > MAX_STATE_BYTES:
+            return None
+        result, state = bytes(result), bytes(state)
+        if content_hash(result, state) != sha:
+            return None
+        try:
+            decoded = decode_result(result)
+            if sha not in _validated:
+                self._validator(state)
+                _validated.add(sha)
+        except (ValueError, LlcpsError):
+            return None
+        return CachedTrial(result=decoded, end_state=state)
+
+    def put(self, key: str, result: TrialResult, end_state: bytes) -> None:
+        """Keep a simulated trial; an entry already there (from another process) is kept."""
+        encoded = encode_result(result)
+        now = _now()
+        values = {
+            "key": key,
+            "result": encoded,
+            "end_state": bytes(end_state),
+            "sha256": content_hash(encoded, end_state),
+            "size": len(encoded) + len(end_state),
+            "hits": 0,
+            "created_at": now,
+            "last_used": now,
+        }
+        try:
+            with self._engine.connect() as conn:
+                conn.execution_options(**{engines.WRITE_OPTION: True})
+                with conn.begin():
+                    if key in self._rejected:  # replace the entry that failed validation
+                        conn.execute(delete(PhysicsCacheEntry).where(PhysicsCacheEntry.key == key))
+                    conn.execute(insert(PhysicsCacheEntry).values(**values))
+        except IntegrityError:
+            return  # another process stored the same key first; its physics is the same
+        except SQLAlchemyError as exc:
+            raise StoreError(f"cannot write the physics cache: {str(getattr(exc, 'orig', exc)).splitlines()[0]}",
+                             hint="run with --no-cache, or check `llcps db status`") from exc  # fmt: skip
+        self._rejected.discard(key)
+        self.counts.stored += 1
+
+    def flush(self) -> None:
+        """Write back when entries were last used (least recently used go first when pruning)."""
+        if not self._used:
+            return
+        used, self._used = self._used, {}
+        now = _now()
+        try:
+            with self._engine.connect() as conn:
+                conn.execution_options(**{engines.WRITE_OPTION: True})
+                with conn.begin():
+                    for key, n in used.items():
+                        conn.execute(
+                            update(PhysicsCacheEntry)
+                            .where(PhysicsCacheEntry.key == key)
+                            .values(last_used=now, hits=PhysicsCacheEntry.hits + n)
+                        )
+        except SQLAlchemyError:
+            pass  # bookkeeping only: a busy store must not fail a trial
+
+
+# ------------------------------------------------------------------------ size, pruning
+@dataclass(frozen=True)
+class CacheStatus:
+    """Size of a store's physics cache."""
+
+    entries: int
+    bytes: int
+    hits: int
+    max_bytes: int
+    oldest_use: str | None
+    newest_use: str | None
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "entries": self.entries,
+            "bytes": self.bytes,
+            "hits": self.hits,
+            "max_bytes": self.max_bytes,
+            "oldest_use": self.oldest_use,
+            "newest_use": self.newest_use,
+        }
+
+
+@dataclass(frozen=True)
+class PruneResult:
+    """What :func:`prune` removed and kept."""
+
+    removed: int
+    removed_bytes: int
+    kept: int
+    kept_bytes: int
+    dry_run: bool
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "removed": self.removed,
+            "removed_bytes": self.removed_bytes,
+            "kept": self.kept,
+            "kept_bytes": self.kept_bytes,
+            "dry_run": self.dry_run,
+        }
+
+
+def _write(store: Any):  # noqa: ANN202 - a connection context
+    return store._write()
+
+
+def max_bytes(store: Any) -> int:
+    """The store's bound on the cache size (its setting, else :data:`DEFAULT_MAX_BYTES`)."""
+    with store._read() as conn:
+        value = store._get_setting(conn, MAX_BYTES_SETTING)
+    try:
+        return int(value) if value is not None else DEFAULT_MAX_BYTES
+    except ValueError:
+        return DEFAULT_MAX_BYTES
+
+
+def set_max_bytes(store: Any, limit: int) -> None:
+    """Make ``limit`` the store's bound on the cache size."""
+    if limit < 0:
+        raise LlcpsError(f"a cache size cannot be negative ({limit})", hint="pass a size such as 500MB or 2GB")
+    with _write(store) as conn:
+        store._set_setting(conn, MAX_BYTES_SETTING, str(int(limit)))
+
+
+def status(store: Any) -> CacheStatus:
+    """How many entries and bytes the cache holds."""
+    with store._read() as conn:
+        n, size, hits, oldest, newest = conn.execute(
+            select(
+                func.count(),
+                func.coalesce(func.sum(PhysicsCacheEntry.size), 0),
+                func.coalesce(func.sum(PhysicsCacheEntry.hits), 0),
+                func.min(PhysicsCacheEntry.last_used),
+                func.max(PhysicsCacheEntry.last_used),
+            )
+        ).one()
+    return CacheStatus(
+        entries=int(n),
+        bytes=int(size),
+        hits=int(hits),
+        max_bytes=max_bytes(store),
+        oldest_use=None if oldest is None else str(oldest),
+        newest_use=None if newest is None else str(newest),
+    )
+
+
+def prune(store: Any, *, limit: int | None = None, dry_run: bool = False) -> PruneResult:
+    """Remove the least recently used entries until the cache holds at most ``limit`` bytes.
+
+    Args:
+        store: the experience store.
+        limit: bytes to keep at most (None: the store's bound, :func:`max_bytes`; 0 empties it).
+        dry_run: only say what would be removed.
+    """
+    keep = max_bytes(store) if limit is None else int(limit)
+    if keep < 0:
+        raise LlcpsError(f"a cache size cannot be negative ({keep})", hint="pass a size such as 500MB or 2GB")
+    with store._read() as conn:
+        rows = conn.execute(
+            select(PhysicsCacheEntry.key, PhysicsCacheEntry.size).order_by(
+                PhysicsCacheEntry.last_used.desc(), PhysicsCacheEntry.key
+            )
+        ).all()
+    kept_bytes, kept, doomed, doomed_bytes = 0, 0, [], 0
+    for key, size in rows:
+        if kept_bytes + size <= keep and not doomed:
+            kept_bytes += size
+            kept += 1
+        else:
+            doomed.append(key)
+            doomed_bytes += size
+    if doomed and not dry_run:
+        with _write(store) as conn:
+            for start in range(0, len(doomed), 500):
+                conn.execute(delete(PhysicsCacheEntry).where(PhysicsCacheEntry.key.in_(doomed[start : start + 500])))
+    return PruneResult(removed=len(doomed), removed_bytes=doomed_bytes, kept=kept, kept_bytes=kept_bytes, dry_run=dry_run)
+
+
+__all__ = [
+    "DEFAULT_MAX_BYTES",
+    "CacheCounts",
+    "CacheStatus",
+    "PruneResult",
+    "StorePhysicsCache",
+    "content_hash",
+    "max_bytes",
+    "prune",
+    "set_max_bytes",
+    "status",
+    "validate_state",
+]

@@ -1,0 +1,45 @@
+"""Packed features: every entity round-trips bit for bit, and bytes without the layout are refused."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from llcps.domain import EntityFeatures
+from llcps.errors import LlcpsError
+from llcps.store.trials import pack_features, unpack_features
+
+names = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x1f"), min_size=1, max_size=12)
+numbers = st.floats(allow_nan=False, allow_infinity=False)
+entities = st.builds(EntityFeatures, shape=names, volume=numbers, color=names, vector_magnitude=numbers, unit_x=numbers, unit_y=numbers, unit_z=numbers)
+
+
+@given(st.lists(entities, min_size=0, max_size=2))
+def test_features_round_trip(features: list[EntityFeatures]) -> None:
+    assert unpack_features(pack_features(features)) == tuple(features)
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        b"",
+        b"\x01",
+        b"\x02\x01" + bytes(40) + b"box\x1fred",  # an unknown layout
+        b"\x01\x03" + bytes(120),  # more arguments than any action takes
+        b"\x01\x01" + bytes(20),  # numbers cut short
+        b"\x01\x01" + bytes(40) + b"box",  # a colour missing
+        b"\x01\x01" + bytes(40) + b"\x1fred",  # an empty shape
+        b"\x01\x01" + struct.pack("<5d", 1, 2, 3, 4, 5) + b"\xff\xfe\x1fred",  # not UTF-8
+    ],
+)
+def test_bytes_without_the_layout_are_refused(data: bytes) -> None:
+    with pytest.raises(LlcpsError, match="malformed"):
+        unpack_features(data)
+
+
+def test_names_with_the_separator_cannot_be_packed() -> None:
+    with pytest.raises(LlcpsError):
+        pack_features([EntityFeatures("bo\x1fx", 1.0, "red", 1.0, 0.0, 0.0, 1.0)])
