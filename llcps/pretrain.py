@@ -213,7 +213,8 @@ def pretrain(
                     run_id=summary.run_id,
                     snapshot_id=snapshot_id,
                     extra={"pretrain_seed": seed, "index": index},
-                )
+                ),
+                change=r.change,
             )
             summary.trial_ids.append(trial_id)
             for key, bit in r.outcome.as_dict().items():

@@ -10,6 +10,7 @@ import typer
 
 from llcps.cli._common import (
     JsonFlag,
+    err_console,
     YesFlag,
     choice_enum,
     message,
@@ -67,6 +68,11 @@ def _print_status(store: Store, branch: str | None, as_json: bool) -> None:
             ("branches", status.branches),
             ("trials in database", status.trials_total),
             ("visible trials", f"{status.visible_trials} ({by_source})"),
+            *(
+                [("trial changes", ", ".join(f"{k} {v}" for k, v in status.changes.items()))]
+                if status.changes is not None
+                else []
+            ),
         ],
         show_header=False,
     )
@@ -259,15 +265,47 @@ def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_js
     epilog=examples(
         "llcps db upgrade",
         "llcps --db old.db db upgrade --json",
+        "llcps db upgrade --no-replay-changes   # fast: mark older trials' changes unknown",
     ),
 )
-def upgrade_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
-    """Migrate the store to the newest schema revision this llcps knows."""
+def upgrade_cli(
+    ctx: typer.Context,
+    replay_changes: Annotated[
+        bool,
+        typer.Option(
+            "--replay-changes/--no-replay-changes",
+            help="Recover the symbolic change of trials stored without one by replaying them from their "
+            "stored start state; without replay they are marked unknown.",
+        ),
+    ] = True,
+    as_json: JsonFlag = False,
+) -> None:
+    """Migrate the store to the newest schema revision this llcps knows, and give every
+    trial its symbolic change (the goal-aware world model learns from it).
+
+    Trials stored before changes were recorded are replayed from their start state
+    (deterministic physics); one that has none, whose state does not rebuild, or whose
+    replay disagrees with what was stored is marked unknown. `llcps db status` shows the
+    counts.
+    """
+    from llcps.cps.changes import backfill_changes  # PyBullet loads only when there is work
+
     with open_store(ctx, allow_outdated=True) as store, progress_display("db upgrade", "checking the schema") as progress:
         before, after = store.upgrade(progress=lambda revision, done, total: progress(f"migrating to schema {revision}", done, total))
+        report = backfill_changes(
+            store,
+            replay=replay_changes,
+            progress=lambda done, total: progress("replaying trials for their changes", done, total),
+        )
     if as_json:
-        print_json({"from": before, "to": after, "changed": before != after})
+        print_json({"from": before, "to": after, "changed": before != after, "changes": report.as_json()})
     message(f"upgraded from schema {before} to {after}" if before != after else f"already at schema {after}")
+    if report.total:
+        message(
+            f"trial changes: {report.replayed} replayed, {report.unknown} unknown "
+            f"({report.no_snapshot} without a stored start state or replay, {report.failed} whose state did not "
+            f"rebuild, {report.mismatched} whose replay disagreed)"
+        )
 
 
 @app.command(

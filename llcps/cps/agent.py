@@ -26,19 +26,17 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.episode import SolveConfig, SolveResult
+from llcps.cps.exploration import failure_point, rank_candidates
 from llcps.cps.knowledge import load_experience, load_knowledge
-from llcps.cps.outcomes import desired_outcome
-from llcps.domain import ControllerParams, State, TrialRecord, TrialSpec, WorldModelInput
+from llcps.domain import PUSH_DIRECTION, ControllerParams, State, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
-from llcps.models.measures import rank
 from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
-from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
 from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
-from llcps.sim.perception import entity_features, perceive
+from llcps.sim.controllers import DEFAULT_MAX_STEPS
+from llcps.sim.perception import perceive
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import World
 from llcps.store import Store
@@ -104,6 +102,7 @@ class Agent:
         cache: PhysicsCache | None = None,
         max_steps: int = DEFAULT_MAX_STEPS,
         progress: ProgressCallback | None = None,
+        changes: dict[int, TrialChange] | None = None,
     ) -> None:
         self.store = store
         self.branch = branch
@@ -112,6 +111,8 @@ class Agent:
         self.config = config
         self.result = result
         self.records = records
+        #: The known symbolic change of each trial in ``records``, by trial id.
+        self.changes: dict[int, TrialChange] = {} if changes is None else changes
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
         self.cache = cache
         self.progress = progress
@@ -231,9 +232,11 @@ class Agent:
             snapshot_id=snapshot_id,
             scenario=self.scenario.name,
         )
-        trial_id = self.store.add_trial(new)
+        change = trial.change
+        trial_id = self.store.add_trial(new, change=change)
         record = replace(new, id=trial_id)
         self.records.append(record)
+        self.changes[trial_id] = replace(change, trial_id=trial_id)
         self.result.sim_steps += trial.sim_steps
         if cached is not None:
             self.result.cache_hits += 1
@@ -359,7 +362,8 @@ def solve(
     if progress is not None:
         progress(f"fit world model {config.model}", 0, 0)
     records = list(store.visible_trials(branch_name))
-    model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records)
+    changes = store.visible_changes(branch_name)
+    model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes)
     kb = load_knowledge(store, branch_name)
     result.run_id = store.start_run(
         command=command, seed=config.seed, config=_config_json(config), branch=branch_name
@@ -387,6 +391,7 @@ def solve(
             records=records,
             cache=cache,
             progress=progress,
+            changes=changes,
         )
         _episode(agent, kb, model, result)
     except KeyboardInterrupt:
@@ -424,13 +429,17 @@ def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult) -> Non
     _explore(agent, kb, model, failure, result)
 
 
-def plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult) -> Failure | None:
+def plan_and_repair(
+    agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult, *, store: bool = True
+) -> Failure | None:
     """Execute K's plan; on a failed step re-plan without it, up to MAX_PLAN_REPAIRS times.
 
     Every executed step is a stored ``plan`` trial and counts as an execution of its
     operator, so a step that fails is demoted before the re-plan. Sets ``result.plan``
     (K's first plan), ``result.plan_repairs`` and, when a plan reaches the goal,
-    ``result.status``.
+    ``result.status``. With ``store=False`` nothing is stored or counted (the path
+    ``llcps inspect model`` takes to the failure point); the failed steps are still left
+    out of the re-plans.
 
     Returns:
         The first failure, or None when no step failed. Exploration looks for an
@@ -447,7 +456,7 @@ def plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: Solve
         labels = [step.label for step in steps]
         if attempt == 0:
             result.plan = labels
-        run = agent.run_plan(steps, record=known)
+        run = agent.run_plan(steps, store=store, record=known)
         state, failure = run.state, run.failure
         if attempt > 0:
             result.plan_repairs.append(
@@ -471,17 +480,14 @@ def plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: Solve
 
 def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: SolveResult) -> None:
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
-    world, config = agent.world, agent.config
-    snapshot, failed_step, failure_state = failure.snapshot, failure.step, failure.state
+    config = agent.config
+    snapshot = failure.snapshot
     agent.restore(snapshot)
-    failed_spec = agent.controller_call(failed_step)
-    candidates = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
+    point = failure_point(agent, failure.monitor, failure.state)
+    candidates = point.candidates
     result.candidates = len(candidates)
-    features = {name: entity_features(world, name) for name in agent.kinds}
-    inputs = [WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in candidates]
-    desired = desired_outcome(missing_add=failure.monitor.missing_add, missing_del=failure.monitor.missing_del)
     remaining = list(range(len(candidates)))
-    order = _rank(model, inputs, remaining, config, desired)
+    order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     agent.report("explore", total=min(config.budget, len(candidates)))
     tried = 0
     while order and result.exploration_trials < config.budget:
@@ -495,8 +501,8 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
             _learn(agent, kb, spec, trial, failure, record, result)
             return
         if tried % config.refit_every == 0 and remaining:
-            model.update(agent.records)
-            order = _rank(model, inputs, remaining, config, desired)
+            model.update(agent.records, agent.changes)
+            order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     result.status = "budget_exhausted"
 
 
@@ -543,12 +549,6 @@ def _learn(
     result.status = "solved"
 
 
-def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> list[int]:
-    proba = model.predict_proba([inputs[i] for i in remaining])
-    order = rank(proba, config.measure, seed=config.seed, desired=desired)
-    return [remaining[i] for i in order]
-
-
 def resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
     """Did this trial resolve the novelty?
 
@@ -586,4 +586,4 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
     }
 
 
-__all__ = ["SolveConfig", "SolveResult", "solve", "load_knowledge"]
+__all__ = ["Failure", "PlanRun", "SolveConfig", "SolveResult", "load_knowledge", "plan_and_repair", "solve"]

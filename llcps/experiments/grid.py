@@ -21,6 +21,7 @@ import re
 from dataclasses import dataclass
 from typing import Iterable
 
+from llcps.cps.episode import DEFAULT_MEASURE, DEFAULT_MODEL
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.models.measures import PAPER_MEASURES
 from llcps.models.registry import PAPER_MODELS
@@ -263,6 +264,10 @@ def _seed_list(seeds: int | Iterable[int]) -> tuple[int, ...]:
 
 _EXTRA_MODELS = ("random", "logreg", "forest")
 
+#: A budget larger than any scenario's candidate space: the episode ends when every
+#: candidate was tried (an unsolved episode records how many there were).
+WHOLE_SPACE = 100_000
+
 #: Exploration trials between world-model refits in the paper's grids. The paper updates
 #: its models during exploration without saying how often; refitting the network after
 #: every trial would make it 80 % of a grid's cost (0.6 s a refit at 200-500 trials).
@@ -281,17 +286,41 @@ PRESETS: dict[str, Preset] = {
         refit_every=GRID_REFIT_EVERY,
     ),
     # Model-guided exploration against no model, scenario by scenario: each episode starts
-    # from the seed's pretraining set (condition reset), with the whole candidate space as
-    # budget so that every episode that can be solved is.
+    # from the seed's 200 random pretraining interactions (condition reset), with the
+    # whole candidate space as budget so that every episode that can be solved is.
     "vs_random": Preset(
         "vs_random",
-        ("nb", "random"),
-        ("goal-directed",),
-        (30,),
+        (DEFAULT_MODEL, "random"),
+        (DEFAULT_MEASURE,),
+        (200,),
         conditions=("reset",),
-        default_seeds=10,
-        budget=None,
-        pretrain_pool=30,
+        default_seeds=20,
+        budget=WHOLE_SPACE,
+        pretrain_pool=200,
+    ),
+    # Lifelong learning with the default model and measure: does the exploration of the
+    # earlier scenarios (update) shorten the later ones against the pretraining set alone
+    # (reset)? The whole candidate space as budget, 200 pretraining interactions.
+    "lifelong": Preset(
+        "lifelong",
+        (DEFAULT_MODEL,),
+        (DEFAULT_MEASURE,),
+        (200,),
+        default_seeds=20,
+        budget=WHOLE_SPACE,
+        pretrain_pool=200,
+    ),
+    # Every world model under goal-directed from 200 pretraining interactions (reset), the
+    # whole candidate space as budget: the evidence for the default model.
+    "models": Preset(
+        "models",
+        PAPER_MODELS + _EXTRA_MODELS,
+        (DEFAULT_MEASURE,),
+        (200,),
+        conditions=("reset",),
+        default_seeds=5,
+        budget=WHOLE_SPACE,
+        pretrain_pool=200,
     ),
     # The no-model baseline of the paper grid, at its budget: the random order uses no
     # training data, so 4 pretraining points stand for any number (`experiment report

@@ -34,7 +34,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 
-from llcps.domain import TrialRecord, check_id
+from llcps.domain import TrialChange, TrialRecord, check_id
 from llcps.provenance import Provenance
 from llcps.provenance import current as provenance_of_process
 from llcps.errors import LlcpsError, StoreError, UnknownNameError
@@ -61,9 +61,11 @@ from llcps.store.schema import (
     Setting,
     Snapshot,
     Trial,
+    TrialChangeRow,
     WorldModel,
 )
 from llcps.store.visibility import BranchRow, Link
+from llcps.store.changes import CHANGE_COLUMNS, UNKNOWN, ChangeDecoder, change_row
 from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, iso_timestamp, trial_row
 
 #: The root branch every store starts with.
@@ -580,6 +582,7 @@ class Store:
             )
         )
         conn.execute(delete(WorldModel).where(clauses["model"]))
+        conn.execute(delete(TrialChangeRow).where(TrialChangeRow.trial_id.in_(trial_ids)))
         conn.execute(delete(Trial).where(clauses["trial"]))
         conn.execute(delete(Episode).where(clauses["episode"]))
 
@@ -839,22 +842,34 @@ class Store:
             self._branch_ids[name] = bid
         return bid
 
-    def add_trial(self, trial: TrialRecord) -> int:
-        """Write one trial; it is committed (durable) when this returns its id."""
-        return self.add_trials([trial])[0]
+    def add_trial(self, trial: TrialRecord, *, change: TrialChange | None = None) -> int:
+        """Write one trial (and its symbolic change); committed (durable) when this returns its id."""
+        return self.add_trials([trial], changes=None if change is None else [change])[0]
 
-    def add_trials(self, trials: Sequence[TrialRecord]) -> list[int]:
-        """Write several trials in one transaction; ids in input order."""
+    def add_trials(
+        self, trials: Sequence[TrialRecord], *, changes: Sequence[TrialChange | None] | None = None
+    ) -> list[int]:
+        """Write several trials in one transaction; ids in input order.
+
+        Args:
+            changes: each trial's symbolic change, in the same order (None: a trial
+                without one); written in the same transaction as the trials.
+        """
         if not trials:
             return []
+        if changes is not None and len(changes) != len(trials):
+            raise LlcpsError(f"{len(trials)} trial(s) but {len(changes)} change(s)", hint="pass one change per trial, or None")
         now = _now()
         try:
             with self._write() as conn:
                 rows = [trial_row(t, branch_id=self._branch_id(conn, t.branch), created_at=now) for t in trials]
                 if len(rows) == 1:
-                    return [conn.execute(_INSERT_TRIAL, rows[0]).inserted_primary_key[0]]
-                result = conn.execute(_INSERT_TRIALS, rows)
-                return list(result.scalars())
+                    ids = [conn.execute(_INSERT_TRIAL, rows[0]).inserted_primary_key[0]]
+                else:
+                    ids = list(conn.execute(_INSERT_TRIALS, rows).scalars())
+                if changes is not None:
+                    self._insert_changes(conn, [(i, c) for i, c in zip(ids, changes) if c is not None])
+                return ids
         except StoreError as exc:
             if "FOREIGN KEY" in exc.message.upper() or "foreign key" in exc.message:
                 stale = {t.branch for t in trials}
@@ -936,6 +951,90 @@ class Store:
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
             return self._count(conn, chain, *self._trial_filters(source, None, None, None))
+
+    # ---------------------------------------------------------- trial changes
+
+    @staticmethod
+    def _insert_changes(conn: Connection, changes: Sequence[tuple[int, TrialChange | None]]) -> None:
+        if changes:
+            conn.execute(insert(TrialChangeRow), [change_row(trial_id, change) for trial_id, change in changes])
+
+    def visible_changes(self, branch: str | None, *, after_id: int | None = None) -> dict[int, TrialChange]:
+        """The known symbolic changes of the trials ``branch`` sees, by trial id.
+
+        Visibility follows the trials'. Trials whose change is unknown (or was never
+        recovered) are left out.
+
+        Raises:
+            LlcpsError: a stored change is malformed.
+        """
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            stmt = (
+                select(*CHANGE_COLUMNS)
+                .join(Trial, Trial.id == TrialChangeRow.trial_id)
+                .where(_visible(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
+                .order_by(TrialChangeRow.trial_id)
+            )
+            if after_id is not None:
+                stmt = stmt.where(Trial.id > after_id)
+            decoder = ChangeDecoder()
+            with gc_paused():
+                rows = conn.execute(stmt).all()
+                changes = (decoder.decode(row) for row in rows)
+                return {c.trial_id: c for c in changes if c is not None}  # type: ignore[misc]
+
+    def get_change(self, trial_id: int) -> TrialChange | None:
+        """One trial's symbolic change; None when it is unknown or not recorded."""
+        with self._read() as conn:
+            row = conn.execute(select(*CHANGE_COLUMNS).where(TrialChangeRow.trial_id == trial_id)).first()
+        return None if row is None else ChangeDecoder().decode(row)
+
+    def count_visible_changes(self, branch: str | None) -> int:
+        """How many trials ``branch`` sees have a known change (part of a fitted model's identity)."""
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            stmt = (
+                select(func.count())
+                .select_from(TrialChangeRow)
+                .join(Trial, Trial.id == TrialChangeRow.trial_id)
+                .where(_visible(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
+            )
+            return conn.scalar(stmt) or 0
+
+    def change_counts(self) -> dict[str, int]:
+        """Trials of the whole store by how their change is known: ``recorded``,
+        ``replayed``, ``unknown``, and ``missing`` (no row: a store not yet backfilled)."""
+        with self._read() as conn:
+            counts = dict(conn.execute(select(TrialChangeRow.source, func.count()).group_by(TrialChangeRow.source)).all())
+            total = conn.scalar(select(func.count()).select_from(Trial)) or 0
+        out = {source: int(counts.get(source, 0)) for source in ("recorded", "replayed", UNKNOWN)}
+        out["missing"] = total - sum(counts.values())
+        return out
+
+    def trials_without_change(self, *, limit: int | None = None) -> list[tuple[int, int | None]]:
+        """(trial id, snapshot id) of every trial with no change row, in id order."""
+        with self._read() as conn:
+            stmt = (
+                select(Trial.id, Trial.snapshot_id)
+                .outerjoin(TrialChangeRow, TrialChangeRow.trial_id == Trial.id)
+                .where(TrialChangeRow.trial_id.is_(None))
+                .order_by(Trial.id)
+                .limit(limit)
+            )
+            return [(int(i), None if s is None else int(s)) for i, s in conn.execute(stmt)]
+
+    def put_changes(self, changes: Sequence[tuple[int, TrialChange | None]]) -> None:
+        """Record the changes of stored trials that have none yet (None: unknown), in one transaction.
+
+        Raises:
+            StoreError: a trial already has a change, or does not exist.
+        """
+        try:
+            with self._write() as conn:
+                self._insert_changes(conn, changes)
+        except StoreError as exc:
+            raise StoreError(exc.message, hint="a change is recorded once per trial; only trials without one are backfilled") from exc
 
     def max_visible_trial_id(self, branch: str | None) -> int:
         """The largest trial id ``branch`` sees, 0 if none: the watermark of a fit on it."""
@@ -1125,6 +1224,7 @@ class Store:
                 trials_total=conn.scalar(select(func.count()).select_from(Trial)) or 0,
                 visible_trials=sum(by_source.values()),
                 visible_by_source=by_source,
+                changes=self.change_counts() if inspect(conn).has_table(TrialChangeRow.__tablename__) else None,
             )
 
 
