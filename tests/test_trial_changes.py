@@ -109,8 +109,8 @@ def test_payloads_carry_changes_onto_the_new_trial_ids(store: Store, tmp_path: P
 # ------------------------------------------------------------------------------- backfill
 def _store_at(path: Path, revision: str) -> Store:
     """A store built by Alembic up to ``revision`` (the schema before trial changes)."""
+    engines.create_sqlite_file(path)
     engine = engines.make_engine(engines.resolve_url(str(path)), pooled=False)
-    engines.set_sqlite_application_id(engine)
     with engine.connect() as conn, conn.begin():
         migrations.upgrade(conn, revision)
     engine.dispose()
@@ -127,9 +127,14 @@ def _real_trial(store: Store, new_trial, seed: int):
     return store.add_trial(record), r
 
 
+def _before_changes() -> str:
+    """The revision just before trial changes (0004) in the chain."""
+    return migrations.known_revisions()[migrations.known_revisions().index("0004") - 1]
+
+
 def test_an_older_store_upgrades_and_its_changes_are_replayed_or_marked_unknown(tmp_path: Path, new_trial) -> None:
     path = tmp_path / "old.db"
-    previous = migrations.known_revisions()[migrations.known_revisions().index("0004") - 1]
+    previous = _before_changes()
     with _store_at(path, previous) as old:
         assert old.revision == previous
         replayable, result = _real_trial(old, new_trial, 21)
@@ -156,7 +161,7 @@ def test_an_older_store_upgrades_and_its_changes_are_replayed_or_marked_unknown(
 
 def test_db_upgrade_backfills_with_a_summary(tmp_path: Path, new_trial) -> None:
     path = tmp_path / "old.db"
-    with _store_at(path, "0002") as old:
+    with _store_at(path, _before_changes()) as old:
         old.add_trial(new_trial(1))
     done = CliRunner().invoke(app, ["--db", str(path), "db", "upgrade", "--json"])
     assert done.exit_code == 0, done.output

@@ -973,7 +973,7 @@ class Store:
             stmt = (
                 select(*CHANGE_COLUMNS)
                 .join(Trial, Trial.id == TrialChangeRow.trial_id)
-                .where(_visible(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
+                .where(visibility.clause(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
                 .order_by(TrialChangeRow.trial_id)
             )
             if after_id is not None:
@@ -998,7 +998,7 @@ class Store:
                 select(func.count())
                 .select_from(TrialChangeRow)
                 .join(Trial, Trial.id == TrialChangeRow.trial_id)
-                .where(_visible(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
+                .where(visibility.clause(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
             )
             return conn.scalar(stmt) or 0
 
