@@ -83,9 +83,12 @@ def test_a_change_count_mismatch_writes_nothing(store: Store, new_trial) -> None
     ],
 )
 def test_a_damaged_change_row_is_one_clear_error(store: Store, new_trial, column: str, value, message: str) -> None:
+    raw_text = column in ("added", "deleted", "bodies") and isinstance(value, str)
+    if raw_text and store.engine.dialect.name != "sqlite":
+        pytest.skip("PostgreSQL's json type refuses text that is not JSON: the row cannot be damaged so")
     trial_id = store.add_trial(new_trial(1), change=change())
     with store.engine.begin() as conn:
-        if column in ("added", "deleted", "bodies") and isinstance(value, str):
+        if raw_text:
             conn.exec_driver_sql(f"UPDATE trial_changes SET {column} = ? WHERE trial_id = ?", (value, trial_id))
         else:
             conn.execute(update(TrialChangeRow).where(TrialChangeRow.trial_id == trial_id).values({column: value}))

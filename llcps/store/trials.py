@@ -155,11 +155,13 @@ def _flags() -> Any:
     any of them other than 0 or 1 (a row changed outside llcps) gives
     :data:`MALFORMED_FLAGS`, which the decoder refuses.
     """
-    parts = [getattr(Trial, name) for name in OUTCOME_NAMES] + [Trial.solved, Trial.cache_hit]
-    flags = cast(parts[0], Integer)
+    # Booleans (solved, cache_hit) and small integers (the bits) alike, as integers: a
+    # PostgreSQL smallint does not compare with a boolean.
+    parts = [cast(column, Integer) for column in [*(getattr(Trial, name) for name in OUTCOME_NAMES), Trial.solved, Trial.cache_hit]]
+    flags = parts[0]
     for bit, column in enumerate(parts[1:], start=1):
-        flags = flags.op("|")(cast(column, Integer).op("<<")(bit))
-    return case((and_(*(column.in_((False, True)) for column in parts)), flags), else_=MALFORMED_FLAGS)
+        flags = flags.op("|")(column.op("<<")(bit))
+    return case((and_(*(column.in_((0, 1)) for column in parts)), flags), else_=MALFORMED_FLAGS)
 
 
 #: Columns read for a TrialRecord, in the order :class:`TrialDecoder` unpacks them.
