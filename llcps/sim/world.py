@@ -25,20 +25,9 @@ from pybullet_utils import bullet_client
 
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.sim import CONTROLLERS_REVISION, native_output_silenced
-from llcps.sim.entities import (
-    Entity,
-    EntitySpec,
-    FIXTURE_RGBA,
-    FixtureSpec,
-    TableSpec,
-    build_entity,
-    build_fixture,
-)
+from llcps.sim.bodies import Entity, build_entity, build_fixture
+from llcps.sim.specs import FIXTURE_RGBA, FLOOR, TABLE, FixtureSpec, SceneSpec
 from llcps.sim.robot import Robot
-
-#: Names reserved for the built-in fixtures.
-TABLE = "table"
-FLOOR = "floor"
 
 #: zlib level of serialized states (a scene's state shrinks from ~90 kB to ~40 kB in ~1 ms).
 STATE_COMPRESSION = 3
@@ -91,67 +80,6 @@ class PhysicsSettings:
         data = asdict(self)
         data["gravity"] = list(self.gravity)
         return data
-
-
-@dataclass(frozen=True)
-class SceneSpec:
-    """Everything needed to rebuild a world: table geometry, fixtures, entities.
-
-    Attributes:
-        entities: manipulable objects and containers, built in this order.
-        fixtures: static boxes beyond the table and floor (lips, walls, shelves).
-        table: the table's geometry.
-        name: a label (scenario and condition, or "pretrain").
-    """
-
-    entities: tuple[EntitySpec, ...] = ()
-    fixtures: tuple[FixtureSpec, ...] = ()
-    table: TableSpec = field(default_factory=TableSpec)
-    name: str = ""
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "entities", tuple(self.entities))
-        object.__setattr__(self, "fixtures", tuple(self.fixtures))
-        names = [e.name for e in self.entities] + [f.name for f in self.fixtures] + [TABLE, FLOOR]
-        dupes = sorted({n for n in names if names.count(n) > 1})
-        if dupes:
-            raise ValueError(f"scene names must be unique (table and floor are reserved): {dupes}")
-
-    def entity(self, name: str) -> EntitySpec:
-        for e in self.entities:
-            if e.name == name:
-                return e
-        raise UnknownNameError("entity", name, [e.name for e in self.entities])
-
-    def replace(self, *specs: EntitySpec) -> "SceneSpec":
-        """The scene with some entities replaced by name (or appended when new)."""
-        by_name = {s.name: s for s in specs}
-        kept = [by_name.pop(e.name, e) for e in self.entities]
-        return SceneSpec(tuple(kept) + tuple(by_name.values()), self.fixtures, self.table, self.name)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "table": self.table.to_dict(),
-            "fixtures": [f.to_dict() for f in self.fixtures],
-            "entities": [e.to_dict() for e in self.entities],
-        }
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "SceneSpec":
-        try:
-            return cls(
-                entities=tuple(EntitySpec.from_dict(e) for e in data.get("entities", ())),
-                fixtures=tuple(FixtureSpec.from_dict(f) for f in data.get("fixtures", ())),
-                table=TableSpec.from_dict(data.get("table", {})),
-                name=str(data.get("name", "")),
-            )
-        except (TypeError, ValueError) as exc:
-            raise LlcpsError(
-                f"not a valid scene description: {exc}", hint="scenes come from SceneSpec.to_dict()"
-            ) from exc
-
-
 
 
 class World:
