@@ -35,6 +35,7 @@ from llcps.errors import LlcpsError
 from llcps.models.measures import rank
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
+from llcps.scenarios.goal import goal_text
 from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
 from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
 from llcps.sim.perception import entity_features, perceive
@@ -242,9 +243,14 @@ class Agent:
         """Save the world's physics state in the store; returns the snapshot id."""
         self.sync()
         state = self.world.serialize_state()
-        stored = self.store.put_snapshot(scene=self.world.scene.to_dict(), state=state)
+        stored = self.store.put_snapshot(scene=self.scene_record(), state=state)
         self._states[stored] = state
         return stored
+
+    def scene_record(self) -> dict[str, object]:
+        """The scene as a snapshot stores it: what the world is built from, and the task's goal,
+        so that a trial replays (and is judged) from the store alone, whatever file it came from."""
+        return {**self.world.scene.to_dict(), "goal": goal_text(self.scenario.goal_pos, self.scenario.goal_neg)}
 
     def restore(self, snapshot_id: int) -> None:
         """Return the world to a snapshot taken by :meth:`snapshot`."""
@@ -343,6 +349,7 @@ def solve(
         measure=config.measure,
         seed=config.seed,
         branch=branch_name,
+        variant=config.variant,
     )
     result.run_id = store.start_run(
         command=command, seed=config.seed, config=_config_json(config), branch=branch_name
@@ -363,7 +370,7 @@ def solve(
         records = list(store.visible_trials(branch_name))
         model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records)
         kb = load_knowledge(store, branch_name)
-        world = World.from_scene(scenario.scene(config.condition), gui=gui)
+        world = World.from_scene(scenario.scene(config.condition, config.variant), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
         agent = Agent(
             store=store,
@@ -463,7 +470,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
     snapshot, failed_step, failure_state = failure.snapshot, failure.step, failure.state
     agent.restore(snapshot)
     failed_spec = agent.controller_call(failed_step)
-    candidates = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
+    candidates = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.candidate_grid(agent.scenario))
     result.candidates = len(candidates)
     features = {name: entity_features(world, name) for name in agent.kinds}
     inputs = [WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in candidates]
@@ -568,6 +575,7 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
         "model": config.model,
         "measure": config.measure,
         "seed": config.seed,
+        "variant": config.variant,
         "model_seed": config.fit_seed,
         "budget": config.budget,
         "refit_every": config.refit_every,

@@ -153,7 +153,7 @@ def failure_point(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
         failed_step, failure = run.failure.step, run.failure.monitor
         world.restore_serialized(run.failure.physics)  # candidates start where a_f did
         failed_spec = agent.controller_call(failed_step)
-        specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.grid)
+        specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.candidate_grid(spec))
         features = {name: entity_features(world, name) for name in agent.kinds}
         candidates = tuple(WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in specs)
         desired = desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del)
