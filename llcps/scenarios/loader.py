@@ -118,7 +118,11 @@ class ScenarioSource:
     def concrete(self, variant: int) -> dict[str, Any]:
         """The file with every range replaced by ``variant``'s value: a file of that scene alone."""
         draws = Draws(variant, self.attempt(variant))
-        return _resolve(copy.deepcopy(dict(self.data)), draws)
+        data = _resolve(copy.deepcopy(dict(self.data)), draws)
+        if variant:  # a file of its own: a name of its own
+            data["name"] = f"{self.model.name}_v{variant}"
+            data.pop("alias", None)
+        return data
 
     def _entity_path(self, name: str) -> str:
         for index, entity in enumerate(self.model.entities):
@@ -382,7 +386,10 @@ def dump(source: ScenarioSource, *, fmt: str, variant: int | None = None) -> str
         return source.text
     import tomli_w
 
-    header = f"# {source.name}, variant {variant}: every range of {source.where} drawn (llcps scenario show {source.name} --variant {variant})\n"
+    header = (
+        f"# Variant {variant} of {source.name} ({Path(source.where).name}) with every range drawn:\n"
+        f"# its variant 0 is that scene (`llcps scenario show {source.name} --variant {variant}`).\n"
+    )
     return header + tomli_w.dumps(data)
 
 

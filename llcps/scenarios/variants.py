@@ -78,4 +78,39 @@ def check_variant(variant: object) -> int:
     return variant
 
 
-__all__ = ["DIGITS", "MAX_ATTEMPTS", "Draws", "check_variant", "choice", "is_range", "number", "unit"]
+def parse_range(text: str) -> range:
+    """A range of variants from the command line: ``A:B`` is A..B-1, ``N`` is N alone."""
+    from llcps.errors import LlcpsError
+
+    parts = text.strip().split(":")
+    try:
+        bounds = [int(p) for p in parts]
+    except ValueError:
+        bounds = []
+    if len(parts) == 1 and len(bounds) == 1 and bounds[0] >= 0:
+        return range(bounds[0], bounds[0] + 1)
+    if len(parts) == 2 and len(bounds) == 2 and 0 <= bounds[0] < bounds[1]:
+        return range(bounds[0], bounds[1])
+    raise LlcpsError(
+        f"not a range of variants: {text!r}",
+        hint="write A:B for variants A..B-1 (0 <= A < B), e.g. 0:20, or one variant N",
+    )
+
+
+def range_text(variants: range) -> str:
+    """``range(0, 10)`` -> ``0:10`` (the form :func:`parse_range` reads)."""
+    return f"{variants.start}:{variants.stop}"
+
+
+__all__ = [
+    "DIGITS",
+    "MAX_ATTEMPTS",
+    "Draws",
+    "check_variant",
+    "choice",
+    "is_range",
+    "number",
+    "parse_range",
+    "range_text",
+    "unit",
+]
