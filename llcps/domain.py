@@ -8,8 +8,11 @@ here imports PyBullet, SQLAlchemy, torch or the CLI.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Iterable, Mapping
+
+from llcps.errors import LlcpsError
 
 #: The four actions of Table 1, in the order of their encoding (1..4).
 ACTIONS: tuple[str, ...] = ("push", "push_together", "remove_from_container", "place_in_container")
@@ -26,9 +29,48 @@ ACTION_ARITY: Mapping[str, int] = {
 #: let a push move an entity along every horizontal axis (see docs/controllers.md).
 ORIENTATIONS: tuple[str, ...] = ("left", "top", "right", "front")
 
+#: Horizontal direction in which a push with each orientation moves its argument (robot
+#: frame: +x away from the robot, +y to its left). "top" pushes near the top, along +x.
+PUSH_DIRECTION: Mapping[str, tuple[float, float]] = {
+    "left": (0.0, -1.0),
+    "right": (0.0, 1.0),
+    "front": (1.0, 0.0),
+    "top": (1.0, 0.0),
+}
+#: Side of an entity each orientation names: where a place releases over a container,
+#: and where a remove sets its object down.
+SIDE: Mapping[str, tuple[float, float]] = {
+    "left": (0.0, 1.0),
+    "right": (0.0, -1.0),
+    "front": (1.0, 0.0),
+    "top": (-1.0, 0.0),
+}
+
 #: Entity shapes and colors of Table 1, in the order of their encoding.
 SHAPES: tuple[str, ...] = ("sphere", "box", "cylinder")
 COLORS: tuple[str, ...] = ("red", "blue", "green")
+
+#: Largest seed accepted anywhere: every consumer (numpy, torch, scikit-learn) takes 32 bits.
+MAX_SEED = 2**32 - 1
+#: Largest id (trial, snapshot, run, ...) a store can hold: a signed 64-bit integer.
+MAX_ID = 2**63 - 1
+#: Most random interactions one pretraining run may ask for.
+MAX_PRETRAIN_TRIALS = 10_000_000
+
+
+def check_seed(seed: int, what: str = "seed") -> int:
+    """Refuse a seed outside 0..MAX_SEED before any work starts (and anything is stored)."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise LlcpsError(f"{what} must be an integer from 0 to {MAX_SEED}, got {seed!r}", hint=f"pass a {what} in 0..{MAX_SEED}")
+    return seed
+
+
+def check_id(value: int, what: str = "id") -> int:
+    """Refuse an id no store can hold (a database would fail on it with an overflow)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_ID:
+        raise LlcpsError(f"{what} must be an integer from 0 to {MAX_ID}, got {value!r}", hint="see `llcps inspect trials` for ids")
+    return value
+
 
 #: Where a trial came from.
 TRIAL_SOURCES: tuple[str, ...] = ("pretrain", "plan", "exploration", "replay")
@@ -60,6 +102,16 @@ State = frozenset[Fluent]
 """A symbolic state: the set of fluents that hold (negations are implicit)."""
 
 SYMMETRIC_PREDICATES: frozenset[str] = frozenset({"touching"})
+
+#: Every fluent predicate perception reports (see :mod:`llcps.sim.perception`).
+PREDICATES: tuple[str, ...] = ("visible", "reachable", "touching", "on", "in", "holding", "near")
+
+#: What a body a fluent mentions is: an entity (object or container) or a fixture
+#: (the table, the floor, or another piece of static scenery such as a wall).
+BODY_KINDS: tuple[str, ...] = ("object", "container", "table", "floor", "fixture")
+
+#: How a trial's symbolic change came to be known (``unknown``: it could not be).
+CHANGE_SOURCES: tuple[str, ...] = ("recorded", "replayed", "unknown")
 
 
 def fluent(predicate: str, *arguments: str) -> Fluent:
@@ -253,4 +305,114 @@ class TrialRecord:
             "seed": self.seed,
             "snapshot_id": self.snapshot_id,
             "created_at": self.created_at,
+        }
+
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Body:
+    """One body of a scene as a trial found it, described without its name's meaning.
+
+    The goal-aware world model places an atom's bodies relative to a candidate's
+    arguments from these: kind, shape and axis-aligned bounding box.
+
+    Attributes:
+        name: the body's symbol in fluents.
+        kind: one of BODY_KINDS.
+        shape: the entity's shape (SHAPES); None for a fixture.
+        lo: lower corner of its world-frame bounding box (m).
+        hi: upper corner (m); the floor is a thin slab of the floor's visible extent.
+        centre: the entity's bounding-box centre in its own frame, in the world (m);
+            for a fixture the middle of ``lo`` and ``hi``.
+    """
+
+    name: str
+    kind: str
+    shape: str | None
+    lo: Vec3
+    hi: Vec3
+    centre: Vec3
+
+    def __post_init__(self) -> None:
+        if self.kind not in BODY_KINDS:
+            raise ValueError(f"unknown body kind {self.kind!r}; expected one of {BODY_KINDS}")
+        if self.shape is not None and self.shape not in SHAPES:
+            raise ValueError(f"unknown shape {self.shape!r}; expected one of {SHAPES}")
+        for name in ("lo", "hi", "centre"):
+            value = tuple(float(v) for v in getattr(self, name))
+            if len(value) != 3 or not all(math.isfinite(v) for v in value):
+                raise ValueError(f"body {self.name!r}: {name} needs 3 finite numbers")
+            object.__setattr__(self, name, value)
+
+    @property
+    def is_entity(self) -> bool:
+        return self.kind in ("object", "container")
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "shape": self.shape,
+            "lo": list(self.lo),
+            "hi": list(self.hi),
+            "centre": list(self.centre),
+        }
+
+
+@dataclass(frozen=True)
+class TrialChange:
+    """The symbolic change a trial made, and the scene it made it in.
+
+    Beside Omega (which says what *kind* of fluent changed), this says *which* atoms
+    changed: the goal-aware world model learns from it whether a candidate would make
+    a failure's missing atoms hold. Stored per trial id in the experience store.
+
+    Attributes:
+        before: the symbolic state before the trial.
+        added: atoms that became true.
+        deleted: atoms that stopped being true.
+        bodies: every entity and fixture of the scene as the trial found it.
+        source: how the change is known (CHANGE_SOURCES, never ``unknown`` here).
+        trial_id: the trial it belongs to (None before the trial is stored).
+    """
+
+    before: State
+    added: frozenset[Fluent]
+    deleted: frozenset[Fluent]
+    bodies: tuple[Body, ...]
+    source: str = "recorded"
+    trial_id: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.source not in CHANGE_SOURCES or self.source == "unknown":
+            raise ValueError(f"a known change has source 'recorded' or 'replayed', not {self.source!r}")
+        if self.added & self.before or not self.deleted <= self.before:
+            raise ValueError("a change adds atoms that were false and deletes atoms that were true")
+
+    @classmethod
+    def between(
+        cls, before: Iterable[Fluent], after: Iterable[Fluent], bodies: Iterable[Body], *, source: str = "recorded"
+    ) -> "TrialChange":
+        """The change from the fluent set ``before`` to ``after``."""
+        b, a = frozenset(before), frozenset(after)
+        return cls(before=b, added=a - b, deleted=b - a, bodies=tuple(bodies), source=source)
+
+    @property
+    def after(self) -> State:
+        return (self.before - self.deleted) | self.added
+
+    def body(self, name: str) -> Body | None:
+        """The body called ``name``, if the scene has one."""
+        return next((b for b in self.bodies if b.name == name), None)
+
+    def as_json(self) -> dict[str, object]:
+        return {
+            "trial_id": self.trial_id,
+            "source": self.source,
+            "added": [list(a) for a in sorted(self.added)],
+            "deleted": [list(a) for a in sorted(self.deleted)],
+            "before": [list(a) for a in sorted(self.before)],
+            "bodies": [b.as_dict() for b in self.bodies],
         }

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 import numpy as np
 
-from llcps.domain import ACTIONS, OUTCOME_NAMES
+from llcps.domain import ACTIONS, MAX_PRETRAIN_TRIALS, OUTCOME_NAMES, check_seed
 from llcps.errors import LlcpsError
 from llcps.sim.motion import control_loop_rate
 from llcps.sim.sampler import sample_interaction
@@ -181,8 +181,9 @@ def pretrain(
         progress: called after every stored trial.
         control_loop_every: measure the raw control-loop rate on every k-th scene (0: never).
     """
-    if n < 0:
-        raise LlcpsError(f"the number of trials must be >= 0, got {n}", hint="pass --n 200, say")
+    if not 0 <= n <= MAX_PRETRAIN_TRIALS:
+        raise LlcpsError(f"the number of trials must be from 0 to {MAX_PRETRAIN_TRIALS}, got {n}", hint="pass --trials 200, say")
+    check_seed(seed)
     from llcps.domain import TrialRecord
 
     name = store.resolve_branch(branch).name
@@ -212,7 +213,8 @@ def pretrain(
                     run_id=summary.run_id,
                     snapshot_id=snapshot_id,
                     extra={"pretrain_seed": seed, "index": index},
-                )
+                ),
+                change=r.change,
             )
             summary.trial_ids.append(trial_id)
             for key, bit in r.outcome.as_dict().items():

@@ -1,10 +1,19 @@
-"""Shared fixtures. Keep this small: one fixture per idea."""
+"""Shared fixtures. Keep this small: one fixture per idea.
+
+Store tests run on SQLite and on PostgreSQL: ``store_url`` (and ``store``, ``db_url``)
+are parametrized over both backends. The PostgreSQL cases need a server named by
+``LLCPS_TEST_POSTGRES_URL``; ``make test`` starts a throwaway one (tests/services.sh).
+Without it they are skipped with that reason, and the summary line counts them.
+"""
 
 from __future__ import annotations
 
+import os
 import sys
+import uuid
+from collections import Counter
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import pytest
 
@@ -15,10 +24,67 @@ from store_writer import sample_trial  # noqa: E402
 
 from llcps.store import Store  # noqa: E402
 
+POSTGRES_URL = os.environ.get("LLCPS_TEST_POSTGRES_URL")
+
+
+def _postgres_unavailable() -> str | None:
+    if not POSTGRES_URL:
+        return "no PostgreSQL server: run `make test` (tests/services.sh starts one) or set LLCPS_TEST_POSTGRES_URL"
+    try:
+        import psycopg  # noqa: F401
+    except ImportError:
+        return "psycopg is not installed: pip install -e '.[dev]'"
+    return None
+
+
+POSTGRES_SKIP = _postgres_unavailable()
+
+#: The backends every store test runs on.
+BACKENDS = [
+    pytest.param("sqlite", id="sqlite"),
+    pytest.param(
+        "postgresql",
+        id="postgresql",
+        marks=[pytest.mark.postgresql, pytest.mark.skipif(POSTGRES_SKIP is not None, reason=POSTGRES_SKIP or "")],
+    ),
+]
+
+
+def fresh_postgres_url() -> str:
+    """A URL whose search_path is a new, empty schema: a fresh database for one test."""
+    from sqlalchemy import create_engine, make_url, text
+
+    assert POSTGRES_URL is not None
+    schema = f"t_{uuid.uuid4().hex[:12]}"
+    engine = create_engine(POSTGRES_URL)
+    with engine.begin() as conn:
+        conn.execute(text(f"CREATE SCHEMA {schema}"))
+    engine.dispose()
+    url = make_url(POSTGRES_URL).update_query_dict({"options": f"-csearch_path={schema}"})
+    return url.render_as_string(hide_password=False)
+
+
+def new_store_url(backend: str, directory: Path, name: str = "llcps.db") -> str:
+    """Where a new store of ``backend`` can be made: a file path or a fresh schema's URL."""
+    return str(directory / name) if backend == "sqlite" else fresh_postgres_url()
+
+
+@pytest.fixture(params=BACKENDS)
+def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """A location for a new store, on each backend (no store there yet)."""
+    return new_store_url(request.param, tmp_path)
+
 
 @pytest.fixture
-def store(tmp_path: Path) -> Iterator[Store]:
-    """A fresh SQLite experience store with a `main` branch."""
+def store(store_url: str) -> Iterator[Store]:
+    """A fresh experience store with a `main` branch, on each backend."""
+    with Store.open(store_url, create=True) as opened:
+        yield opened
+
+
+@pytest.fixture
+def sqlite_store(tmp_path: Path) -> Iterator[Store]:
+    """A fresh SQLite store, for tests whose subject is not the store (simulation, models)."""
     with Store.open(str(tmp_path / "llcps.db"), create=True) as opened:
         yield opened
 
@@ -27,3 +93,21 @@ def store(tmp_path: Path) -> Iterator[Store]:
 def new_trial():  # noqa: ANN201 - returns the sample_trial factory
     """``new_trial(seed, branch=..., source=..., **overrides) -> TrialRecord``."""
     return sample_trial
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    return f"postgresql: {'tests run at ' + POSTGRES_URL if POSTGRES_SKIP is None else 'tests skipped: ' + POSTGRES_SKIP}"
+
+
+def pytest_terminal_summary(terminalreporter: Any) -> None:
+    """Say how many PostgreSQL cases ran, so a log shows they were not skipped."""
+    counts: Counter[str] = Counter()
+    for outcome in ("passed", "failed", "error", "skipped"):
+        for report in terminalreporter.stats.get(outcome, []):
+            if "postgresql" in getattr(report, "keywords", {}) and getattr(report, "when", "call") in ("call", "setup"):
+                counts[outcome] += 1
+    if counts:
+        terminalreporter.write_line(
+            f"PostgreSQL cases: {counts['passed']} run and passed, {counts['failed'] + counts['error']} failed, "
+            f"{counts['skipped']} skipped" + (f" ({POSTGRES_SKIP})" if counts["skipped"] and POSTGRES_SKIP else "")
+        )

@@ -16,20 +16,7 @@ from llcps.cps.agent import solve
 from llcps.cps.episode import SolveConfig
 from llcps.cps.replay import replay
 from llcps.pretrain import pretrain
-from llcps.scenarios import SCENARIOS
 from llcps.store import Store
-
-PRETRAIN_TRIALS = 30
-BUDGET = 467  # the whole candidate space: a novelty that can be resolved is
-
-
-@pytest.fixture(scope="module")
-def pretrained(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A store whose main branch holds a small seeded pretraining set."""
-    path = tmp_path_factory.mktemp("agent") / "agent.db"
-    with Store.open(str(path), create=True) as store:
-        pretrain(store, branch="main", n=PRETRAIN_TRIALS, seed=1)
-    return path
 
 
 def test_branch_at_pretrain_does_not_see_later_exploration_or_operators(tmp_path: Path) -> None:
@@ -104,7 +91,7 @@ def test_bad_input_is_one_clear_error_and_changes_nothing(tmp_path: Path, args: 
 def test_interrupt_keeps_completed_trials_and_marks_the_episode(tmp_path: Path) -> None:
     db = tmp_path / "sigint.db"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "llcps.cli.main", "--db", str(db), "solve", "scenario1", "--budget", "400", "--json"],
+        [sys.executable, "-m", "llcps.cli.main", "--db", str(db), "solve", "scenario1", "--budget", "400", "--create", "--json"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -45,3 +45,12 @@ def test_enumeration_is_deterministic(action: str) -> None:
     assert enumerate_candidates(failed=failed, entities=ENTITIES) == enumerate_candidates(
         failed=failed, entities=dict(reversed(list(ENTITIES.items())))
     )
+
+
+def test_the_candidate_space_size_is_counted_from_the_scenes() -> None:
+    from llcps.cps.candidates import candidate_space_size
+    from llcps.scenarios import SCENARIOS
+
+    for name in SCENARIOS:  # two objects and a container: push 3, push_together 3*2, remove 2, place 2
+        assert candidate_space_size(name) == (3 + 6 + 2 + 2) * Grid().size - 1
+    assert candidate_space_size() == max(candidate_space_size(name) for name in SCENARIOS)

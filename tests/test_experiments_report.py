@@ -20,7 +20,9 @@ EXPECTED_SIZES = {
     "paper": (2 * 4 * 2 * 2, 20),
     "full": (5 * 5 * 2 * 2, 20),
     "smoke": (2, 2),
-    "vs_random": (2, 10),
+    "vs_random": (2, 20),
+    "lifelong": (2, 20),
+    "models": (5, 5),
     "random": (1, 20),
 }
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import pytest
+from conftest import BACKENDS, POSTGRES_SKIP, fresh_postgres_url, new_store_url
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
@@ -82,7 +83,7 @@ def test_tasks_cover_the_grid_and_never_share_a_branch() -> None:
     for i, task in enumerate(tasks):
         if isinstance(task, SequenceTask):
             producer = next(j for j, t in enumerate(tasks) if task.pretrain_branch in t.branches)
-            assert producer < i and task.budget == preset.budget
+            assert producer < i and task.budget == preset.exploration_budget()
 
 
 def test_pretraining_subset_takes_one_trial_per_action_deterministically(store: Store, new_trial) -> None:
@@ -119,16 +120,10 @@ def _source_store(store: Store, new_trial) -> dict[str, Any]:
     return {"run": run, "episode": episode, "child_ids": child_ids}
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
+@pytest.fixture(params=BACKENDS)
 def dest_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
-    """A new, empty store's URL: a SQLite file, or a fresh PostgreSQL schema when one is configured."""
-    if request.param == "sqlite":
-        return str(tmp_path / "dest.db")
-    if not os.environ.get("LLCPS_TEST_POSTGRES_URL"):
-        pytest.skip("set LLCPS_TEST_POSTGRES_URL to test on PostgreSQL")
-    from test_store_postgres import _fresh_schema_url
-
-    return _fresh_schema_url()
+    """A new, empty store's URL: a SQLite file, or a fresh PostgreSQL schema."""
+    return new_store_url(request.param, tmp_path, "dest.db")
 
 
 def test_payload_round_trip_remaps_ids_and_dedups_snapshots(store: Store, dest_url: str, new_trial) -> None:
@@ -228,6 +223,19 @@ def test_results_are_identical_with_two_workers(reference: tuple[Store, Any], tm
         assert store_signature(store) == store_signature(ref_store)
 
 
+@pytest.mark.postgresql
+@pytest.mark.skipif(POSTGRES_SKIP is not None, reason=POSTGRES_SKIP or "")
+def test_a_grid_run_into_postgresql_stores_what_sqlite_does(reference: tuple[Store, Any]) -> None:
+    """One seed of the smoke grid, two workers, imported into PostgreSQL: the SQLite run's rows."""
+    ref_store, _ = reference
+    with Store.open(fresh_postgres_url(), create=True) as store:
+        summary = run_experiment(store, preset="smoke", seeds=[0], workers=2)
+        assert summary.status == "ok"
+        expected = {k: v for k, v in store_signature(ref_store).items() if k.endswith("-s0") or "-s0-" in k}
+        assert store_signature(store) == expected
+        assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke", [0]))
+
+
 def test_results_are_identical_without_the_cache_and_from_a_warm_one(reference: tuple[Store, Any], tmp_path: Path) -> None:
     """The reference ran with a cold cache; --no-cache and a later run on a warm cache give the same store."""
     ref_store, ref_summary = reference
@@ -302,7 +310,7 @@ def _llcps(*args: str) -> list[str]:
 def test_kill_9_then_run_again_completes_without_duplicates(reference: tuple[Store, Any], tmp_path: Path) -> None:
     ref_store, _ = reference
     db, out = tmp_path / "killed.db", tmp_path / "report"
-    args = ("--db", str(db), "experiment", "run", "--preset", "smoke", "--seeds", "1", "--workers", "1", "--out", str(out))
+    args = ("--db", str(db), "experiment", "run", "--preset", "smoke", "--seeds", "1", "--workers", "1", "--out", str(out), "--create")
     first = pretrain_branch_name("smoke", 4, 0)
     child = subprocess.Popen(_llcps(*args), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from llcps.cps.agent import solve
+from llcps.cps.candidates import candidate_space_size
 from llcps.cps.episode import SolveConfig
 from llcps.cps.knowledge import load_knowledge
 from llcps.domain import TrialSpec, ControllerParams, fluent
@@ -23,7 +24,7 @@ from llcps.symbolic.planner import plan
 
 PRETRAIN_TRIALS = 30
 SEED = 3
-BUDGET = 467  # the whole candidate space: a novelty that can be resolved is
+BUDGET = candidate_space_size()  # the whole candidate space: a novelty that can be resolved is
 NAMES = tuple(SCENARIOS)
 
 
@@ -50,6 +51,7 @@ def fresh(pretrained: Path) -> dict[str, int]:
             store.create_branch(f"fresh-{name}", from_branch="main", at="pretrain")
             result = solve(store, branch=f"fresh-{name}", config=_config(name))
             assert result.status == "solved", result.as_json()
+            assert result.candidates == candidate_space_size(name)  # the agent's space is the one the budget names
             explored[name] = result.exploration_trials
     return explored
 

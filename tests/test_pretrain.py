@@ -21,7 +21,8 @@ def rows(store: Store) -> list[tuple]:
     ]
 
 
-def test_pretrain_stores_trials_that_replay_exactly(store) -> None:
+def test_pretrain_stores_trials_that_replay_exactly(sqlite_store) -> None:
+    store = sqlite_store
     summary = pretrain(store, branch=None, n=3, seed=5)
     assert summary.trials == 3 and summary.branch == "main"
     trials = store.visible_trials(None)
@@ -46,7 +47,8 @@ def test_the_same_seed_writes_the_same_trials(tmp_path) -> None:
     assert out[0] == out[1]
 
 
-def test_a_negative_count_is_refused(store) -> None:
+def test_a_negative_count_is_refused(sqlite_store) -> None:
+    store = sqlite_store
     with pytest.raises(LlcpsError):
         pretrain(store, branch=None, n=-1, seed=0)
 
@@ -54,7 +56,7 @@ def test_a_negative_count_is_refused(store) -> None:
 def test_cli_prints_one_json_document(tmp_path) -> None:
     db = str(tmp_path / "cli.db")
     runner = CliRunner()
-    done = runner.invoke(app, ["--db", db, "pretrain", "--trials", "1", "--seed", "2", "--json"])
+    done = runner.invoke(app, ["--db", db, "pretrain", "--trials", "1", "--seed", "2", "--create", "--json"])
     assert done.exit_code == 0, done.output
     summary = json.loads(done.stdout)
     assert summary["trials"] == 1 and len(summary["trial_ids"]) == 1

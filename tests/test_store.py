@@ -6,6 +6,7 @@ import dataclasses
 from typing import Iterator
 
 import pytest
+from conftest import BACKENDS, new_store_url
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,9 +19,9 @@ def _expected_record(trial_id: int, new: TrialRecord, created_at: str) -> TrialR
     return dataclasses.replace(new, id=trial_id, created_at=created_at)
 
 
-@pytest.fixture(scope="module")
-def shared_store(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Store]:
-    with Store.open(str(tmp_path_factory.mktemp("shared") / "shared.db"), create=True) as opened:
+@pytest.fixture(scope="module", params=BACKENDS)
+def shared_store(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Store]:
+    with Store.open(new_store_url(request.param, tmp_path_factory.mktemp("shared"), "shared.db"), create=True) as opened:
         yield opened
 
 

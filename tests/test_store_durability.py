@@ -1,4 +1,5 @@
-"""Trials survive a killed writer, and concurrent writers neither fail nor lose trials."""
+"""Trials survive a killed writer, and concurrent writers neither fail nor lose trials
+(on SQLite and on PostgreSQL)."""
 
 from __future__ import annotations
 
@@ -11,14 +12,16 @@ from contextlib import closing
 from pathlib import Path
 
 import pytest
+from sqlalchemy import select
 from store_writer import sample_trial
 
 from llcps.store import Store
+from llcps.store.schema import Trial
 
 WRITER = Path(__file__).parent / "fixtures" / "store_writer.py"
 
 
-def _writer(db: Path, branch: str, count: int, *extra: str) -> subprocess.Popen[str]:
+def _writer(db: str, branch: str, count: int, *extra: str) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, str(WRITER), str(db), branch, str(count), *extra],
         stdin=subprocess.PIPE,
@@ -28,16 +31,18 @@ def _writer(db: Path, branch: str, count: int, *extra: str) -> subprocess.Popen[
     )
 
 
-def _stored_ids(db: Path) -> set[int]:
-    with closing(sqlite3.connect(db)) as conn:
-        assert conn.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
-        return {row[0] for row in conn.execute("SELECT id FROM trials")}
+def _stored_ids(db: str) -> set[int]:
+    if "://" not in db:  # SQLite: the file itself must be intact
+        with closing(sqlite3.connect(db)) as conn:
+            assert conn.execute("PRAGMA integrity_check").fetchall() == [("ok",)]
+    with Store.open(db) as store, store.engine.connect() as conn:
+        return set(conn.scalars(select(Trial.id)))
 
 
 @pytest.mark.parametrize("kill_after", [1, 150])
-def test_kill_9_keeps_every_returned_trial(tmp_path: Path, kill_after: int) -> None:
-    db = tmp_path / "kill.db"
-    Store.open(str(db), create=True).close()
+def test_kill_9_keeps_every_returned_trial(store_url: str, kill_after: int) -> None:
+    db = store_url
+    Store.open(db, create=True).close()
     child = _writer(db, "main", 0)
     assert child.stdout is not None
     returned = [int(child.stdout.readline()) for _ in range(kill_after)]
@@ -47,14 +52,14 @@ def test_kill_9_keeps_every_returned_trial(tmp_path: Path, kill_after: int) -> N
     stored = _stored_ids(db)
     assert set(returned) <= stored
     assert len(stored) - len(returned) <= 1  # at most the commit that was cut off before printing
-    with Store.open(str(db)) as store:  # the store opens and reads normally afterwards
+    with Store.open(db) as store:  # the store opens and reads normally afterwards
         assert store.count_visible_trials("main") == len(stored)
         assert store.add_trial(sample_trial(10**6)) > max(stored)
 
 
-def test_two_concurrent_writers_both_finish_and_lose_nothing(tmp_path: Path) -> None:
-    db = tmp_path / "concurrent.db"
-    with Store.open(str(db), create=True) as store:
+def test_two_concurrent_writers_both_finish_and_lose_nothing(store_url: str) -> None:
+    db = store_url
+    with Store.open(db, create=True) as store:
         store.create_branch("exp")
     count = 400
     writers = [_writer(db, branch, count, "--wait") for branch in ("main", "exp")]
@@ -75,6 +80,6 @@ def test_two_concurrent_writers_both_finish_and_lose_nothing(tmp_path: Path) -> 
     assert [len(i) for i in ids] == [count, count]
     assert not set(ids[0]) & set(ids[1])
     assert _stored_ids(db) == set(ids[0]) | set(ids[1])
-    with Store.open(str(db)) as store:
+    with Store.open(db) as store:
         assert [t.id for t in store.visible_trials("exp")] == ids[1]
         assert [t.id for t in store.visible_trials("main")] == ids[0]

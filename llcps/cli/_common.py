@@ -1,15 +1,18 @@
 """What every command module shares: the app factory, the global context, store
-opening, output helpers and the error wrapper.
+opening, output checks, output helpers and the error contract.
 
 Output rules: data goes to stdout (a table, or with ``--json`` exactly one JSON
-document); messages and progress go to stderr. A :class:`~llcps.errors.LlcpsError`
-anywhere below the root command becomes ``error: ...`` / ``hint: ...`` on stderr
-and its exit code, never a traceback.
+document); messages and progress go to stderr. Every error, argument parsing
+included, becomes ``error: ...`` / ``hint: ...`` on stderr and exit code 2 (130 for
+Ctrl-C), never a traceback (see :class:`LlcpsGroup`). Text from the store (branch
+names, scenarios) is printed literally, never as rich markup.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import re
 import sys
 from dataclasses import dataclass
 from enum import Enum
@@ -17,10 +20,17 @@ from typing import Annotated, Any, Iterable
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
+
 from llcps.cli._conventions import ConventionGroup
 from llcps.errors import LlcpsError
 from llcps.store import Store
+
+try:  # recent typer carries its own copy of click, whose exceptions the parser raises
+    from typer._click import exceptions as click_exceptions
+except ImportError:  # pragma: no cover - older typer uses click itself
+    from click import exceptions as click_exceptions
 
 #: Human messages and progress.
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
@@ -31,24 +41,119 @@ DEFAULT_DB = "llcps.db"
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Print one JSON document on stdout instead of text.")]
 YesFlag = Annotated[bool, typer.Option("--yes", help="Really do it; without it, only report what would change.")]
+CreateFlag = Annotated[
+    bool, typer.Option("--create", help="Create the store if --db names none yet (otherwise only `llcps db init` creates one).")
+]
 
 
 def report_error(exc: LlcpsError) -> None:
-    """Print a project error the one way the CLI does."""
-    typer.echo(f"error: {exc.message}", err=True)
-    if exc.hint:
-        typer.echo(f"hint: {exc.hint}", err=True)
+    """Print a project error the one way the CLI does: an ``error:`` and a ``hint:`` line."""
+    typer.echo(f"error: {_one_line(exc.message)}", err=True)
+    typer.echo(f"hint: {_one_line(exc.hint or 'see `llcps --help`')}", err=True)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+_SUGGESTION = re.compile(r"\s*\(?(?:Did you mean|Possible options:) (.+?)\??\)?\s*$", re.IGNORECASE)
+
+
+def usage_error(exc: Any) -> LlcpsError:
+    """A click parsing error as a project error: its message, and a hint at the fix."""
+    text = _one_line(exc.format_message())
+    ctx = getattr(exc, "ctx", None)
+    command = ctx.command_path if ctx is not None else "llcps"
+    hint = f"see `{command} --help`"
+    found = _SUGGESTION.search(text)
+    if found:
+        text = text[: found.start()].rstrip(" .")
+        hint = f"did you mean {found.group(1)}? ({hint})"
+    return LlcpsError(text[:1].lower() + text[1:], hint=hint)
+
+
+#: click >= 8.2 reports a bare group (``llcps db``) as this usage error; older click exits 0 itself.
+_NO_ARGS_IS_HELP: Any = getattr(click_exceptions, "NoArgsIsHelpError", ())
 
 
 class LlcpsGroup(ConventionGroup):
-    """The root command group: turns project errors into one line and an exit code."""
+    """The root command group: one error contract for everything below it.
 
-    def invoke(self, ctx: Any) -> Any:
+    Every failure, argument parsing included, prints ``error: ...`` and ``hint: ...`` on
+    stderr and exits 2 (``LlcpsError.exit_code``); Ctrl-C exits 130. An unexpected
+    exception is reported the same way as an internal error (``LLCPS_DEBUG=1`` shows
+    its traceback). The global ``--db`` and ``--branch`` may also follow the
+    subcommand (:func:`hoist_global_options`).
+    """
+
+    def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None, standalone_mode: bool = True, **extra: Any) -> Any:  # type: ignore[override]  # noqa: E501
+        code = self._run(args, prog_name, complete_var, extra)
+        if not standalone_mode:
+            return code
+        sys.exit(code)
+
+    def _run(self, args: Any, prog_name: str | None, complete_var: str | None, extra: dict[str, Any]) -> int:
+        args = hoist_global_options(list(sys.argv[1:] if args is None else args))
         try:
-            return super().invoke(ctx)
+            result = super().main(args=args, prog_name=prog_name, complete_var=complete_var, standalone_mode=False, **extra)
+            return result if isinstance(result, int) else 0
+        except click_exceptions.ClickException as exc:
+            if isinstance(exc, _NO_ARGS_IS_HELP) and exc.ctx is not None:  # a bare group: its help, not an error
+                typer.echo(exc.ctx.get_help())
+                return 0
+            report_error(usage_error(exc))
+            return LlcpsError.exit_code
         except LlcpsError as exc:
             report_error(exc)
-            raise typer.Exit(exc.exit_code) from None
+            return exc.exit_code
+        except (typer.Abort, KeyboardInterrupt):
+            typer.echo("error: interrupted", err=True)
+            typer.echo("hint: completed work is kept; run the same command again to go on", err=True)
+            return 130
+        except Exception as exc:  # noqa: BLE001 - the contract: never a traceback
+            if os.environ.get("LLCPS_DEBUG"):
+                raise
+            report_error(
+                LlcpsError(
+                    f"internal error: {type(exc).__name__}: {exc}",
+                    hint="this is a bug in llcps; rerun with LLCPS_DEBUG=1 to see the traceback and report it",
+                )
+            )
+            return LlcpsError.exit_code
+
+
+#: Global options that may also follow the subcommand: ``llcps inspect trials --branch exp``.
+GLOBAL_OPTIONS = ("--db", "--branch")
+
+
+def hoist_global_options(args: list[str]) -> list[str]:
+    """Move ``--db``/``--branch`` (and their values) given after the subcommand to the front.
+
+    Click only knows a group's options before its subcommand; moving them keeps one
+    definition (with its environment variable) for both places. Tokens after ``--``
+    are left alone; a later occurrence wins, as with any repeated option.
+    """
+    front: list[str] = []
+    rest: list[str] = []
+    i = 0
+    while i < len(args):
+        token = args[i]
+        if token == "--":
+            rest.extend(args[i:])
+            break
+        name = token.split("=", 1)[0]
+        if name in GLOBAL_OPTIONS:
+            if "=" in token:
+                front.append(token)
+            elif i + 1 < len(args):
+                front.extend(args[i : i + 2])
+                i += 1
+            else:
+                rest.append(token)  # let click say that the value is missing
+        else:
+            rest.append(token)
+        i += 1
+    return front + rest
 
 
 def new_app(help: str, **kwargs: Any) -> typer.Typer:  # noqa: A002 - typer's own name
@@ -107,9 +212,9 @@ def message(text: str) -> None:
 
 def print_table(title: str | None, columns: Iterable[str], rows: Iterable[Iterable[Any]], *, show_header: bool = True) -> None:
     """A rich table on stdout."""
-    table = Table(title=title, show_header=show_header)
+    table = Table(title=None if title is None else escape(title), show_header=show_header)
     for column in columns:
-        table.add_column(column)
-    for row in rows:
-        table.add_row(*("" if v is None else str(v) for v in row))
+        table.add_column(escape(column))
+    for row in rows:  # cells hold names from the store: never markup
+        table.add_row(*("" if v is None else escape(str(v)) for v in row))
     out_console.print(table)

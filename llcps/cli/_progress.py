@@ -55,12 +55,32 @@ class PhaseProgress:
         self._progress.update(self._task, description=f"{self._label}: {text}" if self._label else text)
 
 
+class _NoProgress(PhaseProgress):
+    """The handle when stderr is not a terminal: progress is not shown at all."""
+
+    def __init__(self) -> None:
+        pass
+
+    def __call__(self, phase: str, done: int = 0, total: int | None = None) -> None:
+        pass
+
+    def note(self, text: str) -> None:
+        pass
+
+
 @contextmanager
 def progress_display(label: str, first_phase: str = "starting") -> Iterator[PhaseProgress]:
-    """Show progress on stderr while the block runs; yields the :class:`PhaseProgress`."""
+    """Show progress on stderr while the block runs; yields the :class:`PhaseProgress`.
+
+    Piped stderr gets nothing (not even the blank line a finished display leaves), so
+    a script sees only messages and the ``error:``/``hint:`` lines.
+    """
+    if not err_console.is_terminal:
+        yield _NoProgress()
+        return
     display = Progress(
         SpinnerColumn(),
-        TextColumn("{task.description}"),
+        TextColumn("{task.description}", markup=False),  # phases carry names from the store
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),

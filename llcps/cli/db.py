@@ -10,6 +10,7 @@ import typer
 
 from llcps.cli._common import (
     JsonFlag,
+    err_console,
     YesFlag,
     choice_enum,
     message,
@@ -21,10 +22,13 @@ from llcps.cli._common import (
 )
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
+from llcps.domain import MAX_ID, TRIAL_SOURCES
 from llcps.errors import LlcpsError
+from llcps.outputs import check_output_file
+from llcps.scenarios import get_scenario
 from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
-from llcps.domain import TRIAL_SOURCES
 from llcps.store.export import BINARY_FORMATS, EXPORT_FORMATS, export_trials
+from llcps.store.schema import MAX_BRANCH_NAME
 
 app = new_app(
     "Create, inspect, migrate, branch and export the experience store.",
@@ -41,7 +45,9 @@ TrialSource = choice_enum("ExportSource", TRIAL_SOURCES)
 DEFAULT_RESET_TARGET = ResetTarget(PRETRAIN)
 DEFAULT_EXPORT_FORMAT = ExportFormat("csv")
 
-BranchName = Annotated[str, typer.Argument(metavar="NAME", help="Branch name (no whitespace, '/', '..'; at most 100 characters).", show_default=False)]
+BranchName = Annotated[
+    str, typer.Argument(metavar="NAME", help=f"Branch name (no whitespace, '/', '..'; at most {MAX_BRANCH_NAME} characters).", show_default=False)
+]
 
 
 def _print_status(store: Store, branch: str | None, as_json: bool) -> None:
@@ -62,6 +68,11 @@ def _print_status(store: Store, branch: str | None, as_json: bool) -> None:
             ("branches", status.branches),
             ("trials in database", status.trials_total),
             ("visible trials", f"{status.visible_trials} ({by_source})"),
+            *(
+                [("trial changes", ", ".join(f"{k} {v}" for k, v in status.changes.items()))]
+                if status.changes is not None
+                else []
+            ),
         ],
         show_header=False,
     )
@@ -73,13 +84,21 @@ def _print_branch(info: BranchInfo, as_json: bool, text: str) -> None:
     message(text)
 
 
-def _confirm(change: BranchChange, as_json: bool, yes: bool) -> None:
-    """Show a dry run; without --yes stop with an error so scripts notice."""
-    if yes:
-        return
+def _dry_run(change: BranchChange, as_json: bool) -> None:
+    """Report what a removal would do; nothing changed (exit 0: a dry run is not an error)."""
     if as_json:
         print_json(change.as_json())
-    raise LlcpsError(f"{change.summary}; nothing changed", hint="rerun with --yes to do it")
+    message(f"{change.summary}; nothing changed (rerun with --yes to do it)")
+
+
+def _fork_point(value: Optional[str]) -> Optional[str]:
+    """``--at``: 'pretrain' or a trial id within the range a store can hold."""
+    if value is None or value == PRETRAIN:
+        return value
+    text = value.strip()
+    if not text.isdigit() or int(text) > MAX_ID:
+        raise typer.BadParameter(f"{value!r} is neither 'pretrain' nor a trial id from 0 to {MAX_ID}")
+    return text
 
 
 @app.command(
@@ -161,16 +180,13 @@ def branch_cli(
             help="Fork point: a trial id the parent sees, or 'pretrain' for its last pretraining trial "
             "(default: the parent's latest trial).",
             show_default=False,
+            callback=_fork_point,
         ),
     ] = None,
     as_json: JsonFlag = False,
 ) -> None:
     """Create a branch that sees its parent's trials up to the fork point (it is not checked out)."""
-    fork: int | str | None = at
-    if at is not None and at != PRETRAIN:
-        if not at.strip().isdigit():
-            raise LlcpsError(f"invalid --at {at!r}", hint="pass a trial id or 'pretrain'")
-        fork = int(at)
+    fork: int | str | None = int(at) if at is not None and at != PRETRAIN else at
     with open_store(ctx) as store:
         info = store.create_branch(name, from_branch=from_branch or selected_branch(ctx), at=fork)
     _print_branch(
@@ -216,8 +232,10 @@ def reset_cli(
     with open_store(ctx) as store:
         name = store.resolve_branch(selected_branch(ctx)).name
         target = str(to.value)  # type: ignore[attr-defined]
-        _confirm(store.reset_branch(name, to=target, dry_run=True), as_json, yes)
-        change = store.reset_branch(name, to=target, dry_run=False)
+        change = store.reset_branch(name, to=target, dry_run=not yes)
+    if not yes:
+        _dry_run(change, as_json)
+        return
     if as_json:
         print_json(change.as_json())
     message(change.summary)
@@ -233,8 +251,10 @@ def reset_cli(
 def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_json: JsonFlag = False) -> None:
     """Delete a branch and everything it owns (not main, the current branch, or a parent)."""
     with open_store(ctx) as store:
-        _confirm(store.delete_branch(name, dry_run=True), as_json, yes)
-        change = store.delete_branch(name, dry_run=False)
+        change = store.delete_branch(name, dry_run=not yes)
+    if not yes:
+        _dry_run(change, as_json)
+        return
     if as_json:
         print_json(change.as_json())
     message(change.summary)
@@ -245,15 +265,47 @@ def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_js
     epilog=examples(
         "llcps db upgrade",
         "llcps --db old.db db upgrade --json",
+        "llcps db upgrade --no-replay-changes   # fast: mark older trials' changes unknown",
     ),
 )
-def upgrade_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
-    """Migrate the store to the newest schema revision this llcps knows."""
+def upgrade_cli(
+    ctx: typer.Context,
+    replay_changes: Annotated[
+        bool,
+        typer.Option(
+            "--replay-changes/--no-replay-changes",
+            help="Recover the symbolic change of trials stored without one by replaying them from their "
+            "stored start state; without replay they are marked unknown.",
+        ),
+    ] = True,
+    as_json: JsonFlag = False,
+) -> None:
+    """Migrate the store to the newest schema revision this llcps knows, and give every
+    trial its symbolic change (the goal-aware world model learns from it).
+
+    Trials stored before changes were recorded are replayed from their start state
+    (deterministic physics); one that has none, whose state does not rebuild, or whose
+    replay disagrees with what was stored is marked unknown. `llcps db status` shows the
+    counts.
+    """
+    from llcps.cps.changes import backfill_changes  # PyBullet loads only when there is work
+
     with open_store(ctx, allow_outdated=True) as store, progress_display("db upgrade", "checking the schema") as progress:
         before, after = store.upgrade(progress=lambda revision, done, total: progress(f"migrating to schema {revision}", done, total))
+        report = backfill_changes(
+            store,
+            replay=replay_changes,
+            progress=lambda done, total: progress("replaying trials for their changes", done, total),
+        )
     if as_json:
-        print_json({"from": before, "to": after, "changed": before != after})
+        print_json({"from": before, "to": after, "changed": before != after, "changes": report.as_json()})
     message(f"upgraded from schema {before} to {after}" if before != after else f"already at schema {after}")
+    if report.total:
+        message(
+            f"trial changes: {report.replayed} replayed, {report.unknown} unknown "
+            f"({report.no_snapshot} without a stored start state or replay, {report.failed} whose state did not "
+            f"rebuild, {report.mismatched} whose replay disagreed)"
+        )
 
 
 @app.command(
@@ -275,21 +327,24 @@ def export_cli(
         ),
     ] = DEFAULT_EXPORT_FORMAT,  # type: ignore[assignment]
     out: Annotated[
-        Optional[Path], typer.Option("--out", metavar="FILE", help="File to write (default: stdout).", show_default=False, dir_okay=False)
+        Optional[Path],
+        typer.Option("--out", metavar="FILE", help="File to write (default: stdout); its directory must exist.", show_default=False, dir_okay=False),
     ] = None,
     source: Annotated[
         Optional[TrialSource],  # type: ignore[valid-type]
         typer.Option("--source", help="Only trials from this source.", show_default=False),
     ] = None,
-    scenario: Annotated[Optional[str], typer.Option("--scenario", metavar="NAME", help="Only trials of this scenario.", show_default=False)] = None,
-    episode: Annotated[Optional[int], typer.Option("--episode", metavar="ID", help="Only trials of this episode.", show_default=False)] = None,
+    scenario: Annotated[Optional[str], typer.Option("--scenario", metavar="NAME", help="Only trials of this scenario (a name or its alias).", show_default=False)] = None,
+    episode: Annotated[Optional[int], typer.Option("--episode", metavar="ID", min=1, max=MAX_ID, help="Only trials of this episode.", show_default=False)] = None,
 ) -> None:
     """Export the trials --branch (default: the current branch) sees, in id order, one flat row per trial."""
     fmt_name = str(fmt.value)  # type: ignore[attr-defined]
     if fmt_name in BINARY_FORMATS and out is None:
         raise LlcpsError(f"--format {fmt_name} writes a binary file", hint="pass --out FILE")
-    if out is not None and not out.parent.is_dir():
-        raise LlcpsError(f"directory {out.parent} does not exist", hint="create it first or choose another --out")
+    if scenario is not None:
+        scenario = get_scenario(scenario).name
+    if out is not None:
+        check_output_file(out, what="--out")
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name
         count = export_trials(
@@ -300,5 +355,6 @@ def export_cli(
             source=None if source is None else str(source.value),  # type: ignore[attr-defined]
             scenario=scenario,
             episode=episode,
+            what="--out",
         )
     message(f"exported {count} trial(s) of branch {branch}" + (f" to {out}" if out else ""))

@@ -14,9 +14,11 @@ import typer
 HEADER = """# CLI reference
 
 Generated from the command tree by `python -m llcps.cli.docs > docs/cli.md`; a test keeps it in sync.
-Global options go before the command: `llcps --db runs.db --branch exp inspect trials`.
+The global options `--db` and `--branch` go before or after the command:
+`llcps --db runs.db inspect trials --branch exp`.
 With `--json` a command prints exactly one JSON document on stdout; messages and progress go to stderr.
-Errors print `error: ...` and `hint: ...` on stderr and exit non-zero (2 for bad input).
+Every error, a mistyped option included, prints `error: ...` and `hint: ...` on stderr and
+exits 2; commands that report a result say what their exit codes 0, 1 and 130 mean.
 `llcps --version` prints the version; `llcps --install-completion` installs shell completion.
 
 An option name means the same in every command: `--seed` seeds the command's own random

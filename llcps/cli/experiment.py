@@ -7,12 +7,13 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
-from rich.markup import escape
 
-from llcps.cli._common import JsonFlag, choice_enum, message, new_app, open_store, print_json, print_table
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, message, new_app, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
+from llcps.domain import MAX_SEED
 from llcps.errors import LlcpsError
+from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
 from llcps.experiments.grid import PRESETS
 from llcps.experiments.runner import (
@@ -46,11 +47,16 @@ HtmlFlag = Annotated[
 PresetName = choice_enum("PresetName", tuple(PRESETS))
 EngineName = choice_enum("EngineName", ENGINES)
 
+#: Most seeds and workers one run may ask for.
+MAX_SEEDS = 10_000
+MAX_WORKERS = 1024
+
 #: Exit codes of ``llcps experiment run``.
 EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 
 _PRESET_HELP = "Grid to run: " + "; ".join(
-    f"{p.name} ({len(p.cells())} cells, {p.default_seeds} seeds, budget {p.budget})" for p in PRESETS.values()
+    f"{p.name} ({len(p.cells())} cells, {p.default_seeds} seeds, budget {'the whole candidate space' if p.budget is None else p.budget})"
+    for p in PRESETS.values()
 ) + "."
 
 
@@ -68,14 +74,18 @@ def run_cli(
     preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = "paper",  # type: ignore[valid-type, assignment]
     seeds: Annotated[
         Optional[int],
-        typer.Option("--seeds", metavar="N", min=1, help="How many seeds (default: the preset's count).", show_default=False),
+        typer.Option("--seeds", metavar="N", min=1, max=MAX_SEEDS, help="How many seeds (default: the preset's count).", show_default=False),
     ] = None,
     first_seed: Annotated[
-        int, typer.Option("--first-seed", metavar="K", min=0, help="Start the seeds at K (K..K+N-1): runners on several machines sharing one PostgreSQL store take disjoint seeds.")
+        int,
+        typer.Option(
+            "--first-seed", metavar="K", min=0, max=MAX_SEED,
+            help="Start the seeds at K (K..K+N-1): runners on several machines sharing one PostgreSQL store take disjoint seeds.",
+        ),
     ] = 0,
     workers: Annotated[
         Optional[int],
-        typer.Option("--workers", metavar="N", min=1, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
+        typer.Option("--workers", metavar="N", min=1, max=MAX_WORKERS, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
     ] = None,
     engine: Annotated[EngineName, typer.Option("--engine", help="local: a process pool; ray: Ray tasks (pip install 'llcps[ray]').")] = "local",  # type: ignore[valid-type, assignment]
     ray_address: Annotated[
@@ -91,6 +101,7 @@ def run_cli(
             help="Answer a trial simulated before (same physics settings, scene, state, call and step cap) from the store's physics cache, shared by all workers and later runs; results are identical either way.",
         ),
     ] = True,
+    create: CreateFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Run every sequence of the grid the store does not hold yet, then write the report.
@@ -103,8 +114,10 @@ def run_cli(
     """
     name = str(preset.value)  # type: ignore[attr-defined]
     n_workers = workers if workers is not None else cpu_count()
+    seed_range = _seeds(name, seeds, first_seed)
+    target = check_output_dir(out_dir if out_dir is not None else default_out_dir(name), what="--out-dir")
     try:
-        with open_store(ctx, create=True) as store:
+        with open_store(ctx, create=create) as store:
             with progress_display(f"experiment {name}", "planning the tasks") as bar:
 
                 def report(done: int, total: int, label: str) -> None:
@@ -113,7 +126,7 @@ def run_cli(
                 summary = run_experiment(
                     store,
                     preset=name,
-                    seeds=_seeds(name, seeds, first_seed),
+                    seeds=seed_range,
                     workers=n_workers,
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
@@ -131,9 +144,7 @@ def run_cli(
             if len(table) == 0:
                 raise LlcpsError("no results to report", hint="see the failed tasks above")
             with progress_display("report") as bar:
-                out_dir, analysis = write_report(
-                    table, out_dir if out_dir is not None else default_out_dir(name), store=store, html=html, progress=bar
-                )
+                out_dir, analysis = write_report(table, target, store=store, html=html, progress=bar)
     except KeyboardInterrupt:
         message("interrupted: every task imported so far is kept; run the same command to resume")
         raise typer.Exit(EXIT_INTERRUPTED) from None
@@ -200,7 +211,7 @@ def report_cli(
         target = out_dir
         if target is None:
             target = default_out_dir(name) if source is None else (source if source.is_dir() else source.parent)
-        return name, mine, target
+        return name, mine, check_output_dir(target, what="--out-dir")
 
     with progress_display("report", "reading the results") as bar:
         if source is not None:
@@ -220,6 +231,8 @@ def report_cli(
 
 def _seeds(preset: str, count: int | None, first: int) -> range:
     n = PRESETS[preset].default_seeds if count is None else count
+    if first + n - 1 > MAX_SEED:
+        raise LlcpsError(f"seeds {first}..{first + n - 1} go beyond the largest seed {MAX_SEED}", hint="lower --first-seed or --seeds")
     return range(first, first + n)
 
 
@@ -254,7 +267,7 @@ def _pct(value: Any) -> str:
 def _ci(low: Any, high: Any) -> str:
     if low is None or high is None:
         return "n/a"
-    return escape(f"[{_pct(low)}, {_pct(high)}]")  # not a markup tag
+    return f"[{_pct(low)}, {_pct(high)}]"
 
 
 def _num(value: Any) -> str:

@@ -8,7 +8,8 @@ import typer
 
 from llcps.cli._common import JsonFlag, choice_enum, new_app, open_store, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
-from llcps.domain import OUTCOME_NAMES, TRIAL_SOURCES, TrialRecord
+from llcps.domain import MAX_ID, OUTCOME_NAMES, TRIAL_SOURCES, TrialRecord
+from llcps.scenarios import get_scenario
 
 app = new_app(
     "Inspect the experience store: trials, runs, episodes and what was learned from them.",
@@ -40,7 +41,9 @@ def outcome_text(record: TrialRecord) -> str:
 )
 def trials_cli(
     ctx: typer.Context,
-    scenario: Annotated[Optional[str], typer.Option("--scenario", metavar="NAME", help="Only trials of this scenario.", show_default=False)] = None,
+    scenario: Annotated[
+        Optional[str], typer.Option("--scenario", metavar="NAME", help="Only trials of this scenario (a name or its alias).", show_default=False)
+    ] = None,
     source: Annotated[
         Optional[TrialSource],  # type: ignore[valid-type]
         typer.Option("--source", help="Only trials from this source.", show_default=False),
@@ -49,11 +52,14 @@ def trials_cli(
         Optional[bool],
         typer.Option("--solved/--unsolved", help="Only trials that solved (or did not solve) their task.", show_default=False),
     ] = None,
-    episode: Annotated[Optional[int], typer.Option("--episode", metavar="ID", help="Only trials of this episode.", show_default=False)] = None,
-    limit: Annotated[int, typer.Option("--limit", min=0, metavar="N", help="Show the newest N matching trials; 0 shows all.")] = 20,
+    episode: Annotated[
+        Optional[int], typer.Option("--episode", metavar="ID", min=1, max=MAX_ID, help="Only trials of this episode.", show_default=False)
+    ] = None,
+    limit: Annotated[int, typer.Option("--limit", min=0, max=MAX_ID, metavar="N", help="Show the newest N matching trials; 0 shows all.")] = 20,
     as_json: JsonFlag = False,
 ) -> None:
     """List the trials --branch (default: the current branch) sees, oldest of the selection first."""
+    scenario = None if scenario is None else get_scenario(scenario).name
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name
         records = store.visible_trials(

@@ -11,13 +11,17 @@ from llcps.cli._common import JsonFlag, choice_enum, message, open_store, print_
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.cli.inspect import app
-from llcps.domain import OUTCOME_NAMES
+from llcps.domain import MAX_SEED, OUTCOME_NAMES
 from llcps.models import PAPER_MODELS, WORLD_MODELS
+from llcps.scenarios import get_scenario
 
 if TYPE_CHECKING:
-    from llcps.models.inspection import ModelInspection
+    from llcps.cps.inspection import ModelInspection
 
 ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
+
+#: Most candidates listed per measure.
+MAX_TOP = 1000
 
 _SHORT = {name: ("+" if name.startswith("positive") else "-") + name.split("_", 1)[1][:5] for name in OUTCOME_NAMES}
 
@@ -40,18 +44,20 @@ def model_cli(
         Optional[str],
         typer.Option("--scenario", metavar="NAME", help="Also rank this scenario's failure-state candidates under every measure.", show_default=False),
     ] = None,
-    limit: Annotated[int, typer.Option("--limit", min=1, metavar="N", help="Candidates shown per measure.")] = 5,
-    seed: Annotated[int, typer.Option("--seed", help="Run seed: the held-out split and tie-breaks.")] = 0,
+    limit: Annotated[int, typer.Option("--limit", min=1, max=MAX_TOP, metavar="N", help="Candidates shown per measure.")] = 5,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Run seed: the held-out split and tie-breaks.")] = 0,
     model_seed: Annotated[
-        Optional[int], typer.Option("--model-seed", help="Seed of the world models (default: --seed).", show_default=False)
+        Optional[int],
+        typer.Option("--model-seed", min=0, max=MAX_SEED, help="Seed of the world models (default: --seed).", show_default=False),
     ] = None,
     test_fraction: Annotated[float, typer.Option("--test-fraction", min=0.01, max=0.99, help="Share of trials held out.")] = 0.25,
     as_json: JsonFlag = False,
 ) -> None:
     """Evaluate world models on the branch's trials (held-out split) next to the majority baseline."""
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
+    scenario = None if scenario is None else get_scenario(scenario).name
     with progress_display("inspect model", "loading the world models") as progress:
-        from llcps.models.inspection import inspect_models  # sklearn loads only when used
+        from llcps.cps.inspection import inspect_models  # sklearn loads only when used
 
         with open_store(ctx) as store:
             branch = store.resolve_branch(selected_branch(ctx)).name
@@ -97,14 +103,37 @@ def show(report: "ModelInspection") -> None:
                 for m in evaluation.labels
             ],
         )
+    goal_rows = [
+        (e.model, e.goal.examples, e.goal.positives, f"{e.goal.brier:.4f} | {e.goal.baseline_brier:.4f}", f"{e.goal.auc:.3f} | 0.500")
+        for e in report.evaluations
+        if e.goal is not None
+    ]
+    if goal_rows:
+        print_table(
+            f"goal-aware outcome: held-out (candidate, atom) examples of the {report.n_changes} trials with a known change "
+            "(model | change-rate baseline)",
+            ("model", "examples", "changed", "Brier", "ROC AUC"),
+            goal_rows,
+        )
     if report.failure is None:
         return
     failure = report.failure
     message(f"{failure.scenario}: {failure.missing_effects}; {len(failure.candidates)} candidates")
     for model, by_measure in report.rankings.items():
         for measure, ranked in by_measure.items():
+            atoms = list(ranked[0].goal) if ranked else []
             print_table(
                 f"{model} / {measure}",
-                ("#", "trial", "score", *(_SHORT[name] for name in OUTCOME_NAMES)),
-                [(c.position, c.trial, f"{c.score:.3f}", *(f"{c.outcome[n]:.2f}" for n in OUTCOME_NAMES)) for c in ranked],
+                ("#", "trial", "score", *(f"P{a}" for a in atoms), "P(all)", *(_SHORT[name] for name in OUTCOME_NAMES)),
+                [
+                    (
+                        c.position,
+                        c.trial,
+                        f"{c.score:.3f}",
+                        *(f"{c.goal[a]:.3f}" for a in atoms),
+                        f"{c.joint:.3f}",
+                        *(f"{c.outcome[n]:.2f}" for n in OUTCOME_NAMES),
+                    )
+                    for c in ranked
+                ],
             )

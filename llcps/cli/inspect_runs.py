@@ -10,8 +10,10 @@ import typer
 from llcps.cli._common import JsonFlag, open_store, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli.inspect import app
+from llcps.domain import MAX_ID
+from llcps.scenarios import get_scenario
 
-LimitOption = Annotated[int, typer.Option("--limit", min=0, metavar="N", help="Show the newest N; 0 shows all.")]
+LimitOption = Annotated[int, typer.Option("--limit", min=0, max=MAX_ID, metavar="N", help="Show the newest N; 0 shows all.")]
 AllBranches = Annotated[bool, typer.Option("--all", help="Every branch, not just --branch.")]
 
 
@@ -29,7 +31,9 @@ def runs_cli(
     all_branches: AllBranches = False,
     compare: Annotated[
         Optional[tuple[int, int]],
-        typer.Option("--compare", metavar="A B", help="Show runs A and B side by side instead of the list.", show_default=False),
+        typer.Option(
+            "--compare", metavar="A B", min=1, max=MAX_ID, help="Show runs A and B side by side instead of the list.", show_default=False
+        ),
     ] = None,
     as_json: JsonFlag = False,
 ) -> None:
@@ -97,11 +101,14 @@ def episodes_cli(
     ctx: typer.Context,
     limit: LimitOption = 20,
     all_branches: AllBranches = False,
-    scenario: Annotated[Optional[str], typer.Option("--scenario", metavar="NAME", help="Only episodes of this scenario.", show_default=False)] = None,
-    run: Annotated[Optional[int], typer.Option("--run", metavar="ID", help="Only episodes of this run.", show_default=False)] = None,
+    scenario: Annotated[
+        Optional[str], typer.Option("--scenario", metavar="NAME", help="Only episodes of this scenario (a name or its alias).", show_default=False)
+    ] = None,
+    run: Annotated[Optional[int], typer.Option("--run", metavar="ID", min=1, max=MAX_ID, help="Only episodes of this run.", show_default=False)] = None,
     as_json: JsonFlag = False,
 ) -> None:
     """Episodes (scenario solves), oldest first: status and exploration per scenario."""
+    scenario = None if scenario is None else get_scenario(scenario).name
     with open_store(ctx) as store:
         branch = None if all_branches else store.resolve_branch(selected_branch(ctx)).name
         episodes = store.list_episodes(branch=branch, scenario=scenario, run_id=run, limit=limit or None)

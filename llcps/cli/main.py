@@ -29,7 +29,7 @@ app = new_app(
         "llcps db init                                   # a store at ./llcps.db",
         "llcps pretrain --trials 200 --seed 1            # random interactions, models fitted",
         "llcps solve scenario2                           # plan, explore, learn an operator",
-        "llcps --db runs.db --branch exp inspect trials  # global options go first",
+        "llcps --db runs.db --branch exp inspect trials  # global options, before or after the command",
         "llcps --version",
     ),
 )
@@ -53,12 +53,18 @@ def _global_options(
     ctx: typer.Context,
     db_location: Annotated[
         str,
-        typer.Option("--db", envvar="LLCPS_DB", metavar="PATH|URL", help="Experience store: a SQLite file path or an SQLAlchemy URL."),
+        typer.Option(
+            "--db", envvar="LLCPS_DB", metavar="PATH|URL", help="Experience store: a SQLite file path or an SQLAlchemy URL (before or after the command)."
+        ),
     ] = DEFAULT_DB,
     branch: Annotated[
         Optional[str],
         typer.Option(
-            "--branch", envvar="LLCPS_BRANCH", metavar="NAME", help="Branch to read and write (default: the store's current branch).", show_default=False
+            "--branch",
+            envvar="LLCPS_BRANCH",
+            metavar="NAME",
+            help="Branch to read and write (default: the store's current branch; before or after the command).",
+            show_default=False,
         ),
     ] = None,
     version: Annotated[
@@ -66,7 +72,10 @@ def _global_options(
         typer.Option("--version", is_eager=True, callback=_show_version, help="Print the llcps version and exit."),
     ] = False,
 ) -> None:
-    """Life-long creative problem solving with world models trained on an experience store."""
+    """Life-long creative problem solving with world models trained on an experience store.
+
+    Every error prints `error:` and `hint:` lines on stderr and exits 2.
+    """
     ctx.obj = CliContext(db=db_location, branch=branch)
 
 

@@ -6,10 +6,10 @@ from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, choice_enum, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, open_store, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
-from llcps.domain import OUTCOME_NAMES
+from llcps.domain import MAX_PRETRAIN_TRIALS, MAX_SEED, OUTCOME_NAMES
 from llcps.models import PAPER_MODELS, WORLD_MODELS
 
 if TYPE_CHECKING:
@@ -21,9 +21,9 @@ ModelName = choice_enum("PretrainModel", tuple(WORLD_MODELS))
 def pretrain_cli(
     ctx: typer.Context,
     trials: Annotated[
-        int, typer.Option("--trials", metavar="N", min=0, help="Number of random interactions (trials) to run.")
+        int, typer.Option("--trials", metavar="N", min=0, max=MAX_PRETRAIN_TRIALS, help="Number of random interactions (trials) to run.")
     ] = 200,
-    seed: Annotated[int, typer.Option("--seed", help="Run seed: trial i gets its own seed derived from it.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Run seed: trial i gets its own seed derived from it.")] = 0,
     model: Annotated[
         Optional[list[ModelName]],  # type: ignore[valid-type]
         typer.Option(
@@ -34,8 +34,12 @@ def pretrain_cli(
         ),
     ] = None,
     model_seed: Annotated[
-        int, typer.Option("--model-seed", help="Seed of the fitted models (`llcps solve --model-seed` reuses a model fitted with it).")
+        int,
+        typer.Option(
+            "--model-seed", min=0, max=MAX_SEED, help="Seed of the fitted models (`llcps solve --model-seed` reuses a model fitted with it)."
+        ),
     ] = 0,
+    create: CreateFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Run N random interactions in settled random scenes, store each as a trial, then
@@ -47,7 +51,7 @@ def pretrain_cli(
     with progress_display("pretrain", "loading the simulator") as progress:
         from llcps.pretrain import pretrain  # the simulator loads only when a command needs it
 
-        with open_store(ctx, create=True) as store:
+        with open_store(ctx, create=create) as store:
             summary = pretrain(
                 store,
                 branch=selected_branch(ctx),

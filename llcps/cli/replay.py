@@ -10,6 +10,8 @@ import typer
 from llcps.cli._common import JsonFlag, message, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
+from llcps.domain import MAX_ID
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 
 EXAMPLES = examples(
     "llcps replay 42                       # must match what was recorded",
@@ -20,17 +22,29 @@ EXAMPLES = examples(
 
 def replay_cli(
     ctx: typer.Context,
-    trial_id: Annotated[int, typer.Argument(metavar="TRIAL_ID", help="Id of a stored trial (see `llcps inspect trials`).", show_default=False)],
+    trial_id: Annotated[
+        int, typer.Argument(metavar="TRIAL_ID", min=1, max=MAX_ID, help="Id of a stored trial (see `llcps inspect trials`).", show_default=False)
+    ],
     gif: Annotated[
-        Optional[Path], typer.Option("--gif", metavar="FILE", help="Render the replay to a GIF, captioned with the trial and its parameters.", show_default=False, dir_okay=False)
+        Optional[Path],
+        typer.Option(
+            "--gif",
+            metavar="FILE",
+            help="Render the replay to a GIF, captioned with the trial and its parameters (FILE ends in .gif; its directory must exist).",
+            show_default=False,
+            dir_okay=False,
+        ),
     ] = None,
     gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Restore a trial's start state, run it again, compare Omega, solved and sim steps.
 
-    Exit code 0 when everything matches what was recorded, 1 when it does not.
+    Exit code 0 when everything matches what was recorded, 1 when it does not, 2 for
+    bad input (a stored trial or physics state that fails its checks included).
     """
+    if gif is not None:
+        check_output_file(gif, what="--gif", suffixes=GIF_SUFFIXES)
     with progress_display("replay", "loading the simulator") as progress:
         from llcps.cps.replay import replay  # the simulator loads only when needed
 

@@ -11,7 +11,7 @@ from llcps.cli._common import JsonFlag, choice_enum, message, new_app, print_jso
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.scenarios import CONDITIONS, SCENARIOS, get_scenario
-from llcps.scenarios.variants import parse_range, range_text
+from llcps.scenarios.variants import MAX_VARIANT, parse_range, range_text
 
 app = new_app(
     "Scenario files: list them, show one, render its scenes, check the properties every scenario must have.",
@@ -29,7 +29,7 @@ _NAME_HELP = "A scenario name or alias (see `llcps scenario list`), or the path 
 ScenarioArg = Annotated[str, typer.Argument(metavar="NAME|PATH", help=_NAME_HELP, show_default=False)]
 VariantOption = Annotated[
     Optional[int],
-    typer.Option("--variant", metavar="N", min=0, help="A scene variant: every range of the file drawn with seed N (0: the canonical scene).", show_default=False),
+    typer.Option("--variant", metavar="N", min=0, max=MAX_VARIANT, help="A scene variant: every range of the file drawn with seed N (0: the canonical scene).", show_default=False),
 ]
 
 

@@ -8,12 +8,15 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import typer
 from rich.syntax import Syntax
 
-from llcps.cli._common import JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
-from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, SolveConfig
+from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, MAX_BUDGET, SolveConfig
+from llcps.domain import MAX_SEED
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models import MEASURES, WORLD_MODELS
 from llcps.scenarios import CONDITIONS, SCENARIOS
+from llcps.scenarios.variants import MAX_VARIANT
 
 if TYPE_CHECKING:
     from llcps.cps.agent import SolveResult
@@ -40,26 +43,42 @@ def solve_cli(
     measure: Annotated[MeasureName, typer.Option("--measure", help="Measure that orders candidates by the model's prediction.")] = DEFAULT_MEASURE,  # type: ignore[valid-type, assignment]
     variant: Annotated[
         int,
-        typer.Option("--variant", metavar="N", min=0, help="Scene variant: N draws the scene from the ranges the scenario file declares (0: the canonical scene)."),
+        typer.Option(
+            "--variant",
+            metavar="N",
+            min=0,
+            max=MAX_VARIANT,
+            help="Scene variant: N draws the scene from the ranges the scenario file declares (0: the canonical scene).",
+        ),
     ] = 0,
-    seed: Annotated[int, typer.Option("--seed", help="Run seed: breaks ties in the ranking; recorded with every trial.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Run seed: breaks ties in the ranking; recorded with every trial.")] = 0,
     model_seed: Annotated[
         Optional[int],
-        typer.Option("--model-seed", help="Seed of the world model's fit (default: --seed; `llcps pretrain --model-seed` stores one).", show_default=False),
+        typer.Option(
+            "--model-seed",
+            min=0,
+            max=MAX_SEED,
+            help="Seed of the world model's fit (default: --seed; `llcps pretrain --model-seed` stores one).",
+            show_default=False,
+        ),
     ] = None,
-    budget: Annotated[int, typer.Option("--budget", metavar="N", help="Most exploration trials before giving up (exit 1).")] = DEFAULT_BUDGET,
-    refit_every: Annotated[int, typer.Option("--refit-every", metavar="N", help="Refit the world model after every N exploration trials.")] = 1,
+    budget: Annotated[int, typer.Option("--budget", metavar="N", min=0, max=MAX_BUDGET, help="Most exploration trials before giving up (exit 1).")] = DEFAULT_BUDGET,
+    refit_every: Annotated[
+        int, typer.Option("--refit-every", metavar="N", min=1, max=MAX_BUDGET, help="Refit the world model after every N exploration trials.")
+    ] = 1,
     gui: Annotated[bool, typer.Option("--gui", help="Watch in a PyBullet window (needs a display).")] = False,
     gif: Annotated[
         Optional[Path],
         typer.Option(
             "--gif",
             metavar="FILE",
-            help="Afterwards, film the plan, the resolving trial and the plan it enabled to a captioned GIF (not counted in the stored times).",
+            help="Afterwards, film the plan, the resolving trial and the plan it enabled to a captioned GIF "
+            "(not counted in the stored times; FILE ends in .gif and its directory must exist).",
             show_default=False,
             dir_okay=False,
         ),
     ] = None,
+    create: CreateFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Plan, execute, explore on failure, learn an operator; every trial goes to the store.
@@ -81,11 +100,13 @@ def solve_cli(
         variant=variant,
     )
     config.validate()
+    if gif is not None:
+        check_output_file(gif, what="--gif", suffixes=GIF_SUFFIXES)
     before = _mtime(gif)
     with progress_display("solve", "loading the simulator") as progress:
         from llcps.cps.agent import solve  # the simulator loads only when a command needs it
 
-        with open_store(ctx, create=True) as store:
+        with open_store(ctx, create=create) as store:
             result = solve(store, branch=selected_branch(ctx), config=config, gui=gui, gif=gif, progress=progress)
     if as_json:
         print_json(result.as_json())

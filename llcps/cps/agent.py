@@ -26,19 +26,18 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.episode import SolveConfig, SolveResult
+from llcps.cps.exploration import failure_point, rank_candidates
 from llcps.cps.knowledge import load_experience, load_knowledge
-from llcps.cps.outcomes import desired_outcome
-from llcps.domain import ControllerParams, State, TrialRecord, TrialSpec, WorldModelInput
+from llcps.domain import PUSH_DIRECTION, ControllerParams, State, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
-from llcps.models.measures import rank
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
 from llcps.scenarios.goal import goal_text
-from llcps.sim.controllers import DEFAULT_MAX_STEPS, PUSH_DIRECTION
 from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
-from llcps.sim.perception import entity_features, perceive
+from llcps.sim.controllers import DEFAULT_MAX_STEPS
+from llcps.sim.perception import perceive
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import World
 from llcps.store import Store
@@ -104,6 +103,7 @@ class Agent:
         cache: PhysicsCache | None = None,
         max_steps: int = DEFAULT_MAX_STEPS,
         progress: ProgressCallback | None = None,
+        changes: dict[int, TrialChange] | None = None,
     ) -> None:
         self.store = store
         self.branch = branch
@@ -112,6 +112,8 @@ class Agent:
         self.config = config
         self.result = result
         self.records = records
+        #: The known symbolic change of each trial in ``records``, by trial id.
+        self.changes: dict[int, TrialChange] = {} if changes is None else changes
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
         self.cache = cache
         self.progress = progress
@@ -182,7 +184,7 @@ class Agent:
 
         The trial starts from the stored snapshot ``start`` if given, else from the
         world's current state, which must then be the state of ``snapshot_id``. With
-        ``snapshot_id=None`` the trial is a re-enactment for a GIF: it is not stored.
+        ``snapshot_id=None`` the trial is not stored (nor answered by the cache).
         A stored trial leaves the world in its serialized end state, so what follows
         is the same whether the trial was simulated or answered by the physics cache;
         a cached answer is recorded as such, with this run's wall seconds.
@@ -192,9 +194,13 @@ class Agent:
         key: str | None = None
         if snapshot_id is not None and self.cache is not None:
             key = trial_key(self.world.settings, self.world.scene.to_dict(), self._states[snapshot_id], spec, self.max_steps)
-            cached = self.cache.get(key)
+            # The end state comes from the database: checked like a stored snapshot (a state
+            # this process made, or checked before, costs a digest).
+            cached = self.cache.get(key, check=self.world.check_serialized)
             if cached is not None and cached.result.spec != spec:  # a damaged entry: simulate instead
                 cached = None
+            if cached is None and start is None:
+                start = snapshot_id  # a check may have rebuilt the world: start from the stored bytes
         if cached is not None:
             trial, self._pending = cached.result, cached.end_state
         else:
@@ -227,9 +233,11 @@ class Agent:
             snapshot_id=snapshot_id,
             scenario=self.scenario.name,
         )
-        trial_id = self.store.add_trial(new)
+        change = trial.change
+        trial_id = self.store.add_trial(new, change=change)
         record = replace(new, id=trial_id)
         self.records.append(record)
+        self.changes[trial_id] = replace(change, trial_id=trial_id)
         self.result.sim_steps += trial.sim_steps
         if cached is not None:
             self.result.cache_hits += 1
@@ -275,7 +283,8 @@ class Agent:
 
         Args:
             steps: the plan.
-            store: store each step as a ``plan`` trial (False: a re-enactment for a GIF).
+            store: store each step as a ``plan`` trial (False: nothing is stored, e.g. to
+                find where a plan fails).
             record: the knowledge base the plan was made with: count each step as an
                 execution of its operator in its context (success or failure), which sets
                 the operator's cost by experience. None: count nothing.
@@ -284,9 +293,11 @@ class Agent:
         state = perceive(self.world)
         for index, step in enumerate(steps):
             spec = self.controller_call(step)
-            stored = self.snapshot() if store else None
-            self.sync()
-            physics = self._states[stored] if stored is not None else self.world.serialize_state()
+            if store:
+                stored = self.snapshot()
+                physics = self._states[stored]
+            else:
+                stored, physics = None, self.world.serialize_state()
             trial, record_ = self.execute(spec, source="plan", snapshot_id=stored)
             reached = self.scenario.goal_reached(trial.after)
             failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], self.scenario), trial.after)
@@ -340,6 +351,8 @@ def solve(
         ``no_plan`` or ``interrupted``.
     """
     scenario = config.validate()
+    if gif is not None:
+        check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
     branch_name = store.resolve_branch(branch).name
     started = time.perf_counter()
     result = SolveResult(
@@ -351,6 +364,14 @@ def solve(
         branch=branch_name,
         variant=config.variant,
     )
+    # What the store holds is read (and checked) first: a malformed row stops the
+    # episode before it records a run.
+    if progress is not None:
+        progress(f"fit world model {config.model}", 0, 0)
+    records = list(store.visible_trials(branch_name))
+    changes = store.visible_changes(branch_name)
+    model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes)
+    kb = load_knowledge(store, branch_name)
     result.run_id = store.start_run(
         command=command, seed=config.seed, config=_config_json(config), branch=branch_name
     )
@@ -365,11 +386,6 @@ def solve(
     )
     world: World | None = None
     try:
-        if progress is not None:
-            progress(f"fit world model {config.model}", 0, 0)
-        records = list(store.visible_trials(branch_name))
-        model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records)
-        kb = load_knowledge(store, branch_name)
         world = World.from_scene(scenario.scene(config.condition, config.variant), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
         agent = Agent(
@@ -382,6 +398,7 @@ def solve(
             records=records,
             cache=cache,
             progress=progress,
+            changes=changes,
         )
         _episode(agent, kb, model, result)
     except KeyboardInterrupt:
@@ -419,13 +436,17 @@ def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult) -> Non
     _explore(agent, kb, model, failure, result)
 
 
-def plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult) -> Failure | None:
+def plan_and_repair(
+    agent: Agent, kb: KnowledgeBase, state: State, result: SolveResult, *, store: bool = True
+) -> Failure | None:
     """Execute K's plan; on a failed step re-plan without it, up to MAX_PLAN_REPAIRS times.
 
     Every executed step is a stored ``plan`` trial and counts as an execution of its
     operator, so a step that fails is demoted before the re-plan. Sets ``result.plan``
     (K's first plan), ``result.plan_repairs`` and, when a plan reaches the goal,
-    ``result.status``.
+    ``result.status``. With ``store=False`` nothing is stored or counted (the path
+    ``llcps inspect model`` takes to the failure point); the failed steps are still left
+    out of the re-plans.
 
     Returns:
         The first failure, or None when no step failed. Exploration looks for an
@@ -442,7 +463,7 @@ def plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: Solve
         labels = [step.label for step in steps]
         if attempt == 0:
             result.plan = labels
-        run = agent.run_plan(steps, record=known)
+        run = agent.run_plan(steps, store=store, record=known)
         state, failure = run.state, run.failure
         if attempt > 0:
             result.plan_repairs.append(
@@ -466,17 +487,14 @@ def plan_and_repair(agent: Agent, kb: KnowledgeBase, state: State, result: Solve
 
 def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: SolveResult) -> None:
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
-    world, config = agent.world, agent.config
-    snapshot, failed_step, failure_state = failure.snapshot, failure.step, failure.state
+    config = agent.config
+    snapshot = failure.snapshot
     agent.restore(snapshot)
-    failed_spec = agent.controller_call(failed_step)
-    candidates = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.candidate_grid(agent.scenario))
+    point = failure_point(agent, failure.monitor, failure.state)
+    candidates = point.candidates
     result.candidates = len(candidates)
-    features = {name: entity_features(world, name) for name in agent.kinds}
-    inputs = [WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in candidates]
-    desired = desired_outcome(missing_add=failure.monitor.missing_add, missing_del=failure.monitor.missing_del)
     remaining = list(range(len(candidates)))
-    order = _rank(model, inputs, remaining, config, desired)
+    order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     agent.report("explore", total=min(config.budget, len(candidates)))
     tried = 0
     while order and result.exploration_trials < config.budget:
@@ -490,8 +508,8 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
             _learn(agent, kb, spec, trial, failure, record, result)
             return
         if tried % config.refit_every == 0 and remaining:
-            model.update(agent.records)
-            order = _rank(model, inputs, remaining, config, desired)
+            model.update(agent.records, agent.changes)
+            order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     result.status = "budget_exhausted"
 
 
@@ -538,12 +556,6 @@ def _learn(
     result.status = "solved"
 
 
-def _rank(model, inputs, remaining: list[int], config: SolveConfig, desired) -> list[int]:
-    proba = model.predict_proba([inputs[i] for i in remaining])
-    order = rank(proba, config.measure, seed=config.seed, desired=desired)
-    return [remaining[i] for i in order]
-
-
 def resolves(agent: Agent, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
     """Did this trial resolve the novelty?
 
@@ -582,4 +594,4 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
     }
 
 
-__all__ = ["SolveConfig", "SolveResult", "solve", "load_knowledge"]
+__all__ = ["Failure", "PlanRun", "SolveConfig", "SolveResult", "load_knowledge", "plan_and_repair", "solve"]

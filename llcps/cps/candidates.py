@@ -10,6 +10,7 @@ this list; ``random`` shuffles it.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 from typing import Iterator, Mapping, Sequence
@@ -100,3 +101,21 @@ def focused_count(candidates: Sequence[TrialSpec], failed: TrialSpec) -> int:
             break
         n += 1
     return n
+
+
+@functools.cache  # the scenarios' scenes are fixed: counted once per process
+def candidate_space_size(scenario: str | None = None) -> int:
+    """How many exploration candidates a scenario's novelty offers (the largest of all
+    scenarios for None): every combination of the grid, less the failed call itself.
+
+    What an exploration budget of "the whole candidate space" means (467 for the three
+    scenarios of the paper: 13 action-argument pairs x 36 settings - 1).
+    """
+    from llcps.scenarios import SCENARIOS, get_scenario
+
+    chosen = SCENARIOS.values() if scenario is None else [get_scenario(scenario)]
+    sizes = []
+    for spec in chosen:
+        kinds = {e.name: e.kind for e in spec.scene("novelty").entities}  # type: ignore[attr-defined]
+        sizes.append(len(enumerate_candidates(failed=None, entities=kinds)) - 1)
+    return max(sizes)

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from llcps.cps.candidates import Grid
+from llcps.domain import check_seed
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.models import MEASURES, WORLD_MODELS
 from llcps.scenarios import get_scenario
@@ -16,6 +17,8 @@ from llcps.scenarios.variants import check_variant
 DEFAULT_MODEL = "nb"
 DEFAULT_MEASURE = "goal-directed"
 DEFAULT_BUDGET = 300
+#: Largest exploration budget (and refit interval) accepted: far beyond any candidate space.
+MAX_BUDGET = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -55,10 +58,13 @@ class SolveConfig:
             raise UnknownNameError("world model", self.model, list(WORLD_MODELS))
         if self.measure not in MEASURES:
             raise UnknownNameError("measure", self.measure, list(MEASURES))
-        if self.budget < 0:
-            raise LlcpsError(f"budget must be >= 0, got {self.budget}", hint="pass --budget 0 or more")
-        if self.refit_every < 1:
-            raise LlcpsError(f"refit_every must be >= 1, got {self.refit_every}")
+        check_seed(self.seed)
+        if self.model_seed is not None:
+            check_seed(self.model_seed, "model seed")
+        if not 0 <= self.budget <= MAX_BUDGET:
+            raise LlcpsError(f"budget must be from 0 to {MAX_BUDGET}, got {self.budget}", hint="pass --budget 0 or more")
+        if not 1 <= self.refit_every <= MAX_BUDGET:
+            raise LlcpsError(f"refit_every must be from 1 to {MAX_BUDGET}, got {self.refit_every}")
         return scenario
 
 

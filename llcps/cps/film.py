@@ -87,16 +87,22 @@ def reenact(
 ) -> list[Reenactment]:
     """Run each shot's trial again from its stored start state, in order; film them to ``gif``.
 
+    Every stored scene and state is untrusted: the scene is checked before the engine
+    builds it, and the state before the engine restores it (see :mod:`llcps.sim.snapshot`).
+
     Raises:
-        LlcpsError: a trial has no stored start state.
+        LlcpsError: a trial has no stored start state; its snapshot fails its hash,
+            size or structure checks.
     """
     from llcps.sim.render import GifRecorder, frame_camera
     from llcps.sim.trial import run_trial
-    from llcps.sim.world import World
+    from llcps.sim.world import SceneSpec, World
 
     for shot in shots:
         if shot.trial.snapshot_id is None:
-            raise LlcpsError(f"trial {shot.trial.id} has no stored start state, so it cannot be replayed")
+            raise LlcpsError(
+                f"trial {shot.trial.id} has no stored start state, so it cannot be replayed", hint="replay a trial with a snapshot_id"
+            )
     phase = "render" if gif is not None else "replay"
     # Steps to simulate, or frames to render (one per FILM_EVERY steps, plus first and last).
     sizes = [max(1, s.trial.sim_steps) // (FILM_EVERY if gif is not None else 1) + (2 if gif is not None else 0) for s in shots]
@@ -112,7 +118,8 @@ def reenact(
             key = json.dumps(snapshot.scene, sort_keys=True)
             world = worlds.get(key)
             if world is None:
-                world = worlds[key] = World.from_scene(snapshot.scene, gui=gui)
+                scene = SceneSpec.from_dict(snapshot.scene)  # checked before the engine builds anything
+                world = worlds[key] = World.from_scene(scene, gui=gui)
             world.restore_serialized(snapshot.state)
             if progress is not None:
                 progress(phase, done, total)

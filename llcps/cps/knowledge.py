@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from llcps.errors import LlcpsError, StoreError
 from llcps.store import Store
 from llcps.symbolic.experience import Experience
 from llcps.symbolic.knowledge import KnowledgeBase
@@ -9,10 +10,22 @@ from llcps.symbolic.knowledge import KnowledgeBase
 
 def load_knowledge(store: Store, branch: str) -> KnowledgeBase:
     """The default K plus every learned operator (and refinement) ``branch`` sees, oldest
-    first, costed by the operator executions ``branch`` sees."""
+    first, costed by the operator executions ``branch`` sees.
+
+    Raises:
+        StoreError: a stored operator does not describe an operator, or a stored
+            execution's context is malformed (the message names the row).
+    """
     kb = KnowledgeBase.default()
     for record in sorted(store.visible_operators(branch), key=lambda r: r.id):
-        kb = kb.apply_learned(record.definition)
+        try:
+            kb = kb.apply_learned(record.definition)
+        except (LlcpsError, ValueError, TypeError, KeyError, AttributeError, IndexError, RecursionError) as exc:
+            detail = exc.message if isinstance(exc, LlcpsError) else f"{type(exc).__name__}: {exc}"
+            raise StoreError(
+                f"stored operator {record.id} ({record.name!r}) is malformed: {detail}",
+                hint="the row was changed outside llcps; delete it or restore the database from a copy",
+            ) from None
     return kb.with_experience(load_experience(store, branch))
 
 

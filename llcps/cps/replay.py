@@ -14,6 +14,7 @@ from pathlib import Path
 from llcps.cps.film import PHASES, ProgressCallback, Shot, reenact
 from llcps.domain import Fluent, Outcome, TrialRecord
 from llcps.errors import LlcpsError
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.store import Store
 
 
@@ -104,12 +105,15 @@ def replay(
         progress: ``progress(phase, done, total)`` in simulation steps.
 
     Raises:
-        LlcpsError: the trial does not exist or has no stored start state.
+        LlcpsError: the trial does not exist or has no stored start state; its snapshot
+            fails its hash, size or structure checks (see :mod:`llcps.sim.snapshot`).
     """
+    if gif is not None:
+        check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
     trial = store.get_trial(trial_id)
+    goal = trial_goal(store, trial)  # a stored goal (or scenario name) is checked before any physics
     (done,) = reenact(store, [Shot(trial, PHASES.get(trial.source, trial.source))], gif=gif, gui=gui, progress=progress)
     result = done.result
-    goal = trial_goal(store, trial)
     solved = goal is not None and goal[0] <= result.after and not (goal[1] & result.after)
     return ReplayReport(
         trial=trial,

@@ -10,7 +10,9 @@ re-run can tell which sequences are complete. The name encodes the whole cell, a
 :func:`parse_branch` reads it back: results are rebuilt from the store alone.
 
 Names of world models and measures are plain strings here; :func:`validate_preset`
-checks them against the registries in :mod:`llcps.models`, imported only when asked.
+checks them against the registries in :mod:`llcps.models`. The paper's models and
+measures, the longest branch name and the size of the candidate space each come from
+the one place that defines them.
 """
 
 from __future__ import annotations
@@ -19,21 +21,17 @@ import re
 from dataclasses import dataclass
 from typing import Iterable
 
+from llcps.cps.episode import DEFAULT_MEASURE, DEFAULT_MODEL
 from llcps.errors import LlcpsError, UnknownNameError
+from llcps.models.measures import PAPER_MEASURES
+from llcps.models.registry import PAPER_MODELS
+from llcps.store.schema import MAX_BRANCH_NAME
 
 #: The order a sequence solves the scenarios in (the paper's order).
 SCENARIO_SEQUENCE: tuple[str, ...] = ("scenario1", "scenario2", "scenario3")
 #: ``update``: the world model keeps training across scenarios; ``reset``: the training
 #: data goes back to the pretraining set before each scenario (a branch from that point).
 EXPERIMENT_CONDITIONS: tuple[str, ...] = ("update", "reset")
-#: The paper's four measures, in the order its Figure 2 lists them.
-PAPER_MEASURES: tuple[str, ...] = (
-    "least-destructive",
-    "most-positive-changes",
-    "least-negative-changes",
-    "most-changes",
-)
-PAPER_MODELS: tuple[str, ...] = ("nn", "nb")
 #: 200 pretraining points ("Apriori Training") and 4 ("No Apriori Training").
 PAPER_PRETRAIN_SIZES: tuple[int, ...] = (200, 4)
 
@@ -41,8 +39,6 @@ PAPER_PRETRAIN_SIZES: tuple[int, ...] = (200, 4)
 BRANCH_PREFIX = "exp"
 #: Separator of the fields of a branch name ("/" is not allowed in branch names).
 SEP = "-"
-#: Longest branch name the store accepts (``llcps.store.schema.MAX_BRANCH_NAME``).
-MAX_BRANCH_NAME = 100
 
 # Preset and model names become single fields of a branch name, so they may not
 # contain the separator; measures may (they are parsed as "whatever is left").
@@ -204,8 +200,9 @@ class Preset:
     pretrain_sizes: tuple[int, ...]
     conditions: tuple[str, ...] = EXPERIMENT_CONDITIONS
     default_seeds: int = 20
-    #: Most exploration trials per episode (an unsolved episode records this many).
-    budget: int = 150
+    #: Most exploration trials per episode (an unsolved episode records this many);
+    #: None: the whole candidate space (:func:`llcps.cps.candidates.candidate_space_size`).
+    budget: int | None = 150
     #: Random interactions drawn per seed; every pretraining set of the seed is this pool
     #: or a subset of it (the paper's 4 points are one per action from its 200).
     pretrain_pool: int = 200
@@ -215,7 +212,7 @@ class Preset:
     def __post_init__(self) -> None:
         if isinstance(self.refit_every, bool) or not isinstance(self.refit_every, int) or self.refit_every < 1:
             raise LlcpsError(f"preset {self.name!r}: refit_every must be a positive integer, not {self.refit_every!r}")
-        if isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 0:
+        if self.budget is not None and (isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 0):
             raise LlcpsError(f"preset {self.name!r}: the budget must be a non-negative integer, not {self.budget!r}")
         if self.pretrain_sizes and self.pretrain_pool < max(self.pretrain_sizes):
             raise LlcpsError(
@@ -223,6 +220,14 @@ class Preset:
                 f"a pretraining set of {max(self.pretrain_sizes)}",
                 hint="make pretrain_pool at least the largest pretraining size",
             )
+
+    def exploration_budget(self) -> int:
+        """The budget as a number (None resolves to the size of the candidate space)."""
+        if self.budget is not None:
+            return self.budget
+        from llcps.cps.candidates import candidate_space_size  # builds the scenarios' scenes
+
+        return candidate_space_size()
 
     def cells(self) -> tuple[Cell, ...]:
         """Every cell, in a fixed order (model, measure, pretraining size, condition)."""
@@ -259,6 +264,10 @@ def _seed_list(seeds: int | Iterable[int]) -> tuple[int, ...]:
 
 _EXTRA_MODELS = ("random", "logreg", "forest")
 
+#: A budget larger than any scenario's candidate space: the episode ends when every
+#: candidate was tried (an unsolved episode records how many there were).
+WHOLE_SPACE = 100_000
+
 #: Exploration trials between world-model refits in the paper's grids. The paper updates
 #: its models during exploration without saying how often; refitting the network after
 #: every trial would make it 80 % of a grid's cost (0.6 s a refit at 200-500 trials).
@@ -277,17 +286,41 @@ PRESETS: dict[str, Preset] = {
         refit_every=GRID_REFIT_EVERY,
     ),
     # Model-guided exploration against no model, scenario by scenario: each episode starts
-    # from the seed's pretraining set (condition reset), with the whole candidate space as
-    # budget so that every episode that can be solved is.
+    # from the seed's 200 random pretraining interactions (condition reset), with the
+    # whole candidate space as budget so that every episode that can be solved is.
     "vs_random": Preset(
         "vs_random",
-        ("nb", "random"),
-        ("goal-directed",),
-        (30,),
+        (DEFAULT_MODEL, "random"),
+        (DEFAULT_MEASURE,),
+        (200,),
         conditions=("reset",),
-        default_seeds=10,
-        budget=467,
-        pretrain_pool=30,
+        default_seeds=20,
+        budget=WHOLE_SPACE,
+        pretrain_pool=200,
+    ),
+    # Lifelong learning with the default model and measure: does the exploration of the
+    # earlier scenarios (update) shorten the later ones against the pretraining set alone
+    # (reset)? The whole candidate space as budget, 200 pretraining interactions.
+    "lifelong": Preset(
+        "lifelong",
+        (DEFAULT_MODEL,),
+        (DEFAULT_MEASURE,),
+        (200,),
+        default_seeds=20,
+        budget=WHOLE_SPACE,
+        pretrain_pool=200,
+    ),
+    # Every world model under goal-directed from 200 pretraining interactions (reset), the
+    # whole candidate space as budget: the evidence for the default model.
+    "models": Preset(
+        "models",
+        PAPER_MODELS + _EXTRA_MODELS,
+        (DEFAULT_MEASURE,),
+        (200,),
+        conditions=("reset",),
+        default_seeds=5,
+        budget=WHOLE_SPACE,
+        pretrain_pool=200,
     ),
     # The no-model baseline of the paper grid, at its budget: the random order uses no
     # training data, so 4 pretraining points stand for any number (`experiment report

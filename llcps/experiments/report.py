@@ -539,7 +539,7 @@ def table_budget(table: ResultsTable) -> int | None:
     """The exploration budget of the table's episodes, when its presets share one."""
     from llcps.experiments.grid import PRESETS
 
-    budgets = {PRESETS[p].budget if p in PRESETS else None for p in table.unique("preset")}
+    budgets = {PRESETS[p].exploration_budget() if p in PRESETS else None for p in table.unique("preset")}
     return budgets.pop() if len(budgets) == 1 else None
 
 

@@ -122,7 +122,7 @@ def kaplan_meier(times: Sequence[float], solved: Sequence[bool], *, tau: float) 
 def budget(rows: Iterable[ResultRow]) -> float:
     """The horizon tau of some rows: their preset's budget, else the largest count observed."""
     rows = list(rows)
-    budgets = {PRESETS[r.preset].budget for r in rows if r.preset in PRESETS}
+    budgets = {PRESETS[r.preset].exploration_budget() for r in rows if r.preset in PRESETS}
     observed = max((r.exploration_trials for r in rows), default=0)
     return float(max(budgets)) if len(budgets) == 1 and max(budgets) >= observed else float(observed)
 

@@ -97,10 +97,11 @@ def plan_tasks(preset: Preset, seeds: int | Iterable[int] | None = None, *, cach
     chosen = _seed_list(preset.default_seeds if seeds is None else seeds)
     sequences = preset.sequences(chosen)
     tasks: list[Task] = []
+    budget = preset.exploration_budget()
     for seed in chosen:
         tasks.append(PretrainTask(preset.name, seed, preset.pretrain_pool, tuple(preset.pretrain_sizes)))
         tasks.extend(
-            SequenceTask(s, preset.budget, refit_every=preset.refit_every, cache_url=cache_url)
+            SequenceTask(s, budget, refit_every=preset.refit_every, cache_url=cache_url)
             for s in sequences
             if s.seed == seed
         )

@@ -28,10 +28,11 @@ from typing import Any, Mapping, Sequence
 
 from sqlalchemy import insert, select, update
 
-from llcps.domain import TrialRecord
+from llcps.domain import TrialChange, TrialRecord
 from llcps.errors import StoreError
 from llcps.store import EpisodeRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
-from llcps.store.schema import Branch, Episode, Operator, Run, Snapshot, Trial
+from llcps.store.changes import change_row
+from llcps.store.schema import Branch, Episode, Operator, Run, Snapshot, Trial, TrialChangeRow
 from llcps.store.store import run_provenance_values
 from llcps.store.trials import trial_row
 
@@ -58,6 +59,7 @@ class Payload:
         branches: in creation order; a parent is either earlier in the list or
             already in the destination store.
         trials: the branches' own trials, in id order.
+        changes: the known symbolic changes of those trials (``trial_id`` of the source).
         external: ids of trials the payload refers to (fork points, watermarks) but
             does not carry, mapped to ids of the destination store.
     """
@@ -69,6 +71,7 @@ class Payload:
     trials: tuple[TrialRecord, ...] = ()
     operators: tuple[OperatorRecord, ...] = ()
     external: Mapping[int, int] = field(default_factory=dict)
+    changes: tuple[TrialChange, ...] = ()
 
     @property
     def branch_names(self) -> tuple[str, ...]:
@@ -124,6 +127,9 @@ def export_branches(
             episodes.extend(reversed(store.list_episodes(branch=name)))
             runs.update((r.id, r) for r in store.list_runs(branch=name))
     trials.sort(key=lambda t: t.id)
+    own = {t.id for t in trials}
+    changes = [c for name in names for i, c in store.visible_changes(name).items() if i in own]
+    changes.sort(key=lambda c: c.trial_id)  # type: ignore[arg-type, return-value]
     episodes.sort(key=lambda e: e.id)
     if provenance:
         wanted = {t.run_id for t in trials} | {e.run_id for e in episodes}
@@ -149,6 +155,7 @@ def export_branches(
         trials=tuple(trials),
         operators=tuple(operators),
         external=dict(external or {}),
+        changes=tuple(changes),
     )
 
 
@@ -298,6 +305,14 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
             new_ids = list(conn.execute(_INSERT_TRIALS, rows).scalars())
             for t, new in zip(trials, new_ids, strict=True):
                 trial_ids.add(t.id, new)
+        if payload.changes:
+            carried = {t.id for t in trials}
+            rows = []
+            for change in payload.changes:
+                if change.trial_id not in carried:
+                    raise StoreError(f"the payload holds a change of trial {change.trial_id}, which it does not carry")
+                rows.append(change_row(trial_ids.known[change.trial_id], change))
+            conn.execute(insert(TrialChangeRow), rows)
         operator_ids: dict[int, int] = {}
         for op in payload.operators:
             operator_ids[op.id] = conn.execute(
@@ -342,6 +357,7 @@ def count_rows(payload: Payload) -> dict[str, int]:
         "episodes": len(payload.episodes),
         "snapshots": len(payload.snapshots),
         "trials": len(payload.trials),
+        "changes": len(payload.changes),
         "operators": len(payload.operators),
     }
 

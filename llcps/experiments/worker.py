@@ -144,6 +144,7 @@ def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
     store.create_branch(pool_branch, from_branch=MAIN_BRANCH, at=0)
     pretrain(store, branch=pool_branch, n=task.pool, seed=task.seed, control_loop_every=0)
     pool = store.visible_trials(pool_branch)
+    pool_changes = store.visible_changes(pool_branch)
     for size, name in own.items():
         if name == pool_branch:
             continue
@@ -155,7 +156,8 @@ def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
             [
                 replace(t, id=None, created_at=None, branch=name, run_id=run_id, episode_id=None, extra={**t.extra, "pool": task.pool})
                 for t in chosen
-            ]
+            ],
+            changes=[pool_changes.get(t.id) for t in chosen],  # type: ignore[arg-type]
         )
         store.finish_run(run_id, status="ok")
     return export_branches(store, task.branches)

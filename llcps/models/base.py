@@ -13,16 +13,20 @@ import io
 import re
 import zipfile
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from llcps.domain import OUTCOME_NAMES, TrialRecord, WorldModelInput
+from llcps.domain import OUTCOME_NAMES, TrialChange, TrialRecord, WorldModelInput
 from llcps.errors import LlcpsError
+
+if TYPE_CHECKING:
+    from llcps.models.goal import GoalLearner
+    from llcps.models.relational import GoalQuery
 
 #: ``meta["format"]`` of every artifact, and the version this code writes and reads.
 ARTIFACT_FORMAT = "llcps-world-model"
-ARTIFACT_VERSION = 1
+ARTIFACT_VERSION = 2
 
 #: Largest total (uncompressed) array payload an artifact may declare: a guard
 #: against a crafted archive that would exhaust memory when read.
@@ -33,36 +37,71 @@ _FIXED_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
 class WorldModel(ABC):
-    """A multi-label predictor of Omega from a trial's inputs.
+    """A multi-label predictor of Omega from a trial's inputs, with a goal-aware head.
+
+    Two outcomes are learned from the same trials: the paper's Omega (Table 2), and the
+    goal-aware one (:mod:`llcps.models.goal`): the probability that a candidate makes
+    a failure's missing atoms hold, learned from each trial's symbolic change.
 
     Attributes:
         name: the registry name (descriptions live in the registry).
         seed: all randomness of fitting and predicting derives from it.
         n_trials: size of the training set of the last fit.
+        goal: the goal-aware head.
     """
 
     name: ClassVar[str]
 
     def __init__(self, seed: int) -> None:
+        from llcps.models.goal import GoalHead  # the head's module imports this one
+
         self.seed = int(seed)
         self.n_trials = 0
+        self.goal = GoalHead(self._goal_learner())
 
     @abstractmethod
-    def fit(self, records: Sequence[TrialRecord]) -> WorldModel:
-        """Fit on the training set (any size, including 0), replacing earlier fits."""
+    def _goal_learner(self) -> GoalLearner:
+        """A fresh learner of the model's own kind for the goal-aware head."""
 
-    def update(self, records: Sequence[TrialRecord]) -> WorldModel:
+    def fit(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange] | None = None) -> WorldModel:
+        """Fit on the training set (any size, including 0), replacing earlier fits.
+
+        Args:
+            records: the trials.
+            changes: their known symbolic changes by trial id (the goal-aware head
+                learns from the trials that have one).
+        """
+        self._fit_outcome(records)
+        self.goal.fit(records, changes or {})
+        return self
+
+    def update(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange] | None = None) -> WorldModel:
         """Bring the model up to ``records``, a training set that grew since the last fit.
 
         What the agent calls during exploration, where the set grows by a few trials at a
-        time. A full refit here; a model whose fit is costly may continue from its current
-        state instead (the network does).
+        time. Omega is refitted (a model whose fit is costly may continue from its current
+        state instead: the network does); the goal-aware head takes the new trials in as
+        episode evidence (:mod:`llcps.models.goal`).
         """
-        return self.fit(records)
+        self._update_outcome(records)
+        self.goal.update(records, changes or {})
+        return self
+
+    @abstractmethod
+    def _fit_outcome(self, records: Sequence[TrialRecord]) -> None:
+        """Fit the Omega predictor on ``records``."""
+
+    def _update_outcome(self, records: Sequence[TrialRecord]) -> None:
+        """Bring the Omega predictor up to a grown set; a full refit unless overridden."""
+        self._fit_outcome(records)
 
     @abstractmethod
     def predict_proba(self, candidates: Sequence[WorldModelInput | TrialRecord]) -> np.ndarray:
         """Predicted P(bit = 1) per candidate: float64 (n, 6) in [0, 1], OUTCOME_NAMES order."""
+
+    def predict_goal(self, query: GoalQuery) -> np.ndarray:
+        """P(each missing atom changes as needed) per candidate: (n_candidates, n_atoms) in [0, 1]."""
+        return self.goal.predict(query)
 
     @abstractmethod
     def _export(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -76,6 +115,9 @@ class WorldModel(ABC):
     def to_artifact(self) -> tuple[bytes, dict[str, Any]]:
         """Serialize the fitted model to (bytes, meta) that load without executing code."""
         arrays, meta = self._export()
+        goal_arrays, goal_meta = self.goal.export()
+        arrays = {**arrays, **goal_arrays}
+        meta = {**meta, **goal_meta}
         data = pack_arrays(arrays)
         common = {
             "format": ARTIFACT_FORMAT,
@@ -115,7 +157,8 @@ class WorldModel(ABC):
             raise LlcpsError(f"{cls.name!r} world-model artifact is corrupt (checksum mismatch)", hint=hint)
         try:
             arrays = unpack_arrays(artifact)
-            model = cls._import(arrays, meta, seed)
+            model = cls._import({k: v for k, v in arrays.items() if not k.startswith("goal/")}, meta, seed)
+            model.goal.load(arrays, meta)
             model.n_trials = int(meta.get("n_trials", 0))
         except LlcpsError as exc:
             raise LlcpsError(f"{cls.name!r} world-model artifact rejected: {exc.message}", hint=hint) from None

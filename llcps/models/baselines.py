@@ -11,11 +11,14 @@ from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 from sklearn.ensemble import RandomForestClassifier
+from scipy.special import expit
 from sklearn.linear_model import LogisticRegression
 
 from llcps.domain import TrialRecord, WorldModelInput
 from llcps.models.base import WorldModel, array
 from llcps.models.features import encode_inputs
+from llcps.models.goal import GoalLearner, Standardizer, StratifiedLearner
+from llcps.models.relational import N_GOAL_FEATURES, GoalQuery, encode_queries
 from llcps.models.learned import N_FEATURES, N_LABELS, EncodedWorldModel, SklearnPerLabelModel
 
 _U64 = np.uint64
@@ -30,6 +33,34 @@ def _splitmix64(x: np.ndarray) -> np.ndarray:
     return z ^ (z >> _U64(31))
 
 
+def _hash_rows(raw: np.ndarray, seed: int) -> np.ndarray:
+    """(n, 6) uniform values in [0, 1): SplitMix64 of the seed and each row's float64 bits."""
+    raw = np.ascontiguousarray(raw, dtype=np.float64)
+    state = np.full(len(raw), seed & _MASK64, dtype=np.uint64)
+    for column in raw.view(np.uint64).T:
+        state = _splitmix64(state ^ column)
+    bits = np.stack([_splitmix64(state ^ _U64(j)) for j in range(N_LABELS)], axis=1)
+    return (bits >> _U64(11)).astype(np.float64) * 2.0**-53
+
+
+class NoLearning(GoalLearner):
+    """The random model's goal head learns nothing (it is never asked to predict)."""
+
+    name: ClassVar[str] = "random"
+
+    def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        return None
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        return _hash_rows(features, self.seed)[:, 0]
+
+    def export(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def load(self, arrays: Mapping[str, np.ndarray]) -> None:
+        return None
+
+
 class RandomModel(WorldModel):
     """No model: a seeded pseudo-random score per candidate and bit.
 
@@ -42,19 +73,23 @@ class RandomModel(WorldModel):
 
     name: ClassVar[str] = "random"
 
-    def fit(self, records: Sequence[TrialRecord]) -> RandomModel:
+    def _fit_outcome(self, records: Sequence[TrialRecord]) -> None:
         """Nothing to learn; remembers only how many trials it was given."""
         self.n_trials = len(records)
-        return self
+
+    def _goal_learner(self) -> GoalLearner:
+        return NoLearning(self.seed)
+
+    def predict_goal(self, query: GoalQuery) -> np.ndarray:
+        """Uniform pseudo-random values in [0, 1), a function of (seed, encoded candidate-atom row)."""
+        n, k = len(query.candidates), len(query.atoms)
+        if n == 0 or k == 0:
+            return np.zeros((n, k))
+        return _hash_rows(encode_queries(query), self.seed)[:, 0].reshape(n, k)
 
     def predict_proba(self, candidates: Sequence[WorldModelInput | TrialRecord]) -> np.ndarray:
         """Uniform pseudo-random values in [0, 1), a function of (seed, candidate)."""
-        raw = np.ascontiguousarray(encode_inputs(candidates))
-        state = np.full(len(raw), self.seed & _MASK64, dtype=np.uint64)
-        for column in raw.view(np.uint64).T:
-            state = _splitmix64(state ^ column)
-        bits = np.stack([_splitmix64(state ^ _U64(j)) for j in range(N_LABELS)], axis=1)
-        return (bits >> _U64(11)).astype(np.float64) * 2.0**-53
+        return _hash_rows(encode_inputs(candidates), self.seed)
 
     def _export(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         return {}, {}
@@ -80,6 +115,39 @@ class LogisticRegressionModel(SklearnPerLabelModel):
     def _make_estimator(self) -> Any:
         return LogisticRegression(C=1.0, max_iter=1000)
 
+    def _goal_learner(self) -> GoalLearner:
+        return StratifiedLearner(self.seed, LogisticGoal)
+
+
+class LogisticGoal(GoalLearner):
+    """Weighted L2 logistic regression on standardized (candidate, atom) rows."""
+
+    name: ClassVar[str] = "logreg"
+
+    def __init__(self, seed: int) -> None:
+        super().__init__(seed)
+        self.scaler = Standardizer()
+        self.coef = np.zeros(N_GOAL_FEATURES)
+        self.intercept = 0.0
+
+    def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        self.scaler.fit(features, weights)
+        estimator = LogisticRegression(C=1.0, max_iter=1000)
+        estimator.fit(self.scaler.transform(features), labels, sample_weight=weights)
+        self.coef = estimator.coef_[0].astype(np.float64)
+        self.intercept = float(estimator.intercept_[0])
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        return expit(self.scaler.transform(features).astype(np.float64) @ self.coef + self.intercept)
+
+    def export(self) -> dict[str, np.ndarray]:
+        return {**self.scaler.export("scaler"), "coef": self.coef, "intercept": np.array([self.intercept])}
+
+    def load(self, arrays: Mapping[str, np.ndarray]) -> None:
+        self.scaler.load(arrays, "scaler")
+        self.coef = array(arrays, "coef", (N_GOAL_FEATURES,)).astype(np.float64)
+        self.intercept = float(array(arrays, "intercept", (1,))[0])
+
 
 class RandomForestModel(EncodedWorldModel):
     """A multi-output random forest over the learnable Omega bits.
@@ -91,6 +159,9 @@ class RandomForestModel(EncodedWorldModel):
 
     name: ClassVar[str] = "forest"
     n_estimators: ClassVar[int] = 100
+
+    def _goal_learner(self) -> GoalLearner:
+        return ForestGoal(self.seed)
 
     def _reset(self) -> None:
         self._forest: RandomForestClassifier | None = None
@@ -129,3 +200,48 @@ class RandomForestModel(EncodedWorldModel):
             raise ValueError("training outcomes disagree with the learned-bit mask")
         self._reset()
         self._fit_encoded(features, outcomes.astype(np.uint8))
+
+
+class ForestGoal(GoalLearner):
+    """A weighted random forest on raw (candidate, atom) rows.
+
+    As for Omega, the artifact holds the training rows and loading refits them (same
+    rows, same seed, one job: the same trees).
+    """
+
+    name: ClassVar[str] = "forest"
+    n_estimators: ClassVar[int] = 100
+    #: Leaves hold at least this many examples: probabilities, not memorized labels.
+    min_samples_leaf: ClassVar[int] = 3
+
+    def __init__(self, seed: int) -> None:
+        super().__init__(seed)
+        self._forest: RandomForestClassifier | None = None
+        self._train: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        features = features.astype(np.float32)
+        self._train = (features, labels.astype(np.uint8), weights.astype(np.float64))
+        self._forest = RandomForestClassifier(
+            n_estimators=self.n_estimators,
+            min_samples_leaf=self.min_samples_leaf,
+            random_state=self.seed & 0xFFFFFFFF,
+            n_jobs=1,
+        ).fit(features, labels, sample_weight=weights)
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        assert self._forest is not None
+        return self._forest.predict_proba(features.astype(np.float32))[:, 1].astype(np.float64)
+
+    def export(self) -> dict[str, np.ndarray]:
+        assert self._train is not None
+        features, labels, weights = self._train
+        return {"train/features": features, "train/labels": labels, "train/weights": weights}
+
+    def load(self, arrays: Mapping[str, np.ndarray]) -> None:
+        features = array(arrays, "train/features", (None, N_GOAL_FEATURES))
+        labels = array(arrays, "train/labels", (len(features),), kind="iub")
+        weights = array(arrays, "train/weights", (len(features),))
+        if not np.isin(labels, (0, 1)).all() or len(np.unique(labels)) != 2 or np.any(weights <= 0):
+            raise ValueError("training labels must be 0/1 with both classes, weights positive")
+        self.fit(features, labels, weights)

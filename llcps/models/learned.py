@@ -39,7 +39,7 @@ class EncodedWorldModel(WorldModel):
         self.learned = learnable_labels(outcome_matrix([]))
         self._table = TrialTable()
 
-    def fit(self, records: Sequence[TrialRecord]) -> EncodedWorldModel:
+    def _fit_outcome(self, records: Sequence[TrialRecord]) -> None:
         """Fit the encoder and the learner on every trial in ``records``."""
         raw, outcomes = self._table.encode(records)
         self.n_trials = len(raw)
@@ -50,9 +50,8 @@ class EncodedWorldModel(WorldModel):
         self._reset()
         if self.learned.any():
             self._fit_encoded(features, outcomes)
-        return self
 
-    def update(self, records: Sequence[TrialRecord]) -> EncodedWorldModel:
+    def _update_outcome(self, records: Sequence[TrialRecord]) -> None:
         """Continue from the current fit if the learner can (:meth:`_can_continue`), else refit.
 
         A continued learner keeps the encoder of its last full fit, so its inputs mean what
@@ -60,13 +59,13 @@ class EncodedWorldModel(WorldModel):
         grown set.
         """
         if not (self.learned.any() and self._can_continue()):
-            return self.fit(records)
+            self._fit_outcome(records)
+            return
         raw, outcomes = self._table.encode(records)
         self._continue_encoded(self.encoder.transform(raw), outcomes)
         self.n_trials = len(raw)
         self.prior = label_prior(outcomes)
         self.learned = learnable_labels(outcomes)
-        return self
 
     def _can_continue(self) -> bool:
         """Whether the learner can train further from its fitted state (:meth:`_continue_encoded`)."""

@@ -8,11 +8,13 @@ seeded random key, so the order is a deterministic function of (predictions, see
 - ``most-changes``: largest sum of all six probabilities.
 - ``most-positive-changes``: largest P(+visibility) + P(+reachability) + P(+touching).
 - ``least-negative-changes``: smallest P(-visibility) + P(-reachability) + P(-touching).
-- ``goal-directed`` (ours): largest ``sum_k desired[k] * P(bit k)``, where ``desired``
-  weighs the kinds of fluent change the failed action needed but did not produce
-  (``llcps.cps.outcomes.desired_outcome``). Without ``desired`` (or with all-zero
-  weights) it falls back to ``most-positive-changes``: a failure usually lacks some
-  fluent that should have become true.
+- ``goal-directed`` (ours): largest predicted probability that the failure's missing
+  atoms all change as needed: the product over atoms of the goal-aware head's
+  probabilities (``goal``, one column per missing atom; :mod:`llcps.models.goal`),
+  ranked by its logarithm. A caller without atom predictions may pass ``desired``
+  instead, weights over Omega's bits for the kinds of change the failed action lacked
+  (``llcps.cps.outcomes.desired_outcome``), ranked by ``sum_k desired[k] * P(bit k)``;
+  with neither it falls back to ``most-positive-changes``.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ class Measure:
         bits: the Omega bits whose predicted probabilities are summed.
         maximize: True when a larger sum ranks first.
         uses_desired: True when the agent's ``desired`` weights replace ``bits``.
+        uses_goal: True when the goal-aware atom probabilities, if given, are the score.
     """
 
     name: str
@@ -45,15 +48,20 @@ class Measure:
     bits: tuple[str, ...]
     maximize: bool
     uses_desired: bool = False
+    uses_goal: bool = False
 
-    def score(self, proba: np.ndarray, desired: np.ndarray | None = None) -> np.ndarray:
+    def score(self, proba: np.ndarray, desired: np.ndarray | None = None, goal: np.ndarray | None = None) -> np.ndarray:
         """Higher is better: the (signed) sum this measure ranks by.
 
         Args:
             proba: (n, 6) predicted probabilities in OUTCOME_NAMES order.
             desired: length-6 non-negative weights (goal-directed only).
+            goal: (n, k) probabilities of the k missing atoms (goal-directed only); the
+                score is the log of their product.
         """
         proba = check_proba(proba)
+        if self.uses_goal and goal is not None:
+            return goal_score(goal, len(proba))
         weights = _desired_weights(desired) if self.uses_desired else None
         if weights is not None:
             total = (proba * weights).sum(axis=1)
@@ -74,20 +82,20 @@ MEASURES: dict[str, Measure] = _entries(
     Measure("least-negative-changes", "smallest sum of the three negative changes first", _NEGATIVE, False),
     Measure(
         "goal-directed",
-        "largest predicted probability of the changes the failed action lacked "
-        "(falls back to most-positive-changes)",
+        "largest predicted probability that the failure's missing atoms all change as needed",
         _POSITIVE,
         True,
         uses_desired=True,
+        uses_goal=True,
     ),
 )
 
-#: The paper's four measures (``goal-directed`` is this project's addition).
+#: The paper's four measures, in the order of its Figure 2 (``goal-directed`` is this project's addition).
 PAPER_MEASURES: tuple[str, ...] = (
     "least-destructive",
-    "most-changes",
     "most-positive-changes",
     "least-negative-changes",
+    "most-changes",
 )
 
 
@@ -126,12 +134,37 @@ def _desired_weights(desired: np.ndarray | None) -> np.ndarray | None:
     return weights if weights.any() else None
 
 
+#: Atom probabilities are floored here before their logarithm (a zero would tie every such candidate).
+GOAL_FLOOR = 1e-12
+
+
+def goal_score(goal: np.ndarray, n: int) -> np.ndarray:
+    """log of the product of each candidate's missing-atom probabilities.
+
+    Raises:
+        LlcpsError: not an (n, k) array of finite probabilities.
+    """
+    goal = np.asarray(goal, dtype=np.float64)
+    if goal.ndim != 2 or goal.shape[0] != n:
+        raise LlcpsError(f"goal predictions must have shape ({n}, k), got {goal.shape}")
+    if not np.all(np.isfinite(goal)) or np.any((goal < 0) | (goal > 1)):
+        raise LlcpsError("goal predictions must be finite probabilities in [0, 1]")
+    return np.log(np.maximum(goal, GOAL_FLOOR)).sum(axis=1)
+
+
 def tie_break_key(n: int, seed: int) -> np.ndarray:
     """A seeded random permutation of ``range(n)``: the order among exact ties."""
     return np.random.default_rng(seed).permutation(n)
 
 
-def rank(proba: np.ndarray, measure: str, *, seed: int, desired: np.ndarray | None = None) -> np.ndarray:
+def rank(
+    proba: np.ndarray,
+    measure: str,
+    *,
+    seed: int,
+    desired: np.ndarray | None = None,
+    goal: np.ndarray | None = None,
+) -> np.ndarray:
     """Candidate indices, best first, under ``measure``.
 
     Args:
@@ -139,9 +172,11 @@ def rank(proba: np.ndarray, measure: str, *, seed: int, desired: np.ndarray | No
         measure: a name in MEASURES.
         seed: orders exact ties (same seed, same order; another seed may differ).
         desired: goal-directed weights over OUTCOME_NAMES (ignored by other measures).
+        goal: (n, k) predicted probabilities of the failure's k missing atoms
+            (goal-directed ranks by their product; ignored by other measures).
 
     Returns:
         An int64 permutation of ``range(n)``.
     """
-    score = get_measure(measure).score(proba, desired)
+    score = get_measure(measure).score(proba, desired, goal)
     return np.lexsort((tie_break_key(len(score), seed), -score))

@@ -17,9 +17,12 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 from scipy.special import expit
+from sklearn.linear_model import LogisticRegression
 
 from llcps.models.base import array
+from llcps.models.goal import GoalLearner, StratifiedLearner
 from llcps.models.learned import N_FEATURES, N_LABELS, EncodedWorldModel
+from llcps.models.relational import CONTINUOUS_MASK
 
 
 def _binarize(features: np.ndarray) -> np.ndarray:
@@ -64,6 +67,9 @@ class NaiveBayesModel(EncodedWorldModel):
         proba[:, self.learned] = expit(joint[:, :, 1] - joint[:, :, 0])
         return proba
 
+    def _goal_learner(self) -> GoalLearner:
+        return StratifiedLearner(self.seed, NaiveBayesGoal)
+
     def _export_learner(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         arrays = {"nb/feature_log_prob": self.feature_log_prob, "nb/class_log_prior": self.class_log_prior}
         return arrays, {"alpha": self.alpha}
@@ -76,3 +82,84 @@ class NaiveBayesModel(EncodedWorldModel):
             raise ValueError("naive Bayes log-probabilities must be negative")
         self.feature_log_prob = feature_log_prob.astype(np.float64)
         self.class_log_prior = class_log_prior.astype(np.float64)
+
+
+class NaiveBayesGoal(GoalLearner):
+    """Weighted Bernoulli naive Bayes on (candidate, atom) rows.
+
+    One-hot columns are features as they are; each continuous column becomes three
+    bits, "above its training quartile q" for q = 1, 2, 3, so that naive Bayes sees
+    where in its range a distance or a size lies, not only which side of the mean.
+    Laplace smoothing (alpha = 1) on weighted counts. Naive Bayes counts correlated
+    bits as independent evidence and so saturates at 0 and 1, which would tie the very
+    candidates to be ranked; its log-odds are rescaled by a logistic fit on the
+    training rows (Platt scaling, slope kept positive), which keeps its order and
+    makes its probabilities mean what they say.
+    """
+
+    name: ClassVar[str] = "nb"
+    alpha: ClassVar[float] = 1.0
+    quantiles: ClassVar[tuple[float, ...]] = (0.25, 0.5, 0.75)
+
+    def __init__(self, seed: int) -> None:
+        super().__init__(seed)
+        width = int(CONTINUOUS_MASK.sum())
+        self.thresholds = np.zeros((width, len(self.quantiles)))
+        self.feature_log_prob = np.zeros((2, self._width()))
+        self.class_log_prior = np.log(np.full(2, 0.5))
+        #: Slope and intercept of the Platt scaling of the log-odds.
+        self.platt = np.array([1.0, 0.0])
+
+    def _width(self) -> int:
+        return int((~CONTINUOUS_MASK).sum()) + self.thresholds.size
+
+    def _bits(self, features: np.ndarray) -> np.ndarray:
+        categorical = features[:, ~CONTINUOUS_MASK] > 0.5
+        continuous = features[:, CONTINUOUS_MASK]
+        above = continuous[:, :, None] > self.thresholds[None, :, :]
+        return np.concatenate([categorical, above.reshape(len(features), -1)], axis=1).astype(np.float64)
+
+    def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        self.thresholds = np.quantile(features[:, CONTINUOUS_MASK], self.quantiles, axis=0).T.copy()
+        x = self._bits(features)
+        y = labels.astype(np.float64)
+        class_weight = np.array([weights @ (1.0 - y), weights @ y])
+        ones = np.stack([np.einsum("n,n,nd->d", weights, 1.0 - y, x), np.einsum("n,n,nd->d", weights, y, x)])
+        self.feature_log_prob = np.log(ones + self.alpha) - np.log(class_weight + 2 * self.alpha)[:, None]
+        self.class_log_prior = np.log(class_weight) - np.log(class_weight.sum())
+        self.platt = np.array([1.0, 0.0])
+        scale = LogisticRegression(C=1e4, max_iter=1000).fit(self._log_odds(features)[:, None], labels, sample_weight=weights)
+        slope = float(scale.coef_[0, 0])
+        if slope > 0:
+            self.platt = np.array([slope, float(scale.intercept_[0])])
+
+    def _log_odds(self, features: np.ndarray) -> np.ndarray:
+        x = self._bits(features)
+        log_present = self.feature_log_prob
+        log_absent = np.log1p(-np.exp(log_present))
+        joint = x @ (log_present - log_absent).T + log_absent.sum(axis=1) + self.class_log_prior
+        return joint[:, 1] - joint[:, 0]
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        return expit(self.platt[0] * self._log_odds(features) + self.platt[1])
+
+    def export(self) -> dict[str, np.ndarray]:
+        return {
+            "nb/thresholds": self.thresholds,
+            "nb/feature_log_prob": self.feature_log_prob,
+            "nb/class_log_prior": self.class_log_prior,
+            "nb/platt": self.platt,
+        }
+
+    def load(self, arrays: Mapping[str, np.ndarray]) -> None:
+        self.thresholds = array(arrays, "nb/thresholds", self.thresholds.shape).astype(np.float64)
+        feature_log_prob = array(arrays, "nb/feature_log_prob", (2, self._width()))
+        class_log_prior = array(arrays, "nb/class_log_prior", (2,))
+        if np.any(feature_log_prob >= 0) or np.any(class_log_prior > 0):
+            raise ValueError("naive Bayes log-probabilities must be negative")
+        self.feature_log_prob = feature_log_prob.astype(np.float64)
+        self.class_log_prior = class_log_prior.astype(np.float64)
+        platt = array(arrays, "nb/platt", (2,))
+        if platt[0] <= 0:
+            raise ValueError("the Platt slope must be positive")
+        self.platt = platt.astype(np.float64)

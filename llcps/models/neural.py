@@ -22,7 +22,9 @@ import torch
 from torch import nn
 
 from llcps.models.base import array
+from llcps.models.goal import GoalLearner, Standardizer
 from llcps.models.learned import N_FEATURES, N_LABELS, EncodedWorldModel
+from llcps.models.relational import N_GOAL_FEATURES, N_STRATA, stratum_of
 
 
 @contextmanager
@@ -39,15 +41,18 @@ def _deterministic_torch() -> Iterator[None]:
         torch.set_num_threads(threads)
 
 
-def build_network(hidden: tuple[int, ...], generator: torch.Generator | None) -> nn.Sequential:
-    """The MLP ``34 -> hidden... -> 6`` (logits), ReLU between layers.
+def build_network(
+    hidden: tuple[int, ...], generator: torch.Generator | None, *, inputs: int = N_FEATURES, outputs: int = N_LABELS
+) -> nn.Sequential:
+    """The MLP ``inputs -> hidden... -> outputs`` (logits), ReLU between layers
+    (Omega's: 34 -> 3 x 256 -> 6).
 
     With a generator the layers get PyTorch's default Linear initialization drawn
     from it; without one they are left uninitialized (to be loaded).
     """
     layers: list[nn.Module] = []
-    width = N_FEATURES
-    for size in (*hidden, N_LABELS):
+    width = inputs
+    for size in (*hidden, outputs):
         linear = nn.utils.skip_init(nn.Linear, width, size)
         if generator is not None:
             nn.init.kaiming_uniform_(linear.weight, a=math.sqrt(5), generator=generator)
@@ -171,6 +176,9 @@ class NeuralNetworkModel(EncodedWorldModel):
             logits = self._network(torch.from_numpy(np.ascontiguousarray(features, dtype=np.float32)))
             return torch.sigmoid(logits).double().numpy()
 
+    def _goal_learner(self) -> GoalLearner:
+        return NeuralGoal(self.seed)
+
     def _export_learner(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         assert self._network is not None
         arrays = {f"net/{key}": value.detach().numpy().copy() for key, value in self._network.state_dict().items()}
@@ -192,3 +200,84 @@ class NeuralNetworkModel(EncodedWorldModel):
         network.eval()
         self._network = network
         self.training_log = dict(meta.get("training", {}))
+
+
+class NeuralGoal(GoalLearner):
+    """A feed-forward network on standardized (candidate, atom) rows, weighted binary cross-entropy.
+
+    Smaller than Omega's (two hidden layers of 64), with one output per (predicate, sign)
+    stratum: the hidden layers are shared by every kind of change, and a row's loss and
+    prediction use its own stratum's output (what makes things touch need not put them in
+    containers). Deterministic for a seed like the Omega network (local generator, one
+    thread, deterministic kernels); at most :attr:`max_steps` minibatch steps with the
+    learning rate decaying to 5 %.
+    """
+
+    name: ClassVar[str] = "nn"
+    hidden: ClassVar[tuple[int, ...]] = (64, 64)
+    batch_size: ClassVar[int] = 256
+    max_steps: ClassVar[int] = 1000
+    max_epochs: ClassVar[int] = 40
+    learning_rate: ClassVar[float] = 3e-3
+    final_lr_fraction: ClassVar[float] = 0.05
+    weight_decay: ClassVar[float] = 1e-4
+
+    def __init__(self, seed: int) -> None:
+        super().__init__(seed)
+        self.scaler = Standardizer()
+        self._network: nn.Sequential | None = None
+
+    def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        self.scaler.fit(features, weights)
+        inputs = torch.from_numpy(self.scaler.transform(features))
+        strata = torch.from_numpy(stratum_of(features))
+        targets = torch.from_numpy(labels.astype(np.float32))
+        w = torch.from_numpy((weights / weights.mean()).astype(np.float32))
+        with _deterministic_torch():
+            generator = torch.Generator().manual_seed((self.seed ^ 0x60A1) & 0xFFFF_FFFF_FFFF_FFFF)
+            network = build_network(self.hidden, generator, inputs=N_GOAL_FEATURES, outputs=N_STRATA)
+            optimizer = torch.optim.Adam(network.parameters(), lr=self.learning_rate, weight_decay=self.weight_decay)
+            n, batch = len(inputs), min(self.batch_size, len(inputs))
+            planned = min(self.max_steps, self.max_epochs * math.ceil(n / batch))
+            schedule = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=self.final_lr_fraction ** (1.0 / planned))
+            loss_fn = nn.BCEWithLogitsLoss(reduction="none")
+            steps = 0
+            network.train()
+            while steps < planned:
+                order = torch.randperm(n, generator=generator)
+                for start in range(0, n, batch):
+                    if steps == planned:
+                        break
+                    index = order[start : start + batch]
+                    optimizer.zero_grad(set_to_none=True)
+                    logits = network(inputs[index]).gather(1, strata[index, None])[:, 0]
+                    loss = (loss_fn(logits, targets[index]) * w[index]).mean()
+                    loss.backward()
+                    optimizer.step()
+                    schedule.step()
+                    steps += 1
+            network.eval()
+        self._network = network
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        assert self._network is not None
+        with _deterministic_torch(), torch.inference_mode():
+            strata = torch.from_numpy(stratum_of(features))
+            logits = self._network(torch.from_numpy(self.scaler.transform(features))).gather(1, strata[:, None])[:, 0]
+            return torch.sigmoid(logits).double().numpy()
+
+    def export(self) -> dict[str, np.ndarray]:
+        assert self._network is not None
+        arrays = {f"net/{key}": value.detach().numpy().copy() for key, value in self._network.state_dict().items()}
+        return {**arrays, **self.scaler.export("scaler")}
+
+    def load(self, arrays: Mapping[str, np.ndarray]) -> None:
+        self.scaler.load(arrays, "scaler")
+        network = build_network(self.hidden, None, inputs=N_GOAL_FEATURES, outputs=N_STRATA)
+        state = {
+            key: torch.from_numpy(array(arrays, f"net/{key}", tuple(value.shape)).astype(np.float32))
+            for key, value in network.state_dict().items()
+        }
+        network.load_state_dict(state, strict=True)
+        network.eval()
+        self._network = network

@@ -13,10 +13,10 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
-from llcps.domain import TrialRecord
-from llcps.errors import LlcpsError
+from llcps.domain import TrialChange, TrialRecord, check_seed
+from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import world_model_entry
 
@@ -27,7 +27,13 @@ logger = logging.getLogger(__name__)
 
 
 def fit_or_load(
-    store: Store, branch: str, name: str, seed: int, *, records: Sequence[TrialRecord] | None = None
+    store: Store,
+    branch: str,
+    name: str,
+    seed: int,
+    *,
+    records: Sequence[TrialRecord] | None = None,
+    changes: Mapping[int, TrialChange] | None = None,
 ) -> WorldModel:
     """The world model ``name`` fitted on every trial ``branch`` sees.
 
@@ -38,25 +44,37 @@ def fit_or_load(
         seed: the model's seed (part of the stored model's identity).
         records: the branch's visible trials, if the caller already loaded them
             (reloaded from the store when they do not reach its watermark).
+        changes: their known symbolic changes, if the caller already loaded them.
 
     Returns:
-        The stored model when it is current, else a fresh fit (which is stored).
+        The stored model when it is current (fitted on today's trials and on as many
+        known changes as the branch has: a backfill makes it stale), else a fresh fit
+        (which is stored).
 
     Raises:
         UnknownNameError: ``name`` is not a registered world model.
     """
     entry = world_model_entry(name)
+    check_seed(seed, "model seed")
     watermark = store.max_visible_trial_id(branch)
-    stored = store.latest_world_model(branch, name, seed)
-    if stored is not None and stored.watermark == watermark:
+    known = store.count_visible_changes(branch)
+    try:
+        stored = store.latest_world_model(branch, name, seed)
+    except StoreError as exc:  # a damaged row: the model is derived data, so fit it again
+        logger.warning("stored world model %s is unusable, refitting: %s", name, exc.message)
+        stored = None
+    if stored is not None and stored.watermark == watermark and stored.meta.get("changes", known) == known:
         try:
             return entry.load(stored.artifact, stored.meta, seed)
         except LlcpsError as exc:
             logger.warning("stored world model %s (id %s) is unusable, refitting: %s", name, stored.id, exc)
     if records is None or max((r.id for r in records), default=0) != watermark:
         records = store.visible_trials(branch)
-    model = entry(seed).fit(records)
+    if changes is None or len(changes) != known:
+        changes = store.visible_changes(branch)
+    model = entry(seed).fit(records, changes)
     artifact, meta = model.to_artifact()
+    meta["changes"] = known
     store.save_world_model(branch=branch, name=name, seed=seed, watermark=watermark, artifact=artifact, meta=meta)
     return model
 
@@ -88,12 +106,13 @@ def fit_models(
         progress: called as ``progress(name, done, total)`` before each fit and once at the end.
     """
     records = store.visible_trials(branch)
+    changes = store.visible_changes(branch)
     fitted = []
     for index, name in enumerate(names):
         if progress is not None:
             progress(name, index, len(names))
         started = time.perf_counter()
-        fit_or_load(store, branch, name, seed, records=records)
+        fit_or_load(store, branch, name, seed, records=records, changes=changes)
         fitted.append(FittedModel(name, seed, len(records), time.perf_counter() - started))
     if progress is not None:
         progress("done", len(names), len(names))

@@ -22,8 +22,8 @@ class WorldModelEntry:
     module: str
     class_name: str
     description: str
-    #: One of the paper's two models (the others are baselines).
-    paper: bool = False
+    #: The model's number in the paper (1: the network, 2: naive Bayes); 0 for baselines.
+    paper: int = 0
 
     def model_class(self) -> type[WorldModel]:
         return getattr(importlib.import_module(self.module), self.class_name)
@@ -47,14 +47,14 @@ WORLD_MODELS: dict[str, WorldModelEntry] = _entries(
         "llcps.models.naive_bayes",
         "NaiveBayesModel",
         "Bernoulli naive Bayes, one classifier per Omega bit (paper model 2)",
-        paper=True,
+        paper=2,
     ),
     WorldModelEntry(
         "nn",
         "llcps.models.neural",
         "NeuralNetworkModel",
         "feed-forward network, 3 x 256 hidden, BCE loss, decaying learning rate (paper model 1)",
-        paper=True,
+        paper=1,
     ),
     WorldModelEntry("random", "llcps.models.baselines", "RandomModel", "no model: a seeded random exploration order"),
     WorldModelEntry(
@@ -66,7 +66,7 @@ WORLD_MODELS: dict[str, WorldModelEntry] = _entries(
 )
 
 #: The paper's models, the default of commands that fit "the models".
-PAPER_MODELS: tuple[str, ...] = tuple(name for name, entry in WORLD_MODELS.items() if entry.paper)
+PAPER_MODELS: tuple[str, ...] = tuple(e.name for e in sorted((e for e in WORLD_MODELS.values() if e.paper), key=lambda e: e.paper))
 
 
 def world_model_entry(name: str) -> WorldModelEntry:

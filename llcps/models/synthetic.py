@@ -8,6 +8,8 @@ world models without a simulator; the agent never uses it.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from llcps.domain import (
@@ -17,11 +19,14 @@ from llcps.domain import (
     ORIENTATIONS,
     OUTCOME_NAMES,
     SHAPES,
+    Body,
     ControllerParams,
     EntityFeatures,
     Outcome,
+    TrialChange,
     TrialRecord,
     TrialSpec,
+    fluent,
 )
 
 
@@ -108,3 +113,63 @@ def synthetic_trials(n: int, *, seed: int, start_id: int = 1, branch: str = "mai
             )
         )
     return records
+
+
+#: Entities of the toy scenes: four objects and two containers (the toy's place and
+#: remove trials take an object and a container; other actions any two).
+_TOY_KINDS = ("object", "object", "object", "object", "container", "container")
+
+
+def _toy_bodies(rng: np.random.Generator, kinds: dict[str, str]) -> tuple[Body, ...]:
+    bodies = []
+    for name, kind in kinds.items():
+        x, y = float(rng.uniform(0.3, 0.9)), float(rng.uniform(-0.4, 0.4))
+        half = float(rng.uniform(0.02, 0.08)) if kind == "object" else float(rng.uniform(0.06, 0.12))
+        height = 2 * half if kind == "object" else float(rng.uniform(0.05, 0.2))
+        shape = SHAPES[int(rng.integers(len(SHAPES)))] if kind == "object" else "box"
+        lo, hi = (x - half, y - half, 0.0), (x + half, y + half, height)
+        bodies.append(Body(name, kind, shape, lo, hi, (x, y, height / 2)))
+    bodies.append(Body("table", "table", None, (-0.3, -0.6, -0.45), (1.05, 0.6, 0.0), (0.375, 0.0, -0.225)))
+    bodies.append(Body("floor", "floor", None, (-3.0, -3.0, -0.45), (3.0, 3.0, -0.45), (0.0, 0.0, -0.45)))
+    return tuple(bodies)
+
+
+def synthetic_changes(records: list[TrialRecord], *, seed: int) -> dict[int, TrialChange]:
+    """A toy symbolic change for each of ``records`` (from :func:`synthetic_trials`), by trial id.
+
+    One learnable relation: ``place_in_container(x, c)`` makes ``(in x c)`` (nine times in
+    ten), and nothing else makes anything ``in`` anything; ``remove_from_container(x, c)``
+    ends ``(in x c)``. Around it, noise: pushes end reachability and touching, push_together
+    makes its arguments touch. Not physics; for tests and timings of the goal-aware head.
+    """
+    rng = np.random.default_rng([seed, 0x60A1])
+    changes: dict[int, TrialChange] = {}
+    for record in records:
+        spec = record.spec
+        kinds = {f"entity{k}": kind for k, kind in enumerate(_TOY_KINDS)}
+        if spec.action in ("place_in_container", "remove_from_container"):
+            kinds[spec.arguments[0]], kinds[spec.arguments[1]] = "object", "container"
+        bodies = _toy_bodies(rng, kinds)
+        objects = [n for n, k in kinds.items() if k == "object"]
+        containers = [n for n, k in kinds.items() if k == "container"]
+        before = {fluent("visible", n) for n in kinds} | {fluent("reachable", n) for n in kinds}
+        before |= {fluent("on", n, "table") for n in objects} | {fluent("touching", n, "table") for n in kinds}
+        if spec.action == "remove_from_container" and rng.random() < 0.7:
+            before.add(fluent("in", *spec.arguments))
+        elif rng.random() < 0.3:
+            before.add(fluent("in", objects[int(rng.integers(len(objects)))], containers[0]))
+        after = set(before)
+        first = spec.arguments[0]
+        if spec.action == "place_in_container" and rng.random() < 0.9:
+            after |= {fluent("in", *spec.arguments), fluent("touching", *spec.arguments)}
+            after -= {fluent("on", first, "table")}
+        elif spec.action == "remove_from_container":
+            after -= {fluent("in", *spec.arguments)}  # a no-op when it was not in
+        elif spec.action == "push" and spec.params.movement_magnitude > 0.2 and rng.random() < 0.7:
+            after -= {fluent("reachable", first), fluent("touching", first, "table")}
+        elif spec.action == "push_together" and rng.random() < 0.8:
+            after.add(fluent("touching", *spec.arguments))
+        changes[record.id] = replace(  # type: ignore[index]
+            TrialChange.between(before, after, bodies), trial_id=record.id
+        )
+    return changes

@@ -26,6 +26,8 @@ from llcps.scenarios.schema import Scalar
 DIGITS = 4
 #: Draws of one variant's layout before its ranges are refused.
 MAX_ATTEMPTS = 100
+#: Largest variant number: a variant is a seed, and seeds are 32 bits everywhere.
+MAX_VARIANT = 2**32 - 1
 
 
 def unit(variant: int, attempt: int, key: str) -> float:
@@ -73,8 +75,10 @@ def check_variant(variant: object) -> int:
     """A variant number, or an error saying what one is."""
     from llcps.errors import LlcpsError
 
-    if isinstance(variant, bool) or not isinstance(variant, int) or variant < 0:
-        raise LlcpsError(f"a variant is a number 0 or more, not {variant!r}", hint="variant 0 is the canonical scene")
+    if isinstance(variant, bool) or not isinstance(variant, int) or not 0 <= variant <= MAX_VARIANT:
+        raise LlcpsError(
+            f"a variant is a number from 0 to {MAX_VARIANT}, not {variant!r}", hint="variant 0 is the canonical scene"
+        )
     return variant
 
 
@@ -87,13 +91,13 @@ def parse_range(text: str) -> range:
         bounds = [int(p) for p in parts]
     except ValueError:
         bounds = []
-    if len(parts) == 1 and len(bounds) == 1 and bounds[0] >= 0:
+    if len(parts) == 1 and len(bounds) == 1 and 0 <= bounds[0] <= MAX_VARIANT:
         return range(bounds[0], bounds[0] + 1)
-    if len(parts) == 2 and len(bounds) == 2 and 0 <= bounds[0] < bounds[1]:
+    if len(parts) == 2 and len(bounds) == 2 and 0 <= bounds[0] < bounds[1] <= MAX_VARIANT + 1:
         return range(bounds[0], bounds[1])
     raise LlcpsError(
         f"not a range of variants: {text!r}",
-        hint="write A:B for variants A..B-1 (0 <= A < B), e.g. 0:20, or one variant N",
+        hint=f"write A:B for variants A..B-1 (0 <= A < B <= {MAX_VARIANT + 1}), e.g. 0:20, or one variant N",
     )
 
 
@@ -105,6 +109,7 @@ def range_text(variants: range) -> str:
 __all__ = [
     "DIGITS",
     "MAX_ATTEMPTS",
+    "MAX_VARIANT",
     "Draws",
     "check_variant",
     "choice",

@@ -13,7 +13,7 @@ import math
 from dataclasses import asdict
 from typing import Sequence
 
-from llcps.sim.specs import DEFAULT_WALL, EntitySpec, FixtureSpec, TableSpec, _triple
+from llcps.sim.specs import DEFAULT_WALL, MAX_EXTENT, EntitySpec, FixtureSpec, TableSpec, _triple
 
 #: Density of solid objects when no mass is given (kg/m^3, light wood).
 DEFAULT_DENSITY = 500.0
@@ -70,7 +70,7 @@ def open_box(
     wall: float = DEFAULT_WALL,
 ) -> EntitySpec:
     """An open-topped box container (a tray when shallow), resting at height ``on``."""
-    dims = _triple(size, "size")
+    dims = _triple(size, "size", MAX_EXTENT)
     return EntitySpec(
         name=name,
         kind="container",
@@ -156,7 +156,7 @@ def shelf(
 
     Placed over a container it blocks the top approach while leaving the sides open.
     """
-    sx, sy, sz = _triple(size, "size")
+    sx, sy, sz = _triple(size, "size", MAX_EXTENT)
     board = FixtureSpec(name, (sx, sy, sz), (at[0], at[1], clearance + sz / 2.0), color="wood")
     if not post:
         return (board,)

@@ -22,7 +22,7 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Mapping, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
 
 from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, EntityFeatures, Outcome, TrialSpec
 from llcps.sim.trial import TrialResult
@@ -79,11 +79,20 @@ class CachedTrial:
     end_state: bytes
 
 
+StateCheck = Callable[[bytes], object]
+"""Raises :class:`~llcps.errors.LlcpsError` when an end state may not be restored."""
+
+
 class PhysicsCache(Protocol):
     """What the agent needs of a physics cache (see :mod:`llcps.store.physics_cache`)."""
 
-    def get(self, key: str) -> CachedTrial | None:
-        """The trial stored under ``key``, or None (absent, or failed validation)."""
+    def get(self, key: str, *, check: StateCheck | None = None) -> CachedTrial | None:
+        """The trial stored under ``key``, or None (absent, or failed validation).
+
+        ``check`` (the restoring world's :meth:`~llcps.sim.world.World.check_serialized`)
+        is called on the end state too; an entry it refuses counts as absent and is
+        replaced by the next simulation of its key.
+        """
 
     def put(self, key: str, result: TrialResult, end_state: bytes) -> None:
         """Keep a simulated trial; a key already present is left as it is."""
@@ -180,4 +189,4 @@ def decode_result(data: bytes) -> TrialResult:
     )
 
 
-__all__ = ["CachedTrial", "KEY_VERSION", "PhysicsCache", "decode_result", "encode_result", "trial_key"]
+__all__ = ["CachedTrial", "KEY_VERSION", "PhysicsCache", "StateCheck", "decode_result", "encode_result", "trial_key"]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Callable, Mapping
 
-from llcps.domain import ACTIONS, TrialSpec
+from llcps.domain import ACTIONS, PUSH_DIRECTION, SIDE, TrialSpec
 from llcps.errors import LlcpsError
 from llcps.sim import geometry as g
 from llcps.sim.motion import TRANSIT_SPEED, VERTICAL_SPEED, CapReached, Motion
@@ -34,20 +34,6 @@ DEFAULT_MAX_STEPS = 6000
 #: Steps allowed after the motion for everything to come to rest.
 SETTLE_STEPS = 720
 
-#: Push direction of each orientation.
-PUSH_DIRECTION: Mapping[str, tuple[float, float]] = {
-    "left": (0.0, -1.0),
-    "right": (0.0, 1.0),
-    "front": (1.0, 0.0),
-    "top": (1.0, 0.0),
-}
-#: Side of an entity each orientation names (place offset, remove destination).
-SIDE: Mapping[str, tuple[float, float]] = {
-    "left": (0.0, 1.0),
-    "right": (0.0, -1.0),
-    "front": (1.0, 0.0),
-    "top": (-1.0, 0.0),
-}
 
 #: Tool travel before the fingers meet the pushed entity (m).
 PRE_CONTACT = 0.03

@@ -48,6 +48,7 @@ assert tuple(DEMO_TRIALS) == ACTIONS
 def render_gallery(out_dir: str | Path, *, every: int = 12, speedup: float = 2.0) -> dict[str, TrialResult]:
     """Render ``<action>.gif`` for every action and ``scene.png`` into ``out_dir``."""
     out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     results: dict[str, TrialResult] = {}
     with World.from_scene(DEMO_SCENE, visuals=True) as world:
         world.settle(max_steps=240)

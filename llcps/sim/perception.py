@@ -26,11 +26,11 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from llcps.domain import EntityFeatures, State, fluent
+from llcps.domain import Body, EntityFeatures, State, fluent
 from llcps.sim import geometry as g
 from llcps.sim.geometry import TOUCH_DISTANCE
 from llcps.sim.robot import RAY_MASK
-from llcps.sim.world import FLOOR
+from llcps.sim.world import FLOOR, TABLE
 
 if TYPE_CHECKING:
     from llcps.sim.world import World
@@ -46,6 +46,9 @@ REACH_ABOVE = 0.02
 APPROACH_HEIGHT = 0.5
 #: Fraction of an entity's extent by which visibility sample points spread from its centre.
 SAMPLE_SPREAD = 0.35
+#: Half width of the floor a body description gives (m): the floor plane is unbounded,
+#: its visible slab is this wide.
+FLOOR_HALF_WIDTH = 3.0
 
 
 @dataclass(frozen=True)
@@ -203,3 +206,28 @@ def entity_features(world: "World", name: str) -> EntityFeatures:
         unit_y=uy,
         unit_z=uz,
     )
+
+
+def scene_bodies(world: "World") -> tuple[Body, ...]:
+    """Every entity and fixture as it is now: kind, shape and bounding box.
+
+    What a trial records beside its symbolic change, so that a world model can say
+    where an atom's bodies are relative to a candidate's arguments. Entities come in
+    scene order, then the table, the floor and the scene's other fixtures.
+    """
+    bodies = []
+    for name, entity in world.entities.items():
+        lo, hi = world.aabb(name)
+        bodies.append(Body(name, entity.kind, entity.spec.shape, lo, hi, world.center(name)))
+    floor_z = world.scene.table.floor_z
+    w = FLOOR_HALF_WIDTH
+    for name in world.fixtures:
+        if name == FLOOR:
+            lo, hi = (-w, -w, floor_z), (w, w, floor_z)
+            kind = "floor"
+        else:
+            lo, hi = world.aabb(name)
+            kind = "table" if name == TABLE else "fixture"
+        centre = tuple((a + b) / 2.0 for a, b in zip(lo, hi))
+        bodies.append(Body(name, kind, None, lo, hi, centre))
+    return tuple(bodies)

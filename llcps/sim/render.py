@@ -17,6 +17,8 @@ import numpy as np
 import pybullet as p
 from PIL import Image, ImageDraw, ImageFont
 
+from llcps.outputs import write_error
+
 if TYPE_CHECKING:
     from llcps.sim.world import World
 
@@ -179,11 +181,14 @@ class GifRecorder:
         self.grab()
 
     def save(self, path: str | Path, *, speedup: float = 1.0, hold_last: int = 6) -> Path:
-        """Write the frames as a looping GIF playing at ``speedup`` x real time."""
+        """Write the frames as a looping GIF playing at ``speedup`` x real time.
+
+        Raises:
+            LlcpsError: the file cannot be written (its directory is not created here).
+        """
         if not self.frames:
             raise ValueError("no frames recorded")
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         ms = max(20, int(round(1000 * self.every * self.world.time_step / speedup)))
         if any(self.captions):
             images = [captioned(f, c) for f, c in zip(self.frames, self.captions)]
@@ -191,7 +196,10 @@ class GifRecorder:
             images = [Image.fromarray(f) for f in self.frames]
         images += [images[-1]] * hold_last
         pal = [f.quantize(colors=128, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) for f in images]
-        pal[0].save(path, save_all=True, append_images=pal[1:], duration=ms, loop=0, optimize=True)
+        try:
+            pal[0].save(path, format="GIF", save_all=True, append_images=pal[1:], duration=ms, loop=0, optimize=True)
+        except OSError as exc:
+            raise write_error(path, exc, what="GIF") from None
         return path
 
 

@@ -17,6 +17,7 @@ which are rotated by ``yaw`` about +z.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -49,11 +50,33 @@ FIXTURE_RGBA: Mapping[str, tuple[float, float, float, float]] = {
 DEFAULT_WALL = 0.01
 
 
-def _triple(values: Sequence[float], what: str) -> tuple[float, float, float]:
-    out = tuple(float(v) for v in values)
-    if len(out) != 3:
+#: Bounds of what a scene may describe (m, kg): a stored scene is untrusted input, and
+#: a kilometre-wide box or a million-kilogram cube would stall the engine.
+MAX_EXTENT = 10.0
+MAX_DISTANCE = 100.0
+MAX_MASS = 1000.0
+MAX_NAME = 64
+
+#: Most entities and fixtures a scene may hold.
+MAX_SCENE_BODIES = 64
+
+
+def _triple(values: Sequence[float], what: str, bound: float) -> tuple[float, float, float]:
+    if isinstance(values, (str, bytes)) or len(values) != 3:
         raise ValueError(f"{what} needs 3 numbers, got {values!r}")
+    out = tuple(_number(v, what, bound) for v in values)
     return out  # type: ignore[return-value]
+
+
+def _number(value: object, what: str, bound: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not -bound <= float(value) <= bound:
+        raise ValueError(f"{what} must be a number within +-{bound:g}, got {value!r}")
+    return float(value)
+
+
+def _name(value: object, what: str) -> None:
+    if not isinstance(value, str) or not value.strip() or len(value) > MAX_NAME or not value.isprintable():
+        raise ValueError(f"{what} needs a printable name of at most {MAX_NAME} characters, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -84,13 +107,12 @@ class EntitySpec:
     wall: float = DEFAULT_WALL
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "size", _triple(self.size, "size"))
-        object.__setattr__(self, "position", _triple(self.position, "position"))
-        object.__setattr__(self, "yaw", float(self.yaw))
-        object.__setattr__(self, "mass", float(self.mass))
-        object.__setattr__(self, "wall", float(self.wall))
-        if not self.name or not self.name.strip():
-            raise ValueError("an entity needs a name")
+        object.__setattr__(self, "size", _triple(self.size, "size", MAX_EXTENT))
+        object.__setattr__(self, "position", _triple(self.position, "position", MAX_DISTANCE))
+        object.__setattr__(self, "yaw", _number(self.yaw, "yaw", MAX_DISTANCE))
+        object.__setattr__(self, "mass", _number(self.mass, "mass", MAX_MASS))
+        object.__setattr__(self, "wall", _number(self.wall, "wall", MAX_EXTENT))
+        _name(self.name, "an entity")
         if self.kind not in KINDS:
             raise ValueError(f"unknown entity kind {self.kind!r}; expected one of {KINDS}")
         if self.shape not in SHAPES:
@@ -154,11 +176,10 @@ class FixtureSpec:
     color: str = "gray"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "size", _triple(self.size, "size"))
-        object.__setattr__(self, "position", _triple(self.position, "position"))
-        object.__setattr__(self, "yaw", float(self.yaw))
-        if not self.name or not self.name.strip():
-            raise ValueError("a fixture needs a name")
+        object.__setattr__(self, "size", _triple(self.size, "size", MAX_EXTENT))
+        object.__setattr__(self, "position", _triple(self.position, "position", MAX_DISTANCE))
+        object.__setattr__(self, "yaw", _number(self.yaw, "yaw", MAX_DISTANCE))
+        _name(self.name, "a fixture")
         if min(self.size) <= 0:
             raise ValueError(f"fixture {self.name!r} needs a positive size")
         if self.color not in FIXTURE_RGBA:
@@ -189,6 +210,8 @@ class TableSpec:
     height: float = 0.45
 
     def __post_init__(self) -> None:
+        for name in ("x_min", "x_max", "y_half", "height"):
+            object.__setattr__(self, name, _number(getattr(self, name), f"table {name}", MAX_EXTENT))
         if not (self.x_max > self.x_min and self.y_half > 0 and self.height > 0):
             raise ValueError(f"invalid table {self}")
 
@@ -250,14 +273,33 @@ class SceneSpec:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "SceneSpec":
+        """Rebuild a scene from :meth:`to_dict` output, checking it (it may come from a database).
+
+        Raises:
+            LlcpsError: not a scene description, or one beyond :data:`MAX_SCENE_BODIES` bodies
+                or the bounds above.
+        """
         try:
+            if not isinstance(data, Mapping):
+                raise TypeError(f"expected a JSON object, got {type(data).__name__}")
+            entities, fixtures = data.get("entities", ()), data.get("fixtures", ())
+            if not isinstance(entities, list | tuple) or not isinstance(fixtures, list | tuple):
+                raise TypeError("entities and fixtures must be lists")
+            if len(entities) + len(fixtures) > MAX_SCENE_BODIES:
+                raise ValueError(f"more than {MAX_SCENE_BODIES} entities and fixtures")
             return cls(
-                entities=tuple(EntitySpec.from_dict(e) for e in data.get("entities", ())),
-                fixtures=tuple(FixtureSpec.from_dict(f) for f in data.get("fixtures", ())),
-                table=TableSpec.from_dict(data.get("table", {})),
-                name=str(data.get("name", "")),
+                entities=tuple(EntitySpec.from_dict(_object(e)) for e in entities),
+                fixtures=tuple(FixtureSpec.from_dict(_object(f)) for f in fixtures),
+                table=TableSpec.from_dict(_object(data.get("table", {}))),
+                name=str(data.get("name", ""))[:200],
             )
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, AttributeError, KeyError) as exc:
             raise LlcpsError(
                 f"not a valid scene description: {exc}", hint="scenes come from SceneSpec.to_dict()"
             ) from exc
+
+
+def _object(value: Any) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise TypeError(f"expected a JSON object, got {type(value).__name__}")
+    return value

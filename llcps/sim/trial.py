@@ -6,9 +6,9 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from llcps.domain import EntityFeatures, Outcome, State, TrialSpec, WorldModelInput
+from llcps.domain import Body, EntityFeatures, Outcome, State, TrialChange, TrialSpec, WorldModelInput
 from llcps.sim.controllers import DEFAULT_MAX_STEPS, execute
-from llcps.sim.perception import entity_features, perceive
+from llcps.sim.perception import entity_features, perceive, scene_bodies
 from llcps.sim.world import World
 
 
@@ -24,6 +24,7 @@ class TrialResult:
         outcome: Omega between ``before`` and ``after``.
         sim_steps: physics steps the controller used.
         wall_seconds: wall time of the whole trial (perception included).
+        bodies: every entity and fixture before the action (the change's scene).
     """
 
     spec: TrialSpec
@@ -33,10 +34,16 @@ class TrialResult:
     outcome: Outcome
     sim_steps: int
     wall_seconds: float
+    bodies: tuple[Body, ...] = ()
 
     @property
     def model_input(self) -> WorldModelInput:
         return WorldModelInput(spec=self.spec, features=self.features)
+
+    @property
+    def change(self) -> TrialChange:
+        """The symbolic change this trial made (stored beside its row)."""
+        return TrialChange.between(self.before, self.after, self.bodies)
 
 
 def run_trial(world: World, spec: TrialSpec, *, max_steps: int = DEFAULT_MAX_STEPS) -> TrialResult:
@@ -48,6 +55,7 @@ def run_trial(world: World, spec: TrialSpec, *, max_steps: int = DEFAULT_MAX_STE
     t0 = time.perf_counter()
     features = tuple(entity_features(world, name) for name in spec.arguments)
     before = perceive(world)
+    bodies = scene_bodies(world)
     steps = execute(world, spec, max_steps=max_steps)
     after = perceive(world)
     return TrialResult(
@@ -58,4 +66,5 @@ def run_trial(world: World, spec: TrialSpec, *, max_steps: int = DEFAULT_MAX_STE
         outcome=Outcome.between(before, after),
         sim_steps=steps,
         wall_seconds=time.perf_counter() - t0,
+        bodies=bodies,
     )

@@ -25,12 +25,17 @@ from pybullet_utils import bullet_client
 
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.sim import CONTROLLERS_REVISION, native_output_silenced
+from llcps.sim import snapshot as snapshots
 from llcps.sim.bodies import Entity, build_entity, build_fixture
 from llcps.sim.specs import FIXTURE_RGBA, FLOOR, TABLE, FixtureSpec, SceneSpec
 from llcps.sim.robot import Robot
 
 #: zlib level of serialized states (a scene's state shrinks from ~90 kB to ~40 kB in ~1 ms).
 STATE_COMPRESSION = 3
+
+#: Reference states (a freshly built scene, raw) by scene key, for checking stored states.
+_REFERENCES: dict[str, bytes] = {}
+_REFERENCE_CAPACITY = 32
 
 #: Rest thresholds used by :meth:`World.settle` and the controllers.
 REST_LINEAR = 0.005  # m/s
@@ -164,6 +169,7 @@ class World:
         if self.gui:
             c.configureDebugVisualizer(p.COV_ENABLE_GUI, 0)
         self.scene = scene
+        self._scene_key = snapshots.scene_key(scene.to_dict())
         self.entities = {}
         self.fixtures = {}
         table = scene.table
@@ -320,10 +326,12 @@ class World:
         The world then continues from exactly these bytes (it is restored from
         them), so whatever runs next replays bit for bit from the stored state in
         any process. A grasp is not part of the state: take snapshots between trials.
+        The state is remembered as trusted, so restoring it skips the checks.
         """
-        state = self.save_state()
-        self.restore_serialized(state)
-        return state
+        raw = self._save_raw()
+        self._trust(raw)
+        self._restore_raw(raw)
+        return zlib.compress(raw, STATE_COMPRESSION)
 
     def save_state(self) -> bytes:
         """The current physics state as :meth:`serialize_state` gives it, without continuing from it.
@@ -331,39 +339,89 @@ class World:
         The world goes on from its live state, which is not the same as the one a
         restore of these bytes gives (the engine keeps history a saved state does
         not hold). For callers that restore next anyway: an agent whose next step
-        either restores another state or continues from exactly these bytes.
+        either restores another state or continues from exactly these bytes. The
+        state is remembered as trusted, so restoring it skips the checks.
         """
-        fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
-        os.close(fd)
-        try:
-            self.client.saveBullet(path)
-            with open(path, "rb") as fh:
-                raw = fh.read()
-        finally:
-            os.unlink(path)
+        raw = self._save_raw()
+        self._trust(raw)
         return zlib.compress(raw, STATE_COMPRESSION)
 
-    def restore_serialized(self, state: bytes) -> None:
+    def restore_serialized(self, state: bytes, *, probe: bool = True) -> None:
         """Rebuild the scene and load a state made by :meth:`serialize_state` in a world
         built from the same scene (in this process or any other).
 
         Afterwards the world is exactly a fresh ``World.from_scene(scene)`` with the
         state restored; the motors hold the restored pose and nothing is grasped.
+        A state this process did not make or check before goes through
+        :meth:`check_serialized` first.
+
+        Raises:
+            StateError: the state is too large, malformed, or not one of this scene.
         """
-        if not state.startswith(b"BULLET"):  # compressed (raw .bullet files are accepted too)
-            try:
-                state = zlib.decompress(state)
-            except zlib.error as exc:
-                raise LlcpsError("not a physics state", hint="states come from World.serialize_state()") from exc
+        self._restore_raw(self.check_serialized(state, probe=probe))
+
+    def check_serialized(self, state: bytes, *, probe: bool = True) -> bytes:
+        """Check that an untrusted serialized state may be restored into this world's scene;
+        returns its raw ``.bullet`` bytes.
+
+        The state is inflated under a size cap, its structure is checked against the
+        scene's (:func:`llcps.sim.snapshot.check_state`) and, with ``probe``, it is
+        restored once in a child process first, so that a state that would crash the
+        engine becomes a clean error (see :mod:`llcps.sim.snapshot`). A state this
+        process made, or checked before, costs only its digest. The first check of a
+        scene may rebuild the world from it (to take the reference state): restore a
+        state afterwards.
+
+        Raises:
+            StateError: the state is too large, malformed, or not one of this scene.
+        """
+        raw = snapshots.decompress_state(state)
+        key = (self._scene_key, snapshots.state_digest(raw))
+        if key not in snapshots.TRUSTED:
+            snapshots.check_state(raw, self.reference_state())
+            if probe:
+                snapshots.probe_states(self.scene.to_dict(), [raw])
+            snapshots.TRUSTED.add(key)
+        return raw
+
+    def reference_state(self) -> bytes:
+        """The raw state of this world's scene freshly built: what a stored state is checked against.
+
+        Taking it the first time rebuilds the world from its scene (the live state is lost).
+        """
+        found = _REFERENCES.get(self._scene_key)
+        if found is None:
+            self.load(self.scene)
+            found = self._save_raw()
+            _REFERENCES[self._scene_key] = found
+            while len(_REFERENCES) > _REFERENCE_CAPACITY:
+                _REFERENCES.pop(next(iter(_REFERENCES)))
+        return found
+
+    def _trust(self, raw: bytes) -> None:
+        """Remember a state this process saved: restoring it needs no checks."""
+        snapshots.TRUSTED.add((self._scene_key, snapshots.state_digest(raw)))
+
+    def _save_raw(self) -> bytes:
+        fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
+        os.close(fd)
+        try:
+            self.client.saveBullet(path)
+            with open(path, "rb") as fh:
+                return fh.read()
+        finally:
+            os.unlink(path)
+
+    def _restore_raw(self, raw: bytes) -> None:
         self.load(self.scene)
         fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
         try:
             with os.fdopen(fd, "wb") as fh:
-                fh.write(state)
+                fh.write(raw)
             try:
                 self.client.restoreState(fileName=path)
             except p.error as exc:
-                raise LlcpsError(
+                raise snapshots.StateError(
                     "cannot restore the physics state: it does not match this scene",
                     hint="restore a state into World.from_scene(<the scene it was saved with>)",
                 ) from exc

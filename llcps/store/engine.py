@@ -5,19 +5,32 @@ directory, an unreadable file, a file that is not SQLite, or a SQLite file that 
 not an llcps store all raise :class:`~llcps.errors.StoreError` and leave the file
 byte-identical. Only then does the engine (which switches SQLite to WAL) connect.
 
+A new SQLite store is made beside its path with its ``application_id`` in the header
+and then hard-linked into place, which fails if the path exists: the path never holds
+a half-made file (a creator killed by ``kill -9`` leaves at most a hidden
+``.NAME.*.new`` beside it), and of several creators at once one wins and the others
+open its store.
+
 SQLite connections get WAL journaling, a 30 s busy timeout, foreign keys and
 ``synchronous=NORMAL``: a committed transaction is in the WAL file before the
 commit returns, so it survives a killed process (an OS crash or power cut can
 lose the last commits, never consistency). Write transactions start with
 ``BEGIN IMMEDIATE`` so concurrent writers queue on the busy timeout instead of
 failing with "database is locked" when a read would have to upgrade to a write.
-Everything SQLite-specific lives in this module; other backends (PostgreSQL)
-get plain SQLAlchemy.
+
+On PostgreSQL a write transaction first takes a transaction-level advisory lock
+(:data:`WRITER_LOCK`), the counterpart of ``BEGIN IMMEDIATE``: writers queue, so
+trial ids commit in the order they were drawn, which branch visibility relies on
+(see :mod:`llcps.store.visibility`). Readers never wait.
+Everything backend-specific lives in this module.
 """
 
 from __future__ import annotations
 
 import os
+import sqlite3
+import tempfile
+from contextlib import closing
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +48,9 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 
 #: Execution option that marks a connection's transaction as a write.
 WRITE_OPTION = "llcps_write"
+
+#: PostgreSQL advisory lock key that serializes writers ("LLCPSWRT" as a signed 64-bit number).
+WRITER_LOCK = int.from_bytes(b"LLCPSWRT", "big", signed=True)
 
 
 def resolve_url(url_or_path: str) -> URL:
@@ -65,8 +81,8 @@ def check_sqlite_file(path: Path, *, create: bool) -> bool:
     """Make sure ``path`` can be an llcps store without touching it.
 
     Returns:
-        True when the file exists (and is an llcps store), False when it is absent
-        and ``create`` allows making it.
+        True when the file exists and is an llcps store; False when it is absent (or
+        an empty database) and ``create`` allows making it.
     """
     if path.is_dir():
         raise StoreError(f"{path} is a directory, not a database file", hint=f"pass a file path, e.g. --db {path / 'llcps.db'}")
@@ -77,7 +93,7 @@ def check_sqlite_file(path: Path, *, create: bool) -> bool:
             if not os.access(path.parent, os.W_OK):
                 raise StoreError(f"cannot create {path}: directory {path.parent} is not writable", hint="choose another --db path")
             return False
-        raise StoreError(f"no llcps database at {path}", hint=f"create one with `llcps --db {path} db init`")
+        raise StoreError(f"no llcps database at {path}", hint=f"create one with `llcps --db {path} db init` (or pass --create)")
     try:
         with path.open("rb") as fh:
             header = fh.read(100)
@@ -85,12 +101,52 @@ def check_sqlite_file(path: Path, *, create: bool) -> bool:
         raise StoreError(f"cannot read {path}: {exc.strerror or exc}", hint="check the file's permissions") from exc
     if len(header) < 100 or not header.startswith(SQLITE_MAGIC):
         raise StoreError(f"{path} is not a SQLite database", hint="choose another --db path; the file was left untouched")
-    if int.from_bytes(header[68:72], "big") != SQLITE_APPLICATION_ID:
-        raise StoreError(
-            f"{path} is a SQLite database but not an llcps store",
-            hint="choose another --db path (or a new file for `llcps db init`); the file was left untouched",
-        )
-    return True
+    if int.from_bytes(header[68:72], "big") == SQLITE_APPLICATION_ID:
+        return True
+    if _read_application_id(path) == SQLITE_APPLICATION_ID:  # still in the write-ahead log (older stores)
+        return True
+    raise StoreError(
+        f"{path} is a SQLite database but not an llcps store",
+        hint="choose another --db path (or a new file for `llcps db init`); the file was left untouched",
+    )
+
+
+def _read_application_id(path: Path) -> int:
+    """The application id SQLite reports, reading the file (and its WAL) only."""
+    try:
+        with closing(sqlite3.connect(f"{path.as_uri()}?mode=ro", uri=True, timeout=BUSY_TIMEOUT_MS / 1000)) as conn:
+            return int(conn.execute("PRAGMA application_id").fetchone()[0])
+    except sqlite3.Error as exc:
+        raise StoreError(f"cannot read {path}: {exc}", hint="check the file and its permissions; the file was left untouched") from exc
+
+
+def create_sqlite_file(path: Path) -> None:
+    """Put a new, empty SQLite file marked as an llcps store at ``path``, atomically.
+
+    The file is made under a temporary name in the same directory and hard-linked to
+    ``path``; if ``path`` exists by then (another creator won), that file is kept.
+    """
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".new")
+    except OSError as exc:
+        raise StoreError(f"cannot create {path}: {exc.strerror or exc}", hint="check that the directory is writable") from exc
+    os.close(fd)
+    try:
+        with closing(sqlite3.connect(tmp)) as conn:
+            conn.execute(f"PRAGMA application_id = {SQLITE_APPLICATION_ID}")
+            conn.commit()
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            pass  # another creator made it first: open that one
+        except OSError:  # a filesystem without hard links: a rename that checks first
+            if not path.exists():
+                os.rename(tmp, path)
+    except (OSError, sqlite3.Error) as exc:
+        raise StoreError(f"cannot create {path}: {exc}", hint="check that the directory is writable") from exc
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def _on_sqlite_connect(foreign_keys: bool, file_backed: bool):  # noqa: ANN202 - event hook factory
@@ -113,6 +169,11 @@ def _on_sqlite_connect(foreign_keys: bool, file_backed: bool):  # noqa: ANN202 -
 def _on_sqlite_begin(conn: Any) -> None:
     immediate = conn.get_execution_options().get(WRITE_OPTION, False)
     conn.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
+
+
+def _on_postgresql_begin(conn: Any) -> None:
+    if conn.get_execution_options().get(WRITE_OPTION, False):
+        conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({WRITER_LOCK})")
 
 
 def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, plain: bool = False) -> Engine:
@@ -146,13 +207,6 @@ def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, pla
     if is_sqlite:
         event.listen(engine, "connect", _on_sqlite_connect(foreign_keys, file_backed))
         event.listen(engine, "begin", _on_sqlite_begin)
+    elif url.get_backend_name() == "postgresql":
+        event.listen(engine, "begin", _on_postgresql_begin)
     return engine
-
-
-def set_sqlite_application_id(engine: Engine) -> None:
-    """Mark a new SQLite file as an llcps store (a no-op on other backends)."""
-    if engine.url.get_backend_name() != "sqlite":
-        return
-    with engine.connect() as conn:
-        conn.exec_driver_sql(f"PRAGMA application_id = {SQLITE_APPLICATION_ID}")
-        conn.commit()

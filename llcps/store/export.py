@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Iterator, Sequence, TextIO
 
 from llcps.errors import LlcpsError
+from llcps.outputs import replaced_atomically, written_atomically
 from llcps.store.flat import Column, flat_rows, trial_columns
 from llcps.store.store import Store
 from llcps.tabular import csv_value
@@ -73,8 +74,12 @@ def export_trials(
     scenario: str | None = None,
     episode: int | None = None,
     batch: int = 5000,
+    what: str = "out",
 ) -> int:
     """Write the trials ``branch`` sees (optionally filtered) to ``out``, in id order.
+
+    A file path is written under a temporary name and renamed into place at the end,
+    so a failed export (a damaged row, a full disk) leaves no half-written file.
 
     Args:
         branch: the branch (None: the current one).
@@ -82,6 +87,7 @@ def export_trials(
         out: a text stream (csv, jsonl) or a file path (any format; parquet needs one).
         source, scenario, episode: keep only trials with these values.
         batch: trials read per query.
+        what: how the caller named ``out``, for errors (e.g. ``"--out"``).
 
     Returns:
         The number of trials written.
@@ -94,9 +100,10 @@ def export_trials(
     if fmt in BINARY_FORMATS:
         if not isinstance(out, (str, Path)):
             raise LlcpsError(f"{fmt} is binary: it is written to a file", hint="pass --out FILE")
-        return _write_parquet(Path(out), batches, columns)
+        with written_atomically(out, what=what) as target:
+            return _write_parquet(target, batches, columns)
     if isinstance(out, (str, Path)):
-        with Path(out).open("w", newline="", encoding="utf-8") as fh:
+        with replaced_atomically(out, what=what) as fh:
             return _write_text(fh, fmt, batches, columns)
     return _write_text(out, fmt, batches, columns)
 

@@ -9,8 +9,10 @@ to it, and pruning it only means later runs compute some physics again.
 
 Everything read back is untrusted: an entry's size is capped and its content hash
 checked before anything is decoded, the result is decoded field by field, and the
-end state must pass :func:`validate_state` before a world restores it (once per
-digest and process). An entry that fails is ignored as a miss and replaced by the
+end state must pass :func:`validate_state` (a bounded inflate, once per digest and
+process) and the restoring world's structure check
+(:meth:`llcps.sim.world.World.check_serialized`, memoized per process) before a
+world restores it. An entry that fails is ignored as a miss and replaced by the
 next simulation of its key.
 
 Size: each entry is about 40 kB (the compressed end state dominates). The cache is
@@ -22,7 +24,6 @@ first, and ``llcps cache prune`` does so on demand.
 from __future__ import annotations
 
 import hashlib
-import zlib
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any, Callable
@@ -31,7 +32,8 @@ from sqlalchemy import delete, func, insert, select, update
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 
 from llcps.errors import LlcpsError, StoreError
-from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, decode_result, encode_result
+from llcps.sim import snapshot as snapshots
+from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, StateCheck, decode_result, encode_result
 from llcps.sim.trial import TrialResult
 from llcps.store import engine as engines
 from llcps.store.schema import PhysicsCacheEntry
@@ -41,9 +43,9 @@ DEFAULT_MAX_BYTES = 2 << 30
 #: Store setting that overrides :data:`DEFAULT_MAX_BYTES` (bytes, as text).
 MAX_BYTES_SETTING = "physics_cache_max_bytes"
 #: Largest compressed end state accepted (a scene's state is ~40 kB).
-MAX_STATE_BYTES = 8 << 20
+MAX_STATE_BYTES = snapshots.MAX_COMPRESSED_STATE_BYTES
 #: Largest end state once decompressed (a scene's state is ~90 kB).
-MAX_RAW_STATE_BYTES = 64 << 20
+MAX_RAW_STATE_BYTES = snapshots.MAX_STATE_BYTES
 #: Hits remembered before their use is written back (``last_used``, ``hits``).
 _FLUSH_EVERY = 64
 
@@ -52,28 +54,24 @@ StateValidator = Callable[[bytes], None]
 
 
 def validate_state(state: bytes) -> None:
-    """Check that ``state`` is a bounded, well-formed serialized physics state.
+    """Check that ``state`` is a bounded serialized physics state.
 
     A state is a zlib stream of a ``.bullet`` file (or the raw file). The stream
-    is inflated with a cap, so a crafted entry cannot exhaust memory, and must
-    hold a Bullet file header.
+    is inflated under the cap of :func:`llcps.sim.snapshot.decompress_state`, so a
+    crafted entry cannot exhaust memory, and must hold a Bullet file header. Its
+    structure is checked against the scene by the world that restores it
+    (:meth:`llcps.sim.world.World.check_serialized`, passed to
+    :meth:`StorePhysicsCache.get` as ``check``).
 
     Raises:
         ValueError: it is not one.
     """
     if not isinstance(state, (bytes, bytearray)) or not state:
         raise ValueError("an end state is non-empty bytes")
-    if len(state) > MAX_STATE_BYTES:
-        raise ValueError(f"an end state is at most {MAX_STATE_BYTES} bytes")
-    if state.startswith(b"BULLET"):
-        return
-    inflater = zlib.decompressobj()
     try:
-        raw = inflater.decompress(bytes(state), MAX_RAW_STATE_BYTES)
-    except zlib.error as exc:
-        raise ValueError(f"not a compressed physics state: {exc}") from None
-    if inflater.unconsumed_tail or not inflater.eof:
-        raise ValueError("a compressed physics state is truncated or inflates beyond the cap")
+        raw = snapshots.decompress_state(bytes(state))
+    except LlcpsError as exc:
+        raise ValueError(exc.message) from None
     if not raw.startswith(b"BULLET"):
         raise ValueError("not a Bullet physics state")
 
@@ -131,8 +129,14 @@ class StorePhysicsCache:
         self._used: dict[str, int] = {}
         self._rejected: set[str] = set()
 
-    def get(self, key: str) -> CachedTrial | None:
-        """The entry under ``key``, or None when absent or when it fails validation."""
+    def get(self, key: str, *, check: StateCheck | None = None) -> CachedTrial | None:
+        """The entry under ``key``, or None when absent or when it fails validation.
+
+        Args:
+            key: a :func:`llcps.sim.cache.trial_key`.
+            check: also run on the end state (the restoring world's structure check);
+                an entry it refuses is a miss, replaced by the next :meth:`put`.
+        """
         try:
             with self._engine.connect() as conn:
                 row = conn.execute(
@@ -150,7 +154,7 @@ class StorePhysicsCache:
         if row is None:
             self.counts.misses += 1
             return None
-        entry = self._check(row)
+        entry = self._check(row, check)
         if entry is None:
             self.counts.misses += 1
             self.counts.rejected += 1
@@ -162,7 +166,7 @@ class StorePhysicsCache:
             self.flush()
         return entry
 
-    def _check(self, row: Any) -> CachedTrial | None:
+    def _check(self, row: Any, check: StateCheck | None) -> CachedTrial | None:
         result, state, sha, result_size, state_size = row
         if result_size is None or state_size is None or result_size > MAX_RESULT_BYTES or state_size > MAX_STATE_BYTES:
             return None
@@ -174,6 +178,8 @@ class StorePhysicsCache:
             if sha not in _validated:
                 self._validator(state)
                 _validated.add(sha)
+            if check is not None:
+                check(state)
         except (ValueError, LlcpsError):
             return None
         return CachedTrial(result=decoded, end_state=state)

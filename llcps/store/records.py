@@ -182,6 +182,9 @@ class StoreStatus:
     trials_total: int
     visible_trials: int
     visible_by_source: Mapping[str, int]
+    #: Trials of the store by how their symbolic change is known (recorded, replayed,
+    #: unknown, missing); None for a store whose schema predates trial changes.
+    changes: Mapping[str, int] | None = None
 
     def as_json(self) -> dict[str, Any]:
         return asdict(self)

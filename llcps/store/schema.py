@@ -182,6 +182,25 @@ class Trial(Base):
     extra: Mapped[dict[str, Any]]
 
 
+class TrialChangeRow(Base):
+    """A trial's symbolic change (atoms added and deleted) and the scene it happened in.
+
+    Kept beside the trial, keyed by its id, so that the trials table and its hot
+    decoder stay as they are; written in the same transaction as the trial. A row with
+    source ``unknown`` marks a trial of an older store whose change could not be
+    recovered by replay (no stored start state, or a replay that did not match).
+    """
+
+    __tablename__ = "trial_changes"
+
+    trial_id: Mapped[int] = mapped_column(ForeignKey("trials.id", ondelete="CASCADE"), primary_key=True)
+    source: Mapped[str] = mapped_column(String(16))
+    before: Mapped[list[Any]]
+    added: Mapped[list[Any]]
+    deleted: Mapped[list[Any]]
+    bodies: Mapped[list[Any]]
+
+
 class Operator(Base):
     """A learned operator (the knowledge-base expansion K')."""
 

@@ -1,11 +1,12 @@
 """The experience store: every trial the robot executes, on git-like branches.
 
-Visibility rule: a branch B with parent P forked at trial id f sees its own rows
-plus the rows P sees with id <= f (recursively, so the limit for a grandparent is
-the smaller of the two fork points). Trial ids only grow, so a branch's own trials
-all have ids above its fork point and "what B saw up to id w" is a prefix.
-Learned operators and world models follow the same rule, with their watermark
-(the largest trial id visible when they were made) in place of the id.
+Which rows a branch sees is the algebra of :mod:`llcps.store.visibility`; this
+module maps it onto queries. Every write is one transaction that holds the
+store's writer lock (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: an advisory lock),
+so trial ids commit in increasing order, as that algebra needs.
+
+Every byte read back is untrusted: a row that does not decode is a
+:class:`~llcps.errors.StoreError` naming the row, never a crash.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import hashlib
 import json
 import re
 from contextlib import contextmanager
-from dataclasses import dataclass
 from datetime import datetime, timezone
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
@@ -34,12 +34,12 @@ from sqlalchemy import (
 )
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 
-from llcps.domain import TrialRecord
+from llcps.domain import TrialChange, TrialRecord, check_id
 from llcps.provenance import Provenance
 from llcps.provenance import current as provenance_of_process
 from llcps.errors import LlcpsError, StoreError, UnknownNameError
 from llcps.store import engine as engines
-from llcps.store import migrations
+from llcps.store import migrations, visibility
 from llcps.store.records import (
     BranchChange,
     BranchInfo,
@@ -61,8 +61,11 @@ from llcps.store.schema import (
     Setting,
     Snapshot,
     Trial,
+    TrialChangeRow,
     WorldModel,
 )
+from llcps.store.visibility import BranchRow, Link
+from llcps.store.changes import CHANGE_COLUMNS, UNKNOWN, ChangeDecoder, change_row
 from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, iso_timestamp, trial_row
 
 #: The root branch every store starts with.
@@ -74,6 +77,11 @@ CURRENT_BRANCH_KEY = "current_branch"
 PRETRAIN = "pretrain"
 
 RESET_TARGETS: tuple[str, ...] = (PRETRAIN, "empty")
+
+#: Largest stored physics state read back (bytes, compressed); larger rows are refused unread.
+MAX_SNAPSHOT_BYTES = 8 * 2**20
+
+_CHANGED = "the row was changed outside llcps; restore the database from a copy (or delete the row)"
 
 _WHITESPACE = re.compile(r"\s")
 _INSERT_TRIAL = insert(Trial)
@@ -133,7 +141,7 @@ def run_record(row: Any) -> RunRecord:
         id=row.id,
         command=row.command,
         seed=row.seed,
-        config=row.config,
+        config=_mapping(row.config, f"run {row.id}", "config"),
         branch=row.branch,
         status=row.status,
         started_at=iso_timestamp(row.started_at) or "",
@@ -165,27 +173,9 @@ def _episode_record(row: Any) -> EpisodeRecord:
         measure=row.measure,
         seed=row.seed,
         status=row.status,
-        summary=row.summary if isinstance(row.summary, Mapping) else {},
+        summary=_mapping(row.summary, f"episode {row.id}", "summary"),
         started_at=iso_timestamp(row.started_at) or "",
         finished_at=iso_timestamp(row.finished_at),
-    )
-
-
-@dataclass(frozen=True)
-class _Link:
-    """One branch of a visibility chain and the largest id visible from it (None: all)."""
-
-    branch_id: int
-    name: str
-    limit: int | None
-
-
-def _visible(chain: Sequence[_Link], branch_col: Any, id_col: Any) -> ColumnElement[bool]:
-    return or_(
-        *(
-            branch_col == link.branch_id if link.limit is None else and_(branch_col == link.branch_id, id_col <= link.limit)
-            for link in chain
-        )
     )
 
 
@@ -236,23 +226,17 @@ class Store:
         """
         url = engines.resolve_url(url_or_path)
         path = engines.sqlite_path(url)
-        exists = engines.check_sqlite_file(path, create=create) if path is not None else True
+        if path is not None and not engines.check_sqlite_file(path, create=create):
+            engines.create_sqlite_file(path)
         engine = engines.make_engine(url)
         store = cls(engine, url)
         try:
-            try:
-                if not exists:
-                    engines.set_sqlite_application_id(engine)
-                    store.upgrade()
-                else:
-                    store._check_schema(create=create, allow_outdated=allow_outdated)
-            except SQLAlchemyError as exc:
-                raise _db_error(exc) from exc
+            store._check_schema(create=create, allow_outdated=allow_outdated)
+        except SQLAlchemyError as exc:
+            engine.dispose()
+            raise _db_error(exc) from exc
         except BaseException:
             engine.dispose()
-            if not exists and path is not None:  # do not leave a half-made store behind
-                for suffix in ("", "-wal", "-shm"):
-                    path.with_name(path.name + suffix).unlink(missing_ok=True)
             raise
         return store
 
@@ -277,7 +261,7 @@ class Store:
                     hint="choose another --db; the database was left untouched",
                 )
             if not create:
-                raise StoreError(f"no llcps store at {self.url}", hint="create one with `llcps db init`")
+                raise StoreError(f"no llcps store at {self.url}", hint="create one with `llcps db init` (or pass --create)")
             self.upgrade()
             return
         head = migrations.head_revision()
@@ -347,6 +331,8 @@ class Store:
         try:
             with engine.connect() as conn:
                 conn.execution_options(**{engines.WRITE_OPTION: True})
+                # The transaction holds the writer lock and Alembic reads the revision
+                # inside it, so a concurrent upgrade finds the work done.
                 with conn.begin():
                     for done, revision in enumerate(pending):
                         if progress is not None:
@@ -384,6 +370,8 @@ class Store:
                 yield conn
         except SQLAlchemyError as exc:
             raise _db_error(exc) from exc
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # a JSON column's text, decoded as rows are read
+            raise StoreError(f"a stored JSON value is malformed ({exc})", hint=_CHANGED) from None
 
     @contextmanager
     def _write(self) -> Iterator[Connection]:
@@ -408,22 +396,15 @@ class Store:
     # --------------------------------------------------------------- branches
 
     def _branches(self, conn: Connection) -> list[Any]:
-        return list(conn.execute(select(Branch.id, Branch.name, Branch.parent_id, Branch.fork_point, Branch.created_at).order_by(Branch.id)))
+        rows = list(conn.execute(select(Branch.id, Branch.name, Branch.parent_id, Branch.fork_point, Branch.created_at).order_by(Branch.id)))
+        for r in rows:
+            if not isinstance(r.name, str) or not isinstance(r.fork_point, int) or not isinstance(r.parent_id, int | None):
+                raise StoreError(f"branch row {r.id} is malformed (name {r.name!r}, parent {r.parent_id!r}, fork point {r.fork_point!r})", hint=_CHANGED)
+        return rows
 
-    def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[_Link]:
+    def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[Link]:
         rows = self._branches(conn) if rows is None else rows
-        by_id = {r.id: r for r in rows}
-        row = next((r for r in rows if r.name == name), None)
-        if row is None:
-            raise UnknownNameError("branch", name, [r.name for r in rows])
-        chain: list[_Link] = []
-        limit: int | None = None
-        while True:
-            chain.append(_Link(row.id, row.name, limit))
-            if row.parent_id is None:
-                return chain
-            limit = row.fork_point if limit is None else min(limit, row.fork_point)
-            row = by_id[row.parent_id]
+        return visibility.chain([BranchRow(r.id, r.name, r.parent_id, r.fork_point) for r in rows], name)
 
     def _name(self, conn: Connection, name: str | None) -> str:
         if name is not None:
@@ -451,10 +432,10 @@ class Store:
         with self._read() as conn:
             return self._info(conn, self._name(conn, name))
 
-    def _count(self, conn: Connection, chain: Sequence[_Link], *extra: ColumnElement[bool]) -> int:
-        return conn.scalar(select(func.count()).select_from(Trial).where(_visible(chain, Trial.branch_id, Trial.id), *extra)) or 0
+    def _count(self, conn: Connection, chain: Sequence[Link], *extra: ColumnElement[bool]) -> int:
+        return conn.scalar(select(func.count()).select_from(Trial).where(visibility.clause(chain, Trial.branch_id, Trial.id), *extra)) or 0
 
-    def _max_visible(self, conn: Connection, chain: Sequence[_Link], *extra: ColumnElement[bool]) -> int:
+    def _max_visible(self, conn: Connection, chain: Sequence[Link], *extra: ColumnElement[bool]) -> int:
         best = 0
         for link in chain:  # one index range per link beats one OR scan
             stmt = select(func.max(Trial.id)).where(Trial.branch_id == link.branch_id, *extra)
@@ -507,7 +488,7 @@ class Store:
             conn.execute(insert(Branch).values(name=name, parent_id=chain[0].branch_id, fork_point=fork, created_at=_now()))
             return self._info(conn, name)
 
-    def _fork_point(self, conn: Connection, chain: Sequence[_Link], at: int | str | None) -> int:
+    def _fork_point(self, conn: Connection, chain: Sequence[Link], at: int | str | None) -> int:
         if at is None:
             return self._max_visible(conn, chain)
         if isinstance(at, str):
@@ -516,6 +497,7 @@ class Store:
             if not at.strip().isdigit():
                 raise LlcpsError(f"invalid fork point {at!r}", hint="pass a trial id or 'pretrain'")
             at = int(at)
+        check_id(at, "fork point")
         if at == 0:
             return 0
         if at < 0 or self._count(conn, chain, Trial.id == at) == 0:
@@ -566,7 +548,7 @@ class Store:
             ),
             default=None,
         )
-        blocking = [r.name for r in children if first_removed is not None and r.fork_point >= first_removed]
+        blocking = visibility.blocking_children(children, first_removed)
         if blocking:
             raise StoreError(
                 f"branch(es) {', '.join(blocking)} forked from {name!r} after trial {first_removed - 1}",
@@ -600,6 +582,7 @@ class Store:
             )
         )
         conn.execute(delete(WorldModel).where(clauses["model"]))
+        conn.execute(delete(TrialChangeRow).where(TrialChangeRow.trial_id.in_(trial_ids)))
         conn.execute(delete(Trial).where(clauses["trial"]))
         conn.execute(delete(Episode).where(clauses["episode"]))
 
@@ -827,12 +810,28 @@ class Store:
             return conn.scalar(select(Snapshot.id).where(Snapshot.sha256 == sha))
 
     def get_snapshot(self, snapshot_id: int) -> SnapshotRecord:
-        """A stored physics state by id."""
+        """A stored physics state by id, after checking its size and its content hash.
+
+        Raises:
+            StoreError: the row is larger than :data:`MAX_SNAPSHOT_BYTES`, its scene is
+                not a JSON object, or scene and state no longer match the stored hash.
+        """
+        check_id(snapshot_id, "snapshot id")
         with self._read() as conn:
+            size = conn.execute(select(func.length(Snapshot.state)).where(Snapshot.id == snapshot_id)).first()
+            if size is None:
+                raise LlcpsError(f"unknown snapshot {snapshot_id}", hint="snapshot ids come from a trial's snapshot_id")
+            if size[0] is None or size[0] > MAX_SNAPSHOT_BYTES:
+                raise StoreError(f"snapshot {snapshot_id} holds {size[0]} bytes, more than the {MAX_SNAPSHOT_BYTES:,} a physics state may", hint=_CHANGED)
             row = conn.execute(select(Snapshot.id, Snapshot.scene, Snapshot.state, Snapshot.sha256).where(Snapshot.id == snapshot_id)).first()
         if row is None:
             raise LlcpsError(f"unknown snapshot {snapshot_id}", hint="snapshot ids come from a trial's snapshot_id")
-        return SnapshotRecord(id=row.id, scene=row.scene, state=bytes(row.state), sha256=row.sha256)
+        if not isinstance(row.scene, dict) or not isinstance(row.state, (bytes, bytearray, memoryview)):
+            raise StoreError(f"snapshot {snapshot_id} is malformed: its scene is not a JSON object", hint=_CHANGED)
+        state = bytes(row.state)
+        if not isinstance(row.sha256, str) or self.snapshot_hash(row.scene, state) != row.sha256:
+            raise StoreError(f"snapshot {snapshot_id} does not match its content hash: it was changed after it was stored", hint=_CHANGED)
+        return SnapshotRecord(id=row.id, scene=row.scene, state=state, sha256=row.sha256)
 
     # ----------------------------------------------------------------- trials
 
@@ -843,22 +842,34 @@ class Store:
             self._branch_ids[name] = bid
         return bid
 
-    def add_trial(self, trial: TrialRecord) -> int:
-        """Write one trial; it is committed (durable) when this returns its id."""
-        return self.add_trials([trial])[0]
+    def add_trial(self, trial: TrialRecord, *, change: TrialChange | None = None) -> int:
+        """Write one trial (and its symbolic change); committed (durable) when this returns its id."""
+        return self.add_trials([trial], changes=None if change is None else [change])[0]
 
-    def add_trials(self, trials: Sequence[TrialRecord]) -> list[int]:
-        """Write several trials in one transaction; ids in input order."""
+    def add_trials(
+        self, trials: Sequence[TrialRecord], *, changes: Sequence[TrialChange | None] | None = None
+    ) -> list[int]:
+        """Write several trials in one transaction; ids in input order.
+
+        Args:
+            changes: each trial's symbolic change, in the same order (None: a trial
+                without one); written in the same transaction as the trials.
+        """
         if not trials:
             return []
+        if changes is not None and len(changes) != len(trials):
+            raise LlcpsError(f"{len(trials)} trial(s) but {len(changes)} change(s)", hint="pass one change per trial, or None")
         now = _now()
         try:
             with self._write() as conn:
                 rows = [trial_row(t, branch_id=self._branch_id(conn, t.branch), created_at=now) for t in trials]
                 if len(rows) == 1:
-                    return [conn.execute(_INSERT_TRIAL, rows[0]).inserted_primary_key[0]]
-                result = conn.execute(_INSERT_TRIALS, rows)
-                return list(result.scalars())
+                    ids = [conn.execute(_INSERT_TRIAL, rows[0]).inserted_primary_key[0]]
+                else:
+                    ids = list(conn.execute(_INSERT_TRIALS, rows).scalars())
+                if changes is not None:
+                    self._insert_changes(conn, [(i, c) for i, c in zip(ids, changes) if c is not None])
+                return ids
         except StoreError as exc:
             if "FOREIGN KEY" in exc.message.upper() or "foreign key" in exc.message:
                 stale = {t.branch for t in trials}
@@ -871,6 +882,7 @@ class Store:
 
     def get_trial(self, trial_id: int) -> TrialRecord:
         """One trial by id, on whatever branch owns it."""
+        check_id(trial_id, "trial id")
         with self._read() as conn:
             names = {r.id: r.name for r in self._branches(conn)}
             row = conn.execute(select(*TRIAL_COLUMNS).where(Trial.id == trial_id)).first()
@@ -919,11 +931,14 @@ class Store:
             limit: at most this many, taken from the start of the order.
             newest_first: descending id order.
         """
+        for value, what in ((limit, "limit"), (after_id, "after_id")):
+            if value is not None:
+                check_id(value, what)
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
             stmt = (
                 select(*TRIAL_COLUMNS)
-                .where(_visible(chain, Trial.branch_id, Trial.id), *self._trial_filters(source, scenario, solved, after_id, episode))
+                .where(visibility.clause(chain, Trial.branch_id, Trial.id), *self._trial_filters(source, scenario, solved, after_id, episode))
                 .order_by(Trial.id.desc() if newest_first else Trial.id)
                 .limit(limit)
             )
@@ -936,6 +951,90 @@ class Store:
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
             return self._count(conn, chain, *self._trial_filters(source, None, None, None))
+
+    # ---------------------------------------------------------- trial changes
+
+    @staticmethod
+    def _insert_changes(conn: Connection, changes: Sequence[tuple[int, TrialChange | None]]) -> None:
+        if changes:
+            conn.execute(insert(TrialChangeRow), [change_row(trial_id, change) for trial_id, change in changes])
+
+    def visible_changes(self, branch: str | None, *, after_id: int | None = None) -> dict[int, TrialChange]:
+        """The known symbolic changes of the trials ``branch`` sees, by trial id.
+
+        Visibility follows the trials'. Trials whose change is unknown (or was never
+        recovered) are left out.
+
+        Raises:
+            LlcpsError: a stored change is malformed.
+        """
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            stmt = (
+                select(*CHANGE_COLUMNS)
+                .join(Trial, Trial.id == TrialChangeRow.trial_id)
+                .where(visibility.clause(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
+                .order_by(TrialChangeRow.trial_id)
+            )
+            if after_id is not None:
+                stmt = stmt.where(Trial.id > after_id)
+            decoder = ChangeDecoder()
+            with gc_paused():
+                rows = conn.execute(stmt).all()
+                changes = (decoder.decode(row) for row in rows)
+                return {c.trial_id: c for c in changes if c is not None}  # type: ignore[misc]
+
+    def get_change(self, trial_id: int) -> TrialChange | None:
+        """One trial's symbolic change; None when it is unknown or not recorded."""
+        with self._read() as conn:
+            row = conn.execute(select(*CHANGE_COLUMNS).where(TrialChangeRow.trial_id == trial_id)).first()
+        return None if row is None else ChangeDecoder().decode(row)
+
+    def count_visible_changes(self, branch: str | None) -> int:
+        """How many trials ``branch`` sees have a known change (part of a fitted model's identity)."""
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            stmt = (
+                select(func.count())
+                .select_from(TrialChangeRow)
+                .join(Trial, Trial.id == TrialChangeRow.trial_id)
+                .where(visibility.clause(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
+            )
+            return conn.scalar(stmt) or 0
+
+    def change_counts(self) -> dict[str, int]:
+        """Trials of the whole store by how their change is known: ``recorded``,
+        ``replayed``, ``unknown``, and ``missing`` (no row: a store not yet backfilled)."""
+        with self._read() as conn:
+            counts = dict(conn.execute(select(TrialChangeRow.source, func.count()).group_by(TrialChangeRow.source)).all())
+            total = conn.scalar(select(func.count()).select_from(Trial)) or 0
+        out = {source: int(counts.get(source, 0)) for source in ("recorded", "replayed", UNKNOWN)}
+        out["missing"] = total - sum(counts.values())
+        return out
+
+    def trials_without_change(self, *, limit: int | None = None) -> list[tuple[int, int | None]]:
+        """(trial id, snapshot id) of every trial with no change row, in id order."""
+        with self._read() as conn:
+            stmt = (
+                select(Trial.id, Trial.snapshot_id)
+                .outerjoin(TrialChangeRow, TrialChangeRow.trial_id == Trial.id)
+                .where(TrialChangeRow.trial_id.is_(None))
+                .order_by(Trial.id)
+                .limit(limit)
+            )
+            return [(int(i), None if s is None else int(s)) for i, s in conn.execute(stmt)]
+
+    def put_changes(self, changes: Sequence[tuple[int, TrialChange | None]]) -> None:
+        """Record the changes of stored trials that have none yet (None: unknown), in one transaction.
+
+        Raises:
+            StoreError: a trial already has a change, or does not exist.
+        """
+        try:
+            with self._write() as conn:
+                self._insert_changes(conn, changes)
+        except StoreError as exc:
+            raise StoreError(exc.message, hint="a change is recorded once per trial; only trials without one are backfilled") from exc
 
     def max_visible_trial_id(self, branch: str | None) -> int:
         """The largest trial id ``branch`` sees, 0 if none: the watermark of a fit on it."""
@@ -975,7 +1074,7 @@ class Store:
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
             names = {link.branch_id: link.name for link in chain}
-            stmt = select(Operator).where(_visible(chain, Operator.branch_id, Operator.watermark)).order_by(Operator.id)
+            stmt = select(Operator).where(visibility.clause(chain, Operator.branch_id, Operator.watermark)).order_by(Operator.id)
             return [
                 OperatorRecord(
                     id=r.id,
@@ -1033,7 +1132,7 @@ class Store:
             chain = self._chain(conn, self._name(conn, branch))
             stmt = (
                 select(OperatorExecution.id, OperatorExecution.operator, OperatorExecution.context, OperatorExecution.success)
-                .where(_visible(chain, OperatorExecution.branch_id, OperatorExecution.watermark))
+                .where(visibility.clause(chain, OperatorExecution.branch_id, OperatorExecution.watermark))
                 .order_by(OperatorExecution.id)
             )
             counts: dict[tuple[str, tuple[tuple[str, ...], ...]], list[int]] = {}
@@ -1077,12 +1176,14 @@ class Store:
             names = {link.branch_id: link.name for link in chain}
             row = conn.execute(
                 select(WorldModel)
-                .where(_visible(chain, WorldModel.branch_id, WorldModel.watermark), WorldModel.name == name, WorldModel.seed == seed)
+                .where(visibility.clause(chain, WorldModel.branch_id, WorldModel.watermark), WorldModel.name == name, WorldModel.seed == seed)
                 .order_by(WorldModel.watermark.desc(), WorldModel.id.desc())
                 .limit(1)
             ).first()
         if row is None:
             return None
+        if not isinstance(row.artifact, (bytes, bytearray, memoryview)) or not isinstance(row.meta, dict):
+            raise StoreError(f"stored world model {row.id} is malformed: its artifact is not bytes or its meta not an object", hint=_CHANGED)
         return ModelArtifact(
             id=row.id,
             branch=names[row.branch_id],
@@ -1109,7 +1210,7 @@ class Store:
             chain = self._chain(conn, name, rows)
             by_source = dict(
                 conn.execute(
-                    select(Trial.source, func.count()).where(_visible(chain, Trial.branch_id, Trial.id)).group_by(Trial.source)
+                    select(Trial.source, func.count()).where(visibility.clause(chain, Trial.branch_id, Trial.id)).group_by(Trial.source)
                 ).all()
             )
             return StoreStatus(
@@ -1123,7 +1224,15 @@ class Store:
                 trials_total=conn.scalar(select(func.count()).select_from(Trial)) or 0,
                 visible_trials=sum(by_source.values()),
                 visible_by_source=by_source,
+                changes=self.change_counts() if inspect(conn).has_table(TrialChangeRow.__tablename__) else None,
             )
+
+
+def _mapping(value: Any, row: str, column: str) -> Mapping[str, Any]:
+    """A JSON column that must hold an object."""
+    if not isinstance(value, dict):
+        raise StoreError(f"{row} is malformed: its {column} is not a JSON object", hint=_CHANGED)
+    return value
 
 
 def _applied(change: BranchChange) -> BranchChange:

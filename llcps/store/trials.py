@@ -4,23 +4,33 @@ Reading the lifelong training set is the hot path (every model refit loads it),
 so rows are read with Core selects that skip SQLAlchemy's JSON and datetime
 processing, and the immutable parts of a record that repeat across trials
 (controller settings, entity features, outcomes) are built once per load.
+
+Rows are untrusted input. Each distinct spec, feature set and outcome is checked
+when it is first built (names from the vocabulary, finite numbers, exact fields),
+and each row's scalars by type, so a row changed outside llcps gives a
+:class:`~llcps.errors.StoreError` naming its trial id instead of a crash later.
+A malformed row is refused rather than skipped: skipping it would silently change
+a branch's training set.
 """
 
 from __future__ import annotations
 
 import gc
 import json
+import math
 import struct
 from contextlib import contextmanager
 from dataclasses import fields
 from datetime import datetime
 from typing import Any, Iterable, Iterator, Mapping, Sequence
 
-from sqlalchemy import Integer, String, Text, cast, type_coerce
+from sqlalchemy import Integer, String, Text, and_, case, cast, type_coerce
 
 from llcps.domain import (
     ACTIONS,
+    COLORS,
     OUTCOME_NAMES,
+    SHAPES,
     TRIAL_SOURCES,
     ControllerParams,
     EntityFeatures,
@@ -28,7 +38,7 @@ from llcps.domain import (
     TrialRecord,
     TrialSpec,
 )
-from llcps.errors import LlcpsError
+from llcps.errors import LlcpsError, StoreError
 from llcps.store.schema import Trial
 
 
@@ -133,17 +143,23 @@ def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> di
     return row
 
 
+#: The flags of a row whose bits are not all 0 or 1 (SQLite keeps whatever a row was given).
+MALFORMED_FLAGS = 256
+
+
 def _flags() -> Any:
     """The six outcome bits, ``solved`` and ``cache_hit`` as one integer, computed by the database.
 
     Bit i (0..5) is Omega's i-th bit, bit 6 ``solved``, bit 7 ``cache_hit``: one value
-    per row instead of eight, which is most of what fetching a row costs.
+    per row instead of eight, which is most of what fetching a row costs. A row with
+    any of them other than 0 or 1 (a row changed outside llcps) gives
+    :data:`MALFORMED_FLAGS`, which the decoder refuses.
     """
     parts = [getattr(Trial, name) for name in OUTCOME_NAMES] + [Trial.solved, Trial.cache_hit]
     flags = cast(parts[0], Integer)
     for bit, column in enumerate(parts[1:], start=1):
         flags = flags.op("|")(cast(column, Integer).op("<<")(bit))
-    return flags
+    return case((and_(*(column.in_((False, True)) for column in parts)), flags), else_=MALFORMED_FLAGS)
 
 
 #: Columns read for a TrialRecord, in the order :class:`TrialDecoder` unpacks them.
@@ -174,6 +190,10 @@ TRIAL_COLUMNS = (
 def _json(value: Any) -> Any:
     """Decode a JSON column read as text (drivers that decode JSON themselves pass through)."""
     return json.loads(value) if isinstance(value, str) else value
+
+
+class _Malformed(ValueError):
+    """A stored value that does not describe what its column should hold."""
 
 
 def _key(value: Any) -> Any:
@@ -207,6 +227,18 @@ def gc_paused() -> Iterator[None]:
 
 
 _TRIAL_RECORD_FIELDS = frozenset(f.name for f in fields(TrialRecord))
+_ENTITY_NUMBERS = tuple(f.name for f in fields(EntityFeatures) if f.name not in ("shape", "color"))
+_SOURCES = frozenset(TRIAL_SOURCES)
+_SHAPES = frozenset(SHAPES)
+_COLORS = frozenset(COLORS)
+_SCALAR_TYPES = (int, int, float, int)
+
+
+def _extra(value: Any) -> dict[str, Any]:
+    decoded = _json(value)
+    if not isinstance(decoded, dict):
+        raise _Malformed("extra is not a JSON object")
+    return decoded
 
 
 def _frozen(cls: type[Any], values: dict[str, Any]) -> Any:
@@ -238,32 +270,71 @@ class TrialDecoder:
         spec = self._specs.get(key)
         if spec is None:
             if action not in ACTIONS:
-                raise LlcpsError(f"stored trial has unknown action {action!r}", hint="upgrade llcps")
-            spec = TrialSpec(action, tuple(_json(arguments)), ControllerParams(rate, magnitude, orientation))
+                raise _Malformed(f"unknown action {action!r}")
+            names = _json(arguments)
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise _Malformed("arguments are not a list of entity names")
+            if not all(type(v) is float and math.isfinite(v) for v in (rate, magnitude)):
+                raise _Malformed("rate or movement magnitude is not a finite number")
+            spec = TrialSpec(action, tuple(names), ControllerParams(rate, magnitude, orientation))
             self._specs[key] = spec
         return spec
 
     def _feature_tuple(self, data: bytes) -> tuple[EntityFeatures, ...]:
         found = self._features.get(data)
         if found is None:
-            found = unpack_features(data)
+            try:
+                found = unpack_features(data)
+            except LlcpsError as exc:
+                raise _Malformed(exc.message) from None
+            for entity in found:
+                if entity.shape not in _SHAPES or entity.color not in _COLORS:
+                    raise _Malformed(f"features name an unknown shape or color ({entity.shape!r}, {entity.color!r})")
+                if not all(math.isfinite(getattr(entity, k)) for k in _ENTITY_NUMBERS):
+                    raise _Malformed("features hold a value that is not a finite number")
             self._features[bytes(data)] = found
         return found
 
     def _outcome(self, flags: int) -> Outcome:
         found = self._outcomes.get(flags)
         if found is None:
+            if not 0 <= flags < 64:
+                raise _Malformed("outcome bits, solved or cache_hit are not 0 or 1")
             found = Outcome.from_bits([(flags >> bit) & 1 for bit in range(len(OUTCOME_NAMES))])
             self._outcomes[flags] = found
         return found
 
-    def decode(self, rows: Iterable[Sequence[Any]]) -> list[TrialRecord]:
-        """Decode many rows (the hot loop: locals, caches, no per-row validation)."""
+    def decode(self, rows: Sequence[Sequence[Any]]) -> list[TrialRecord]:
+        """Decode many rows of :data:`TRIAL_COLUMNS`.
+
+        Raises:
+            StoreError: a row is malformed (the message names its trial id).
+        """
+        try:
+            return self._decode(rows)
+        except (ValueError, TypeError, KeyError, AttributeError, RecursionError) as exc:
+            for row in rows:  # find the row to name: slow, but only on the way to an error
+                try:
+                    self._decode([row])
+                except (ValueError, TypeError, KeyError, AttributeError, RecursionError) as row_exc:
+                    exc = row_exc
+                    trial = row[0]
+                    break
+            else:  # pragma: no cover - a batch fails only through one of its rows
+                trial = "?"
+            raise StoreError(
+                f"stored trial {trial} is malformed: {exc}",
+                hint="the row was changed outside llcps; delete it or restore the database from a copy",
+            ) from None
+
+    def _decode(self, rows: Iterable[Sequence[Any]]) -> list[TrialRecord]:
+        """The hot loop: locals, caches, and only type checks per row."""
         names = self._names
         specs, spec_of = self._specs, self._spec
         features_cache, features_of = self._features, self._feature_tuple
         outcomes, outcome_of = self._outcomes, self._outcome
         new, record_cls, set_dict = object.__new__, TrialRecord, object.__setattr__
+        sources = _SOURCES
         out: list[TrialRecord] = []
         append = out.append
         for (
@@ -277,8 +348,12 @@ class TrialDecoder:
             entity_features = features_cache.get(features)
             if entity_features is None:
                 entity_features = features_of(features)
-            bits = flags & 63
+            bits = flags & ~192  # Omega's bits; a stored value other than 0 or 1 sets bit 8 (see _flags)
             outcome = outcomes.get(bits) or outcome_of(bits)
+            if (type(sim_steps), type(seed), type(wall_seconds), type(branch_id)) != _SCALAR_TYPES or source not in sources:
+                raise _Malformed(f"source, steps, seconds or seed of the wrong type ({source!r}, {sim_steps!r}, {wall_seconds!r}, {seed!r})")
+            if simulation_wall_seconds is not None and type(simulation_wall_seconds) is not float:
+                raise _Malformed(f"simulation_wall_seconds is not a number ({simulation_wall_seconds!r})")
             record = new(record_cls)  # see _frozen: complete, valid values only
             set_dict(
                 record,
@@ -299,7 +374,7 @@ class TrialDecoder:
                     "snapshot_id": snapshot_id,
                     "scenario": scenario,
                     "created_at": created_at if created_at is None or isinstance(created_at, str) else iso_timestamp(created_at),
-                    "extra": {} if extra in ("{}", None) else _json(extra),
+                    "extra": {} if extra in ("{}", None) else _extra(extra),
                     "cache_hit": flags & 128 != 0,
                     "simulation_wall_seconds": simulation_wall_seconds,
                 },

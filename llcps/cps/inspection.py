@@ -1,11 +1,12 @@
 """What ``llcps inspect model`` shows: held-out metrics next to the majority baseline,
 the training set's label frequencies, and optionally the top candidates of a
-scenario's failure state under each measure.
+scenario's failure point under each measure, with each candidate's predicted
+probability of the failure's missing atoms.
 
-The failure state is reached the way the agent reaches it: the scenario's novelty
-condition is built, the branch's knowledge base plans, and the plan runs under the
-monitor until its first failing step. Nothing is written to the store on the way
-(except the fitted models, stored by :func:`~llcps.models.persistence.fit_or_load`).
+The failure point is reached the way the agent reaches it (:func:`~llcps.cps.agent.plan_and_repair`,
+then :func:`~llcps.cps.exploration.failure_point` from the state a_f was executed in),
+without storing anything (except the fitted models, stored by
+:func:`~llcps.models.persistence.fit_or_load`).
 """
 
 from __future__ import annotations
@@ -15,38 +16,35 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from llcps.domain import OUTCOME_NAMES, WorldModelInput
+from llcps.domain import OUTCOME_NAMES, check_seed
 from llcps.errors import LlcpsError
 from llcps.models.base import WorldModel
 from llcps.models.evaluation import EvaluationReport, evaluate
 from llcps.models.features import outcome_matrix
-from llcps.models.measures import MEASURES, get_measure, rank
+from llcps.models.measures import MEASURES
 from llcps.models.persistence import fit_or_load
 from llcps.models.registry import world_model_entry
 
 if TYPE_CHECKING:
+    from llcps.cps.exploration import FailurePoint
     from llcps.store import Store
 
 
 @dataclass(frozen=True)
 class RankedCandidate:
-    """One candidate trial in a measure's order, with the prediction it was ranked by."""
+    """One candidate trial in a measure's order, with the predictions it was ranked by.
+
+    Attributes:
+        goal: predicted probability of each missing atom (``+(in a b)`` must become
+            true, ``-(in a b)`` must stop), and ``joint`` their product.
+    """
 
     position: int
     trial: str
     score: float
     outcome: dict[str, float]
-
-
-@dataclass(frozen=True)
-class FailurePoint:
-    """A scenario's failure state: what failed, the wish, and the candidate trials."""
-
-    scenario: str
-    failed_action: str
-    missing_effects: str
-    desired: np.ndarray
-    candidates: tuple[WorldModelInput, ...]
+    goal: dict[str, float]
+    joint: float
 
 
 @dataclass(frozen=True)
@@ -63,12 +61,15 @@ class ModelInspection:
     rankings: dict[str, dict[str, list[RankedCandidate]]] = field(default_factory=dict)
     #: Why there are no held-out metrics (too few trials), if so.
     evaluation_note: str | None = None
+    #: Trials the goal-aware heads could learn from (those with a known change).
+    n_changes: int = 0
 
     def as_json(self) -> dict[str, Any]:
         data: dict[str, Any] = {
             "branch": self.branch,
             "seed": self.seed,
             "n_trials": self.n_trials,
+            "n_changes": self.n_changes,
             "label_frequencies": self.label_frequencies,
             "evaluations": [report.as_json() for report in self.evaluations],
             "evaluation_note": self.evaluation_note,
@@ -76,8 +77,9 @@ class ModelInspection:
         if self.failure is not None:
             data["scenario"] = {
                 "name": self.failure.scenario,
-                "failed_action": self.failure.failed_action,
+                "failed_action": self.failure.failure.step.label,
                 "missing_effects": self.failure.missing_effects,
+                "missing_atoms": [atom.label for atom in self.failure.query([]).atoms],
                 "desired": dict(zip(OUTCOME_NAMES, self.failure.desired.round(4).tolist())),
                 "candidates": len(self.failure.candidates),
                 "rankings": {
@@ -88,61 +90,52 @@ class ModelInspection:
         return data
 
 
-def top_candidates(
-    model: WorldModel,
-    candidates: Sequence[WorldModelInput],
-    *,
-    measure: str,
-    top: int,
-    seed: int,
-    desired: np.ndarray | None = None,
-) -> list[RankedCandidate]:
-    """The ``top`` best candidates under ``measure`` with their predicted Omega."""
-    proba = model.predict_proba(candidates)
-    order = rank(proba, measure, seed=seed, desired=desired)[:top]
-    score = get_measure(measure).score(proba, desired)
+def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top: int, seed: int) -> list[RankedCandidate]:
+    """The ``top`` best candidates of a failure point under ``measure``, with their predictions."""
+    from llcps.cps.exploration import rank_candidates
+    from llcps.models.goal import joint_probability
+
+    ranking = rank_candidates(model, point, measure=measure, seed=seed)
+    goal = ranking.goal if ranking.goal is not None else model.predict_goal(point.query())
+    atoms = [atom.label for atom in point.query([]).atoms]
+    joint = joint_probability(goal)
     return [
         RankedCandidate(
             position=position + 1,
-            trial=candidates[i].spec.label,
-            score=round(float(score[i]), 6),
-            outcome={name: round(float(p), 4) for name, p in zip(OUTCOME_NAMES, proba[i])},
+            trial=point.candidates[i].label,
+            score=round(float(ranking.score[i]), 6),
+            outcome={name: round(float(p), 4) for name, p in zip(OUTCOME_NAMES, ranking.outcome[i])},
+            goal={atom: round(float(p), 4) for atom, p in zip(atoms, goal[i])},
+            joint=round(float(joint[i]), 6),
         )
-        for position, i in enumerate(order)
+        for position, i in enumerate(ranking.order[:top])
     ]
 
 
-def failure_point(store: Store, *, branch: str, scenario: str, seed: int) -> FailurePoint:
-    """Run ``scenario``'s novelty plan (nothing stored) to its first failure.
+def reach_failure(store: Store, *, branch: str, scenario: str, seed: int) -> FailurePoint:
+    """Run ``scenario``'s novelty plan and its repairs (nothing stored) to the failure
+    exploration starts from, as the agent does.
 
     Raises:
-        LlcpsError: unknown scenario, no plan, or a plan that does not fail.
+        LlcpsError: unknown scenario, no plan, or a plan (or a repair) that reaches the goal.
     """
     # The agent's machinery (PyBullet, planner) loads only when a scenario is asked for.
-    from llcps.cps.agent import SETTLE_STEPS, Agent, SolveConfig, SolveResult, load_knowledge
-    from llcps.cps.candidates import enumerate_candidates
-    from llcps.cps.outcomes import desired_outcome
-    from llcps.sim.perception import entity_features, perceive
+    from llcps.cps.agent import SETTLE_STEPS, Agent, SolveConfig, SolveResult, load_knowledge, plan_and_repair
+    from llcps.cps.exploration import failure_point
+    from llcps.sim.perception import perceive
     from llcps.sim.world import World
-    from llcps.symbolic.planner import plan
 
     config = SolveConfig(scenario=scenario, seed=seed)
     spec = config.validate()
     world = World.from_scene(spec.scene("novelty"))
     try:
         world.settle(max_steps=SETTLE_STEPS)
-        result = SolveResult(
-            scenario=spec.name, condition="novelty", model="-", measure="-", seed=seed, branch=branch
-        )
-        agent = Agent(
-            store=store, branch=branch, world=world, scenario=spec, config=config, result=result, records=[]
-        )
-        kb = load_knowledge(store, branch)
-        steps = plan(kb, agent.task(perceive(world)))
-        if not steps:
+        result = SolveResult(scenario=spec.name, condition="novelty", model="-", measure="-", seed=seed, branch=branch)
+        agent = Agent(store=store, branch=branch, world=world, scenario=spec, config=config, result=result, records=[])
+        failure = plan_and_repair(agent, load_knowledge(store, branch), perceive(world), result, store=False)
+        if failure is None and result.status != "solved":
             raise LlcpsError(f"the knowledge base of {branch!r} has no plan for {spec.name}'s novelty condition")
-        run = agent.run_plan(steps, store=False)
-        if run.failure is None:
+        if failure is None or result.status == "solved":
             learned = bool(store.visible_operators(branch))
             raise LlcpsError(
                 f"the plan for {spec.name}'s novelty condition succeeds on {branch!r}: no failure state to rank",
@@ -150,22 +143,10 @@ def failure_point(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
                 if learned
                 else "the novelty does not make the nominal plan fail (see docs/scenarios.md)",
             )
-        failed_step, failure = run.failure.step, run.failure.monitor
-        world.restore_serialized(run.failure.physics)  # candidates start where a_f did
-        failed_spec = agent.controller_call(failed_step)
-        specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=config.candidate_grid(spec))
-        features = {name: entity_features(world, name) for name in agent.kinds}
-        candidates = tuple(WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in specs)
-        desired = desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del)
+        world.restore_serialized(failure.physics)  # candidates start where a_f did
+        return failure_point(agent, failure.monitor, failure.state)
     finally:
         world.close()
-    return FailurePoint(
-        scenario=spec.name,
-        failed_action=failed_step.label,
-        missing_effects=failure.describe(),
-        desired=desired,
-        candidates=candidates,
-    )
 
 
 def inspect_models(
@@ -188,12 +169,13 @@ def inspect_models(
         models: WORLD_MODELS names.
         seed: seeds the held-out split and tie-breaks (and the models, without ``model_seed``).
         test_fraction: share of trials held out for the metrics.
-        scenario: a scenario whose failure state's candidates to rank (optional).
+        scenario: a scenario whose failure point's candidates to rank (optional).
         top: candidates shown per measure.
         model_seed: seed of the world models (None: ``seed``).
         progress: called as ``progress(phase, done, total)`` as the work goes on.
     """
-    fit_seed = seed if model_seed is None else model_seed
+    check_seed(seed)
+    fit_seed = seed if model_seed is None else check_seed(model_seed, "model seed")
 
     def say(phase: str, done: int = 0, total: int = 0) -> None:
         if progress is not None:
@@ -205,6 +187,7 @@ def inspect_models(
         raise LlcpsError(f"--top must be at least 1, got {top}")
     say("loading trials")
     records = store.visible_trials(branch)
+    changes = store.visible_changes(branch)
     outcomes = outcome_matrix(records)
     frequencies = dict(zip(OUTCOME_NAMES, (outcomes.mean(axis=0) if len(records) else np.zeros(6)).round(4).tolist()))
     evaluations: tuple[EvaluationReport, ...] = ()
@@ -213,7 +196,9 @@ def inspect_models(
         done = []
         for index, name in enumerate(models):
             say(f"held-out evaluation of {name}", index, len(models))
-            done.append(evaluate(name, records, seed=seed, test_fraction=test_fraction, model_seed=fit_seed))
+            done.append(
+                evaluate(name, records, seed=seed, test_fraction=test_fraction, model_seed=fit_seed, changes=changes)
+            )
         evaluations = tuple(done)
     except LlcpsError as exc:
         note = exc.message
@@ -221,15 +206,12 @@ def inspect_models(
     rankings: dict[str, dict[str, list[RankedCandidate]]] = {}
     if scenario is not None:
         say(f"{scenario}: running the plan to its failure")
-        failure = failure_point(store, branch=branch, scenario=scenario, seed=seed)
+        failure = reach_failure(store, branch=branch, scenario=scenario, seed=seed)
         for index, name in enumerate(models):
             say(f"ranking {len(failure.candidates)} candidates with {name}", index, len(models))
-            model = fit_or_load(store, branch, name, fit_seed, records=records)
+            model = fit_or_load(store, branch, name, fit_seed, records=records, changes=changes)
             rankings[name] = {
-                measure: top_candidates(
-                    model, failure.candidates, measure=measure, top=top, seed=seed, desired=failure.desired
-                )
-                for measure in MEASURES
+                measure: top_candidates(model, failure, measure=measure, top=top, seed=seed) for measure in MEASURES
             }
     return ModelInspection(
         branch=branch,
@@ -240,4 +222,5 @@ def inspect_models(
         failure=failure,
         rankings=rankings,
         evaluation_note=note,
+        n_changes=len(changes),
     )

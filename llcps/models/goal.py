@@ -1,0 +1,329 @@
+"""The goal-aware head every world model carries beside Omega.
+
+A :class:`GoalHead` learns P(a candidate changes an atom as needed) from the
+(candidate, atom) examples of :mod:`llcps.models.relational`, with a learner of the
+model's own kind (:class:`GoalLearner`: naive Bayes, a network, logistic regression, a
+forest, or no learning at all for ``random``), and answers a :class:`GoalQuery` with
+one probability per candidate and missing atom.
+
+**Fit and update.** :meth:`GoalHead.fit` trains the learner on every stored trial with
+a known change. During exploration the agent calls :meth:`GoalHead.update` after every
+trial; it does not retrain the learner (a refit on tens of thousands of examples would
+take many failures to move, and costs a second for some learners) but keeps
+*episode evidence*: every example of the trials the learner has not seen, grouped into
+families by :func:`~llcps.models.relational.family_keys` (action, predicate, sign and
+roles; then also the orientation; then also the movement magnitude). Physics is deterministic and every exploration trial
+starts from the same state, so the outcomes of one family's parameterizations are not
+independent draws: either the family can work in this scene or it cannot. Each family
+is therefore a two-way mixture: it works here with belief ``b``, and then a share
+:data:`FAMILY_SUCCESS` of its members changes the atom; or it does not, and none does.
+The learner's mean probability ``p`` over the family's tried members sets the prior
+belief ``b = min(p / FAMILY_SUCCESS, MAX_BELIEF)`` (never more than :data:`MAX_BELIEF`:
+the scene is novel, and the learner may not see why a family that works elsewhere
+fails here). After ``n`` failures and no success the belief is
+``b (1 - s)^n / (b (1 - s)^n + 1 - b)``, a success makes it 1, and every member's
+probability is scaled by posterior over prior belief. With the defaults every failure
+roughly halves a family's probability whatever the learner said, a failure with the
+same orientation halves it again, and one with the same orientation and magnitude
+again: exploration moves away from what failed, first in parameters, then in kind. The evidence lives for one fit: the next fit learns
+from those trials anyway.
+
+**Nothing is ruled out.** A learner trained on random interactions gives a change
+it never saw (a push that lands an object in a container) a vanishing probability, and
+such a change is what a novelty may need. The head's probability is therefore the
+learner's mixed with the base rate of its kind of change (predicate and sign) over the
+training set: ``(1 - e) p + e r`` with ``e`` = :data:`NOVELTY_MIX`. The order among
+untried candidates is the learner's; a family that keeps failing falls below all of
+them.
+
+**Several atoms.** A candidate's score is the product of its atoms' probabilities:
+the atoms are treated as independent given the candidate (:func:`joint_probability`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, Callable, ClassVar, Mapping, Sequence
+
+import numpy as np
+
+from llcps.domain import TrialChange, TrialRecord
+from llcps.models.base import array
+from llcps.models.relational import (
+    CONTINUOUS_MASK,
+    N_GOAL_FEATURES,
+    N_STRATA,
+    ExampleTable,
+    Examples,
+    GoalQuery,
+    encode_queries,
+    family_keys,
+    stratum_of,
+)
+
+#: Share of a family's members that change the atom when the family works in a scene.
+FAMILY_SUCCESS = 0.5
+#: Most belief, before any evidence, that a family works in a novel scene.
+MAX_BELIEF = 0.5
+#: Share of the base rate of its kind of change mixed into every learned probability:
+#: in a novel scene no change is ruled out (see the module docstring).
+NOVELTY_MIX = 0.1
+#: Probabilities are kept inside [FLOOR, 1 - FLOOR] so that logs stay finite.
+FLOOR = 1e-12
+
+
+class GoalLearner(ABC):
+    """A weighted binary classifier over encoded (candidate, atom) rows."""
+
+    #: Name in the artifact (the model's own name).
+    name: ClassVar[str]
+
+    def __init__(self, seed: int) -> None:
+        self.seed = int(seed)
+
+    @abstractmethod
+    def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        """Fit on raw rows (n, d), 0/1 labels with both classes present, positive weights."""
+
+    @abstractmethod
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        """P(label = 1) per raw row, float64 (m,)."""
+
+    @abstractmethod
+    def export(self) -> dict[str, np.ndarray]:
+        """The fitted state as plain arrays."""
+
+    @abstractmethod
+    def load(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Restore :meth:`export` output (shapes checked; may raise on bad input)."""
+
+
+class StratifiedLearner(GoalLearner):
+    """One sub-learner per (predicate, sign) stratum of the rows.
+
+    For learners without interactions (naive Bayes, a linear model), what predicts a
+    change depends on which change is asked: a push_together makes things touch and
+    never puts them in containers. Each stratum gets its own fit; a stratum with one
+    class in training predicts its weighted Laplace-smoothed change rate. The network
+    and the forest learn such interactions themselves and are fitted on all rows.
+    """
+
+    def __init__(self, seed: int, make: Callable[[int], GoalLearner]) -> None:
+        super().__init__(seed)
+        self.name = make(seed).name  # type: ignore[misc]
+        self._make = make
+        self.priors = np.full(N_STRATA, 0.5)
+        self.subs: dict[int, GoalLearner] = {}
+
+    def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        strata = stratum_of(features)
+        self.subs = {}
+        for k in range(N_STRATA):
+            rows = strata == k
+            y, w = labels[rows], weights[rows]
+            self.priors[k] = (float(w @ y) + 1.0) / (float(w.sum()) + 2.0)
+            if 0 < y.sum() < len(y):
+                sub = self._make(self.seed)
+                sub.fit(features[rows], y, w)
+                self.subs[k] = sub
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        strata = stratum_of(features)
+        out = self.priors[strata]
+        for k, sub in self.subs.items():
+            rows = strata == k
+            if rows.any():
+                out[rows] = sub.predict(features[rows])
+        return out
+
+    def export(self) -> dict[str, np.ndarray]:
+        arrays = {"priors": self.priors, "learned": np.array([k in self.subs for k in range(N_STRATA)])}
+        for k, sub in self.subs.items():
+            arrays.update({f"s{k}/{name}": value for name, value in sub.export().items()})
+        return arrays
+
+    def load(self, arrays: Mapping[str, np.ndarray]) -> None:
+        priors = array(arrays, "priors", (N_STRATA,))
+        if np.any((priors <= 0) | (priors >= 1)):
+            raise ValueError("stratum priors must lie strictly inside (0, 1)")
+        self.priors = priors.astype(np.float64)
+        learned = array(arrays, "learned", (N_STRATA,), kind="b")
+        self.subs = {}
+        for k in np.flatnonzero(learned):
+            sub = self._make(self.seed)
+            prefix = f"s{k}/"
+            sub.load({name[len(prefix) :]: v for name, v in arrays.items() if name.startswith(prefix)})
+            self.subs[int(k)] = sub
+
+
+class Standardizer:
+    """Zero mean, unit variance on the continuous columns (weighted), one-hots untouched."""
+
+    def __init__(self) -> None:
+        self.mean = np.zeros(N_GOAL_FEATURES)
+        self.scale = np.ones(N_GOAL_FEATURES)
+
+    def fit(self, features: np.ndarray, weights: np.ndarray) -> Standardizer:
+        w = weights / weights.sum()
+        mean = w @ features
+        var = w @ (features - mean) ** 2
+        self.mean = np.where(CONTINUOUS_MASK, mean, 0.0)
+        scale = np.sqrt(var)
+        self.scale = np.where(CONTINUOUS_MASK & (scale > 1e-9), scale, 1.0)
+        return self
+
+    def transform(self, features: np.ndarray) -> np.ndarray:
+        return ((features - self.mean) / self.scale).astype(np.float32)
+
+    def export(self, prefix: str) -> dict[str, np.ndarray]:
+        return {f"{prefix}/mean": self.mean, f"{prefix}/scale": self.scale}
+
+    def load(self, arrays: Mapping[str, np.ndarray], prefix: str) -> Standardizer:
+        self.mean = array(arrays, f"{prefix}/mean", (N_GOAL_FEATURES,)).astype(np.float64)
+        scale = array(arrays, f"{prefix}/scale", (N_GOAL_FEATURES,)).astype(np.float64)
+        if np.any(scale <= 0):
+            raise ValueError("scales must be positive")
+        self.scale = scale
+        return self
+
+
+def family_scale(tried: int, changed: float, mean_probability: float) -> float:
+    """How much a family's probabilities change after ``tried`` members of it, ``changed``
+    of which changed the atom as asked (see the module docstring): posterior over prior
+    belief that the family works here."""
+    prior = min(mean_probability / FAMILY_SUCCESS, MAX_BELIEF)
+    if changed > 0:
+        return 1.0 / prior
+    stays = prior * (1.0 - FAMILY_SUCCESS) ** tried
+    return (stays / (stays + 1.0 - prior)) / prior
+
+
+def joint_probability(proba: np.ndarray) -> np.ndarray:
+    """P(every atom changes as needed) per candidate: the product over atoms (independence)."""
+    return np.prod(np.clip(proba, 0.0, 1.0), axis=1)
+
+
+class GoalHead:
+    """The goal-aware outcome of one world model (see the module docstring)."""
+
+    def __init__(self, learner: GoalLearner) -> None:
+        self.learner = learner
+        self.prior = 0.5
+        #: Weighted, Laplace-smoothed change rate per (predicate, sign) stratum.
+        self.rates = np.full(N_STRATA, 0.5)
+        self.learned = False
+        self.n_examples = 0
+        #: Largest trial id the learner was fitted on: later trials are episode evidence.
+        self.watermark = 0
+        self._table = ExampleTable()
+        self._evidence: tuple[np.ndarray, ...] | None = None
+        self._evidence_ids: set[int] = set()
+
+    # ------------------------------------------------------------------ fitting
+    def fit(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalHead:
+        """Fit the learner on every record with a known change; forget episode evidence."""
+        examples = self._table.encode(records, changes)
+        self.n_examples = len(examples)
+        self.watermark = max((r.id for r in records if r.id is not None), default=0)
+        positive = float(examples.weights @ examples.labels)
+        total = float(examples.weights.sum())
+        self.prior = (positive + 1.0) / (total + 2.0)
+        strata = stratum_of(examples.features)
+        for k in range(N_STRATA):
+            rows = strata == k
+            w = examples.weights[rows]
+            self.rates[k] = (float(w @ examples.labels[rows]) + 1.0) / (float(w.sum()) + 2.0)
+        self.learned = bool(0 < examples.labels.sum() < len(examples))
+        if self.learned:
+            self.learner.fit(examples.features, examples.labels, examples.weights)
+        self._evidence = None
+        self._evidence_ids = set()
+        return self
+
+    def update(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalHead:
+        """Take in the trials after the fit as episode evidence (the learner is not refitted)."""
+        fresh = [
+            r for r in records if r.id is not None and r.id > self.watermark and r.id not in self._evidence_ids and r.id in changes
+        ]
+        if not fresh:
+            return self
+        examples = self._table.encode(fresh, changes)
+        self._evidence_ids.update(r.id for r in fresh)  # type: ignore[misc]
+        if not len(examples):
+            return self
+        keys = family_keys(examples.features)
+        expected = self._base(examples.features)
+        observed = examples.labels.astype(np.float64)
+        parts = (*keys, observed, expected)
+        if self._evidence is not None:
+            parts = tuple(np.concatenate([old, new]) for old, new in zip(self._evidence, parts))
+        self._evidence = parts
+        return self
+
+    # --------------------------------------------------------------- predicting
+    def _base(self, features: np.ndarray) -> np.ndarray:
+        """The learner's probability mixed with its stratum's change rate (nothing is ruled out)."""
+        if not len(features):
+            return np.zeros(0)
+        rate = self.rates[stratum_of(features)]
+        if not self.learned:
+            return rate
+        return (1.0 - NOVELTY_MIX) * np.clip(self.learner.predict(features), 0.0, 1.0) + NOVELTY_MIX * rate
+
+    def _corrected(self, features: np.ndarray) -> np.ndarray:
+        p = self._base(features)
+        if self._evidence is None or not len(features):
+            return p
+        *ev_levels, observed, expected = self._evidence
+        scale = np.ones(len(features))
+        for keys, ev_keys in zip(family_keys(features), ev_levels):
+            for key in np.unique(keys):
+                tried = ev_keys == key
+                if tried.any():
+                    scale[keys == key] *= family_scale(
+                        int(tried.sum()), float(observed[tried].sum()), float(expected[tried].mean())
+                    )
+        return np.clip(p * scale, FLOOR, 1.0 - FLOOR)
+
+    def predict(self, query: GoalQuery) -> np.ndarray:
+        """P(each atom changes as needed) per candidate: float64 (n_candidates, n_atoms) in [0, 1]."""
+        n, k = len(query.candidates), len(query.atoms)
+        if n == 0 or k == 0:
+            return np.zeros((n, k))
+        return self._corrected(encode_queries(query)).reshape(n, k)
+
+    def predict_rows(self, features: np.ndarray) -> np.ndarray:
+        """P(label = 1) for encoded rows (held-out evaluation), evidence included."""
+        return self._corrected(features)
+
+    # -------------------------------------------------------------- persistence
+    def export(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        arrays = {"goal/prior": np.array([self.prior]), "goal/rates": self.rates}
+        if self.learned:
+            arrays.update({f"goal/{k}": v for k, v in self.learner.export().items()})
+        meta = {"goal_learned": self.learned, "goal_examples": self.n_examples, "goal_watermark": self.watermark}
+        return arrays, meta
+
+    def load(self, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> GoalHead:
+        prior = float(array(arrays, "goal/prior", (1,))[0])
+        if not 0.0 < prior < 1.0:
+            raise ValueError("the goal prior must lie strictly inside (0, 1)")
+        self.prior = prior
+        rates = array(arrays, "goal/rates", (N_STRATA,))
+        if np.any((rates <= 0) | (rates >= 1)):
+            raise ValueError("the goal change rates must lie strictly inside (0, 1)")
+        self.rates = rates.astype(np.float64)
+        self.learned = bool(meta.get("goal_learned", False))
+        self.n_examples = int(meta.get("goal_examples", 0))
+        self.watermark = int(meta.get("goal_watermark", 0))
+        if self.learned:
+            prefix = "goal/"
+            self.learner.load(
+                {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix) and k not in ("goal/prior", "goal/rates")}
+            )
+        return self
+
+
+def examples_of(records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> Examples:
+    """Every goal-aware example of ``records`` (for evaluation and tests)."""
+    return ExampleTable().encode(records, changes)

@@ -1,0 +1,129 @@
+"""Checking where a command will write, before it does any work.
+
+A solve that runs for minutes and then cannot write its GIF, or an export that
+fails half-way into a file, wastes the work and hides the cause behind a traceback.
+These checks run first: the directory must exist (nothing is created silently), the
+file must be creatable there (a probe file is made and removed), and the extension
+must be one the writer knows.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Iterator
+
+from llcps.errors import LlcpsError
+
+#: Extensions of the GIFs that ``--gif`` writes.
+GIF_SUFFIXES: tuple[str, ...] = (".gif",)
+
+
+def check_output_file(path: str | Path, *, what: str, suffixes: tuple[str, ...] = ()) -> Path:
+    """Make sure a file can be written at ``path`` (without writing it).
+
+    Args:
+        what: how the user named the path, e.g. ``"--gif"``.
+        suffixes: accepted extensions (lower case, with the dot); empty accepts any.
+
+    Raises:
+        LlcpsError: wrong extension, a directory, a missing or unwritable directory,
+            or an existing file that cannot be written.
+    """
+    path = Path(path).expanduser()
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise LlcpsError(
+            f"{what} {path} has an extension llcps cannot write",
+            hint=f"use a file name ending in {' or '.join(suffixes)}",
+        )
+    if path.is_dir():
+        raise LlcpsError(f"{what} {path} is a directory", hint=f"pass a file path, e.g. {path / ('out' + (suffixes[0] if suffixes else ''))}")
+    parent = path.absolute().parent
+    if not parent.is_dir():
+        raise LlcpsError(f"{what}: directory {parent} does not exist", hint=f"create it first or choose another {what}")
+    if path.exists():
+        try:
+            with path.open("ab"):
+                pass
+        except OSError as exc:
+            raise LlcpsError(f"{what}: cannot write {path}: {exc.strerror or exc}", hint=f"choose another {what}") from None
+        return path
+    _probe_directory(parent, what)
+    return path
+
+
+def check_output_dir(path: str | Path, *, what: str) -> Path:
+    """Make sure files can be written into directory ``path`` (which may be created).
+
+    The directory itself, or its nearest existing ancestor, must be a writable directory.
+    """
+    path = Path(path).expanduser()
+    existing = path.absolute()
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise LlcpsError(f"{what} {path}: {existing} is not a directory", hint=f"choose another {what}")
+    _probe_directory(existing, what)
+    return path
+
+
+def _probe_directory(directory: Path, what: str) -> None:
+    try:
+        fd, probe = tempfile.mkstemp(dir=directory, prefix=".llcps-write-check-")
+    except OSError as exc:
+        raise LlcpsError(
+            f"{what}: cannot write into directory {directory}: {exc.strerror or exc}", hint=f"choose another {what}"
+        ) from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def write_error(path: str | Path, exc: OSError, *, what: str) -> LlcpsError:
+    """An error for a write that failed after the checks passed (a full disk, /dev/full)."""
+    return LlcpsError(f"{what}: writing {path} failed: {exc.strerror or exc}", hint=f"free some space or choose another {what}")
+
+
+@contextmanager
+def written_atomically(path: str | Path, *, what: str) -> Iterator[Path]:
+    """A temporary path to write that becomes ``path`` only when the block succeeds.
+
+    The file is written beside ``path`` and renamed over it at the end, so a failed
+    export leaves no half-written file (and an existing one untouched). A device or
+    pipe (``/dev/stdout``, ``/dev/full``) is yielded as it is and written directly.
+
+    Raises:
+        LlcpsError: writing failed (see :func:`write_error`).
+    """
+    path = Path(path)
+    try:
+        if path.exists() and not stat.S_ISREG(path.stat().st_mode):
+            yield path
+            return
+        mode = stat.S_IMODE(path.stat().st_mode) if path.exists() else 0o666 & ~_umask()
+        fd, tmp = tempfile.mkstemp(dir=path.absolute().parent, prefix=f".{path.name}.", suffix=".part")
+        os.close(fd)
+        try:
+            yield Path(tmp)
+            os.chmod(tmp, mode)  # mkstemp's 0600 would make the export private
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    except OSError as exc:
+        raise write_error(path, exc, what=what) from None
+
+
+@contextmanager
+def replaced_atomically(path: str | Path, *, what: str) -> Iterator[IO[str]]:
+    """A text file that becomes ``path`` only when the block succeeds (see :func:`written_atomically`)."""
+    with written_atomically(path, what=what) as target, target.open("w", newline="", encoding="utf-8") as fh:
+        yield fh
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

@@ -1,0 +1,154 @@
+"""Trial changes between :class:`~llcps.domain.TrialChange` and ``trial_changes`` rows.
+
+A change is kept in its own table keyed by trial id (the trials table and its hot
+decoder stay as they are). What is read back is untrusted: every atom and body is
+checked before it becomes a domain object, and anything malformed is one
+:class:`~llcps.errors.LlcpsError`. Exploration trials of one episode share their
+start state and scene, so decoded states and body lists are shared too.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Iterable, Sequence
+
+from sqlalchemy import Text, type_coerce
+
+from llcps.domain import BODY_KINDS, CHANGE_SOURCES, Body, Fluent, TrialChange, fluent
+from llcps.errors import LlcpsError
+from llcps.store.schema import TrialChangeRow
+
+#: Source of a row that records that a trial's change could not be recovered.
+UNKNOWN = "unknown"
+
+#: Columns read for a change, in the order :class:`ChangeDecoder` unpacks them.
+CHANGE_COLUMNS = (
+    TrialChangeRow.trial_id,
+    TrialChangeRow.source,
+    type_coerce(TrialChangeRow.before, Text),
+    type_coerce(TrialChangeRow.added, Text),
+    type_coerce(TrialChangeRow.deleted, Text),
+    type_coerce(TrialChangeRow.bodies, Text),
+)
+
+_HINT = "the stored trial change is damaged; `llcps db upgrade --replay-changes` recovers it from the trial's start state"
+#: Bounds that keep a crafted row from costing much (a real scene has a few dozen atoms).
+MAX_ATOMS = 10_000
+MAX_BODIES = 1_000
+
+
+def _atoms(atoms: Iterable[Fluent]) -> list[list[str]]:
+    return [list(a) for a in sorted(atoms)]
+
+
+def change_row(trial_id: int, change: TrialChange | None) -> dict[str, Any]:
+    """The column values of a trial's change; ``None`` records it as unknown."""
+    if change is None:
+        return {"trial_id": trial_id, "source": UNKNOWN, "before": [], "added": [], "deleted": [], "bodies": []}
+    return {
+        "trial_id": trial_id,
+        "source": change.source,
+        "before": _atoms(change.before),
+        "added": _atoms(change.added),
+        "deleted": _atoms(change.deleted),
+        "bodies": [b.as_dict() for b in change.bodies],
+    }
+
+
+def _json(value: Any) -> Any:
+    if not isinstance(value, str):
+        return value
+    try:
+        return json.loads(value)
+    except ValueError:
+        raise LlcpsError("a stored trial change is not valid JSON", hint=_HINT) from None
+
+
+def _atom(value: Any) -> Fluent:
+    if (
+        not isinstance(value, list)
+        or not 1 <= len(value) <= 3
+        or not all(isinstance(part, str) and part for part in value)
+    ):
+        raise LlcpsError(f"a stored trial change holds a malformed atom {str(value)[:60]}", hint=_HINT)
+    return fluent(*value)
+
+
+def _atom_set(value: Any) -> frozenset[Fluent]:
+    decoded = _json(value)
+    if not isinstance(decoded, list) or len(decoded) > MAX_ATOMS:
+        raise LlcpsError("a stored trial change's atoms are not a list of atoms", hint=_HINT)
+    return frozenset(_atom(a) for a in decoded)
+
+
+def _vec(value: Any) -> tuple[float, float, float]:
+    if not isinstance(value, list) or len(value) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise ValueError("expected 3 numbers")
+    return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def _bodies(value: Any) -> tuple[Body, ...]:
+    decoded = _json(value)
+    if not isinstance(decoded, list) or len(decoded) > MAX_BODIES:
+        raise LlcpsError("a stored trial change's bodies are not a list", hint=_HINT)
+    bodies = []
+    for item in decoded:
+        try:
+            if not isinstance(item, dict) or set(item) != {"name", "kind", "shape", "lo", "hi", "centre"}:
+                raise ValueError("unexpected fields")
+            if not isinstance(item["name"], str) or item["kind"] not in BODY_KINDS:
+                raise ValueError("bad name or kind")
+            shape = item["shape"]
+            if shape is not None and not isinstance(shape, str):
+                raise ValueError("bad shape")
+            bodies.append(Body(item["name"], item["kind"], shape, _vec(item["lo"]), _vec(item["hi"]), _vec(item["centre"])))
+        except (ValueError, TypeError) as exc:
+            raise LlcpsError(f"a stored trial change holds a malformed body: {exc}", hint=_HINT) from None
+    return tuple(bodies)
+
+
+class ChangeDecoder:
+    """Builds TrialChanges from rows of :data:`CHANGE_COLUMNS`, sharing repeated parts."""
+
+    def __init__(self) -> None:
+        self._states: dict[str, frozenset[Fluent]] = {}
+        self._bodies: dict[str, tuple[Body, ...]] = {}
+
+    def _state(self, text: Any) -> frozenset[Fluent]:
+        if not isinstance(text, str):
+            return _atom_set(text)
+        found = self._states.get(text)
+        if found is None:
+            found = self._states[text] = _atom_set(text)
+        return found
+
+    def _body_list(self, text: Any) -> tuple[Body, ...]:
+        if not isinstance(text, str):
+            return _bodies(text)
+        found = self._bodies.get(text)
+        if found is None:
+            found = self._bodies[text] = _bodies(text)
+        return found
+
+    def decode(self, row: Sequence[Any]) -> TrialChange | None:
+        """One row's change; None when it is recorded as unknown.
+
+        Raises:
+            LlcpsError: the row is malformed (untrusted input).
+        """
+        trial_id, source, before, added, deleted, bodies = row
+        if source not in CHANGE_SOURCES:
+            raise LlcpsError(f"trial {trial_id}'s change has unknown source {str(source)[:20]!r}", hint=_HINT)
+        if source == UNKNOWN:
+            return None
+        try:
+            return TrialChange(
+                before=self._state(before),
+                added=self._state(added),
+                deleted=self._state(deleted),
+                bodies=self._body_list(bodies),
+                source=source,
+                trial_id=int(trial_id),
+            )
+        except ValueError as exc:
+            raise LlcpsError(f"trial {trial_id}'s stored change is inconsistent: {exc}", hint=_HINT) from None
