@@ -10,6 +10,7 @@ import typer
 from llcps.cli._common import JsonFlag, choice_enum, message, new_app, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
+from llcps.outputs import check_output_dir
 from llcps.scenarios import CONDITIONS, SCENARIOS, get_scenario
 from llcps.scenarios.variants import MAX_VARIANT, parse_range, range_text
 
@@ -110,6 +111,7 @@ def render_cli(
 ) -> None:
     """Render the scenes of a variant (after they settle) to PNG, one per condition."""
     scenario = get_scenario(name)
+    check_output_dir(out_dir, what="--out-dir")
     chosen = CONDITIONS if condition is None else (str(condition.value),)  # type: ignore[attr-defined]
     with progress_display("render", "loading the simulator") as progress:
         from llcps.scenarios.pictures import render_scenes
