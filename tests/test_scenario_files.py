@@ -189,3 +189,38 @@ def test_not_toml_is_one_error(tmp_path: Path) -> None:
     path = tmp_path / "broken.toml"
     path.write_text("name = \n")
     _assert_one_error(runner.invoke(app, ["scenario", "show", str(path)]), path, "not valid TOML")
+
+
+# --- variants in episodes ----------------------------------------------------------------
+
+
+def _episode(path: Path, variant: int) -> tuple[list[tuple[object, ...]], list[dict[str, Any]]]:
+    """The trials (what is compared bit for bit) and stored scenes of one short episode."""
+    from llcps.cps.agent import solve
+    from llcps.cps.episode import SolveConfig
+    from llcps.store import Store
+
+    with Store.open(str(path), create=True) as store:
+        result = solve(store, branch=None, config=SolveConfig(scenario="scenario3", budget=2, seed=0, variant=variant))
+        assert result.variant == variant
+        trials = store.visible_trials("main")
+        rows = [(t.source, t.spec, t.features, t.outcome, t.solved, t.sim_steps, t.scenario) for t in trials]
+        scenes = [store.get_snapshot(t.snapshot_id).scene for t in trials if t.snapshot_id is not None]
+        if variant:
+            from llcps.cps.replay import replay
+
+            report = replay(store, trials[-1].id)  # the scene is in the store: no variant flag
+            assert report.matches, report.as_json()
+    return rows, scenes
+
+
+def test_same_variant_gives_identical_trials_and_other_variants_other_scenes(tmp_path: Path) -> None:
+    first, first_scenes = _episode(tmp_path / "a.db", 3)
+    again, again_scenes = _episode(tmp_path / "b.db", 3)
+    assert first and first == again and first_scenes == again_scenes
+    canonical = SCENARIOS["scenario3"].scene("novelty", 0).to_dict()
+    drawn = SCENARIOS["scenario3"].scene("novelty", 3).to_dict()
+    assert drawn != canonical
+    assert first_scenes and all({k: v for k, v in s.items() if k != "goal"} == drawn for s in first_scenes)
+    _, other_scenes = _episode(tmp_path / "c.db", 0)
+    assert all({k: v for k, v in s.items() if k != "goal"} == canonical for s in other_scenes)
