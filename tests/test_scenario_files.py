@@ -224,3 +224,25 @@ def test_same_variant_gives_identical_trials_and_other_variants_other_scenes(tmp
     assert first_scenes and all({k: v for k, v in s.items() if k != "goal"} == drawn for s in first_scenes)
     _, other_scenes = _episode(tmp_path / "c.db", 0)
     assert all({k: v for k, v in s.items() if k != "goal"} == canonical for s in other_scenes)
+
+
+# --- check ------------------------------------------------------------------------------
+
+
+def test_check_fails_on_a_novelty_that_changes_nothing(tmp_path: Path) -> None:
+    """A file whose novelty is the original scene fails `check` (exit 1), the property named."""
+    data = copy.deepcopy(BASE)
+    data["name"] = "no_novelty"
+    data.pop("alias", None)
+    data.pop("conditions")
+    path = tmp_path / "no_novelty.toml"
+    path.write_text(tomli_w.dumps(data))
+    result = runner.invoke(app, ["scenario", "check", str(path), "--quick", "--json"])
+    assert result.exit_code == 1, result.stderr
+    report = json.loads(result.stdout)
+    (variant,) = report["variants"]
+    assert variant["properties"]["original_solved"] is True
+    assert variant["properties"]["novelty_defeats_plan"] is False
+    assert "novelty_defeats_plan" in variant["reasons"]
+    plain = runner.invoke(app, ["scenario", "check", str(path), "--quick"])
+    assert plain.exit_code == 1 and "variant 0: novelty_defeats_plan does not hold" in plain.stderr
