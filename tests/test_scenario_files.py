@@ -246,3 +246,44 @@ def test_check_fails_on_a_novelty_that_changes_nothing(tmp_path: Path) -> None:
     assert "novelty_defeats_plan" in variant["reasons"]
     plain = runner.invoke(app, ["scenario", "check", str(path), "--quick"])
     assert plain.exit_code == 1 and "variant 0: novelty_defeats_plan does not hold" in plain.stderr
+
+
+def _judged(status: str = "solved", explored: int = 0, **found: Any) -> Any:
+    from llcps.cps.check import VariantCheck, judge
+    from llcps.cps.sweep import Sweep
+
+    defaults: dict[str, Any] = {"plan": ["(push cube)"], "failed_action": "(push cube)", "candidates": 10, "tried": 10, "resolving": [3]}
+    report = VariantCheck(0, status, explored, Sweep(scenario="s", **{**defaults, **found}), quick=False)
+    judge(report)
+    return report
+
+
+@pytest.mark.parametrize(
+    ("case", "failed"),
+    [
+        ({}, set()),
+        ({"status": "budget_exhausted"}, {"original_solved"}),
+        ({"explored": 2}, {"original_solved"}),
+        ({"failed_action": None}, {"novelty_defeats_plan"}),
+        ({"plan_repairs": [{"plan": ["(pick cube)"], "failed_action": None}]}, {"novelty_defeats_plan"}),
+        ({"resolving": []}, {"resolvable", "ranking_matters"}),
+        ({"resolving": [0, 4]}, {"ranking_matters"}),
+    ],
+)
+def test_check_judges_each_property_with_a_reason(case: dict[str, Any], failed: set[str]) -> None:
+    from llcps.cps.check import PROPERTIES
+
+    report = _judged(**case)
+    assert set(report.properties) == set(PROPERTIES)
+    assert {p for p, held in report.properties.items() if not held} == failed
+    assert set(report.reasons) == failed and all(report.reasons.values())
+    assert report.passed is (not failed)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NAMES)
+def test_check_passes_on_every_shipped_scenario_at_variant_zero(name: str) -> None:
+    result = runner.invoke(app, ["scenario", "check", name, "--quick", "--json"])
+    assert result.exit_code == 0, result.stdout + result.stderr
+    report = json.loads(result.stdout)
+    assert report["passed"] and report["shares"] == {p: 1.0 for p in report["properties"]}
