@@ -350,6 +350,29 @@ class Body:
     def is_entity(self) -> bool:
         return self.kind in ("object", "container")
 
+    @classmethod
+    def from_dict(cls, item: object) -> "Body":
+        """Read back :meth:`as_dict`, checking every field (it may come from a database).
+
+        Raises:
+            ValueError: ``item`` does not describe a body.
+        """
+        if not isinstance(item, dict) or set(item) != {"name", "kind", "shape", "lo", "hi", "centre"}:
+            raise ValueError("a body has exactly name, kind, shape, lo, hi and centre")
+        if not isinstance(item["name"], str) or item["kind"] not in BODY_KINDS:
+            raise ValueError("bad name or kind")
+        if item["shape"] is not None and not isinstance(item["shape"], str):
+            raise ValueError("bad shape")
+        vectors = []
+        for name in ("lo", "hi", "centre"):
+            value = item[name]
+            if not isinstance(value, list) or len(value) != 3 or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value
+            ):
+                raise ValueError(f"{name}: expected 3 numbers")
+            vectors.append((float(value[0]), float(value[1]), float(value[2])))
+        return cls(item["name"], item["kind"], item["shape"], *vectors)
+
     def as_dict(self) -> dict[str, object]:
         return {
             "name": self.name,

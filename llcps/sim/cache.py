@@ -24,14 +24,14 @@ import math
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
 
-from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, EntityFeatures, Outcome, TrialSpec
+from llcps.domain import ACTIONS, ORIENTATIONS, Body, ControllerParams, EntityFeatures, Outcome, TrialSpec
 from llcps.sim.trial import TrialResult
 
 if TYPE_CHECKING:
     from llcps.sim.world import PhysicsSettings
 
 #: Version of the key's layout; part of every key.
-KEY_VERSION = 1
+KEY_VERSION = 2  # 2: a result holds the scene's bodies (its symbolic change needs them)
 #: Largest encoded result accepted (a result is a few kB: two symbolic states).
 MAX_RESULT_BYTES = 1 << 20
 
@@ -113,6 +113,7 @@ def encode_result(result: TrialResult) -> bytes:
             "outcome": list(result.outcome.bits()),
             "sim_steps": result.sim_steps,
             "wall_seconds": result.wall_seconds,
+            "bodies": [b.as_dict() for b in result.bodies],
         }
     )
 
@@ -186,7 +187,13 @@ def decode_result(data: bytes) -> TrialResult:
         outcome=decoded,
         sim_steps=sim_steps,
         wall_seconds=_number(raw.get("wall_seconds"), "wall_seconds"),
+        bodies=_bodies(raw.get("bodies")),
     )
+
+
+def _bodies(value: Any) -> tuple[Body, ...]:
+    _expect(isinstance(value, list) and len(value) <= 1000, "bodies are a list")
+    return tuple(Body.from_dict(item) for item in value)
 
 
 __all__ = ["CachedTrial", "KEY_VERSION", "PhysicsCache", "StateCheck", "decode_result", "encode_result", "trial_key"]

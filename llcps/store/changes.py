@@ -14,7 +14,7 @@ from typing import Any, Iterable, Sequence
 
 from sqlalchemy import Text, type_coerce
 
-from llcps.domain import BODY_KINDS, CHANGE_SOURCES, Body, Fluent, TrialChange, fluent
+from llcps.domain import CHANGE_SOURCES, Body, Fluent, TrialChange, fluent
 from llcps.errors import LlcpsError
 from llcps.store.schema import TrialChangeRow
 
@@ -81,12 +81,6 @@ def _atom_set(value: Any) -> frozenset[Fluent]:
     return frozenset(_atom(a) for a in decoded)
 
 
-def _vec(value: Any) -> tuple[float, float, float]:
-    if not isinstance(value, list) or len(value) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-        raise ValueError("expected 3 numbers")
-    return (float(value[0]), float(value[1]), float(value[2]))
-
-
 def _bodies(value: Any) -> tuple[Body, ...]:
     decoded = _json(value)
     if not isinstance(decoded, list) or len(decoded) > MAX_BODIES:
@@ -94,14 +88,7 @@ def _bodies(value: Any) -> tuple[Body, ...]:
     bodies = []
     for item in decoded:
         try:
-            if not isinstance(item, dict) or set(item) != {"name", "kind", "shape", "lo", "hi", "centre"}:
-                raise ValueError("unexpected fields")
-            if not isinstance(item["name"], str) or item["kind"] not in BODY_KINDS:
-                raise ValueError("bad name or kind")
-            shape = item["shape"]
-            if shape is not None and not isinstance(shape, str):
-                raise ValueError("bad shape")
-            bodies.append(Body(item["name"], item["kind"], shape, _vec(item["lo"]), _vec(item["hi"]), _vec(item["centre"])))
+            bodies.append(Body.from_dict(item))
         except (ValueError, TypeError) as exc:
             raise LlcpsError(f"a stored trial change holds a malformed body: {exc}", hint=_HINT) from None
     return tuple(bodies)
