@@ -7,7 +7,7 @@ import pytest
 from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, TrialSpec, fluent
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.sim.controllers import CONTROLLERS, PUSH_DIRECTION, SIDE, execute
-from llcps.sim.entities import inside, open_box, solid
+from llcps.sim.builders import inside, open_box, solid
 from llcps.sim.perception import perceive
 from llcps.sim.world import SceneSpec, World
 

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from llcps.domain import SHAPES, fluent
-from llcps.sim.entities import inside, open_box, solid, stacked
+from llcps.sim.builders import inside, open_box, solid, stacked
 from llcps.sim.perception import CAMERA, entity_features, perceive
 from llcps.sim.world import SceneSpec, World
 

@@ -15,7 +15,8 @@ from PIL import Image
 
 from llcps.domain import ControllerParams, TrialSpec
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.sim.entities import EntitySpec, bucket, edge_lip, inside, open_box, shelf, solid, stacked
+from llcps.sim.builders import bucket, edge_lip, inside, open_box, shelf, solid, stacked
+from llcps.sim.specs import EntitySpec
 from llcps.sim.render import GifRecorder, render_png
 from llcps.sim.trial import run_trial
 from llcps.sim.world import FLOOR, TABLE, SceneSpec, World

@@ -16,6 +16,7 @@ from llcps.domain import MAX_SEED
 from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models import MEASURES, WORLD_MODELS
 from llcps.scenarios import CONDITIONS, SCENARIOS
+from llcps.scenarios.variants import MAX_VARIANT
 
 if TYPE_CHECKING:
     from llcps.cps.agent import SolveResult
@@ -27,7 +28,11 @@ Condition = choice_enum("Condition", CONDITIONS)
 #: Exit codes of ``llcps solve``.
 EXIT_SOLVED, EXIT_UNSOLVED, EXIT_INTERRUPTED = 0, 1, 130
 
-_SCENARIO_HELP = "Scenario to solve: " + ", ".join(f"{s.name} ({s.alias})" for s in SCENARIOS.values()) + "."
+_SCENARIO_HELP = (
+    "Scenario to solve: "
+    + ", ".join(f"{s.name} ({s.alias})" for s in SCENARIOS.values())
+    + "; or the path of a scenario file (.toml, see `llcps scenario`)."
+)
 
 
 def solve_cli(
@@ -36,6 +41,16 @@ def solve_cli(
     condition: Annotated[Condition, typer.Option("--condition", help="Original (the plan works) or novelty (it fails).")] = "novelty",  # type: ignore[valid-type, assignment]
     model: Annotated[ModelName, typer.Option("--model", help="World model that ranks exploration.")] = DEFAULT_MODEL,  # type: ignore[valid-type, assignment]
     measure: Annotated[MeasureName, typer.Option("--measure", help="Measure that orders candidates by the model's prediction.")] = DEFAULT_MEASURE,  # type: ignore[valid-type, assignment]
+    variant: Annotated[
+        int,
+        typer.Option(
+            "--variant",
+            metavar="N",
+            min=0,
+            max=MAX_VARIANT,
+            help="Scene variant: N draws the scene from the ranges the scenario file declares (0: the canonical scene).",
+        ),
+    ] = 0,
     seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Run seed: breaks ties in the ranking; recorded with every trial.")] = 0,
     model_seed: Annotated[
         Optional[int],
@@ -82,6 +97,7 @@ def solve_cli(
         model_seed=model_seed,
         budget=budget,
         refit_every=refit_every,
+        variant=variant,
     )
     config.validate()
     if gif is not None:
@@ -106,6 +122,8 @@ EXAMPLES = examples(
     "llcps solve scenario3 --condition original             # the nominal plan works there",
     "llcps solve bucket --model nn --measure most-changes --budget 50 --json",
     "llcps solve scenario1 --gif scenario1.gif              # then film it",
+    "llcps solve scenario2 --variant 3                      # another layout, drawn from the file's ranges",
+    "llcps solve my_scenario.toml                           # a scenario straight from a file",
 )
 
 
@@ -123,8 +141,9 @@ def _exit_code(result: "SolveResult") -> int:
 
 def show(result: "SolveResult") -> None:
     """The episode summary for people."""
+    variant = f", variant {result.variant}" if result.variant else ""
     print_table(
-        f"{result.scenario} ({result.condition}) on {result.branch}: {result.status}",
+        f"{result.scenario} ({result.condition}{variant}) on {result.branch}: {result.status}",
         ("", ""),
         [
             ("plan", " ".join(result.plan) or "-"),

@@ -34,6 +34,7 @@ from llcps.errors import LlcpsError
 from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models.persistence import fit_or_load
 from llcps.scenarios.base import Scenario
+from llcps.scenarios.goal import goal_text
 from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
 from llcps.sim.controllers import DEFAULT_MAX_STEPS
 from llcps.sim.perception import perceive
@@ -250,9 +251,14 @@ class Agent:
         """Save the world's physics state in the store; returns the snapshot id."""
         self.sync()
         state = self.world.serialize_state()
-        stored = self.store.put_snapshot(scene=self.world.scene.to_dict(), state=state)
+        stored = self.store.put_snapshot(scene=self.scene_record(), state=state)
         self._states[stored] = state
         return stored
+
+    def scene_record(self) -> dict[str, object]:
+        """The scene as a snapshot stores it: what the world is built from, and the task's goal,
+        so that a trial replays (and is judged) from the store alone, whatever file it came from."""
+        return {**self.world.scene.to_dict(), "goal": goal_text(self.scenario.goal_pos, self.scenario.goal_neg)}
 
     def restore(self, snapshot_id: int) -> None:
         """Return the world to a snapshot taken by :meth:`snapshot`."""
@@ -356,6 +362,7 @@ def solve(
         measure=config.measure,
         seed=config.seed,
         branch=branch_name,
+        variant=config.variant,
     )
     # What the store holds is read (and checked) first: a malformed row stops the
     # episode before it records a run.
@@ -379,7 +386,7 @@ def solve(
     )
     world: World | None = None
     try:
-        world = World.from_scene(scenario.scene(config.condition), gui=gui)
+        world = World.from_scene(scenario.scene(config.condition, config.variant), gui=gui)
         world.settle(max_steps=SETTLE_STEPS)
         agent = Agent(
             store=store,
@@ -580,6 +587,7 @@ def _config_json(config: SolveConfig) -> dict[str, object]:
         "model": config.model,
         "measure": config.measure,
         "seed": config.seed,
+        "variant": config.variant,
         "model_seed": config.fit_seed,
         "budget": config.budget,
         "refit_every": config.refit_every,

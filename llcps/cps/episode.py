@@ -12,6 +12,7 @@ from llcps.errors import LlcpsError, UnknownNameError
 from llcps.models import MEASURES, WORLD_MODELS
 from llcps.scenarios import get_scenario
 from llcps.scenarios.base import CONDITIONS, Scenario
+from llcps.scenarios.variants import check_variant
 
 DEFAULT_MODEL = "nb"
 DEFAULT_MEASURE = "goal-directed"
@@ -31,7 +32,10 @@ class SolveConfig:
     seed: int = 0
     budget: int = DEFAULT_BUDGET
     refit_every: int = 1
-    grid: Grid = Grid()
+    #: The candidate grid (None: the one the scenario's file asks for, by default the documented grid).
+    grid: Grid | None = None
+    #: The scene variant (0: the canonical scene; see docs/scenarios.md).
+    variant: int = 0
     #: Seed of the world model's fit (None: the episode's ``seed``).
     model_seed: int | None = None
 
@@ -40,9 +44,14 @@ class SolveConfig:
         """The seed the world model is fitted (or loaded) with."""
         return self.seed if self.model_seed is None else self.model_seed
 
+    def candidate_grid(self, scenario: Scenario) -> Grid:
+        """The grid exploration searches: this config's, else the scenario's."""
+        return self.grid if self.grid is not None else Grid(**scenario.grid)
+
     def validate(self) -> Scenario:
         """Check names and numbers before anything runs; returns the scenario."""
         scenario = get_scenario(self.scenario)
+        check_variant(self.variant)
         if self.condition not in CONDITIONS:
             raise LlcpsError(f"unknown condition {self.condition!r}", hint=f"choose one of: {', '.join(CONDITIONS)}")
         if self.model not in WORLD_MODELS:
@@ -69,6 +78,7 @@ class SolveResult:
     measure: str
     seed: int
     branch: str
+    variant: int = 0
     status: str = "running"
     plan: list[str] = field(default_factory=list)
     plan_repairs: list[dict[str, object]] = field(default_factory=list)
@@ -98,6 +108,7 @@ class SolveResult:
             "model": self.model,
             "measure": self.measure,
             "seed": self.seed,
+            "variant": self.variant,
             "branch": self.branch,
             "solved": self.solved,
             "status": self.status,

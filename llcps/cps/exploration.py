@@ -73,7 +73,7 @@ def failure_point(agent: Agent, failure: StepFailure, state: State) -> FailurePo
     world = agent.world
     agent.sync()
     failed_spec = agent.controller_call(failure.step)
-    specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=agent.config.grid)
+    specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=agent.config.candidate_grid(agent.scenario))
     features = {name: entity_features(world, name) for name in agent.kinds}
     inputs = tuple(WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in specs)
     return FailurePoint(

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from llcps.cps.film import PHASES, ProgressCallback, Shot, reenact
-from llcps.domain import Outcome, TrialRecord
+from llcps.domain import Fluent, Outcome, TrialRecord
+from llcps.errors import LlcpsError
 from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.store import Store
 
@@ -55,6 +56,37 @@ class ReplayReport:
         }
 
 
+def trial_goal(store: Store, trial: TrialRecord) -> tuple[frozenset[Fluent], frozenset[Fluent]] | None:
+    """The goal a trial was judged by: the one its snapshot stored with the scene, or, for
+    snapshots stored before goals were, its scenario's (None: a trial of no scenario).
+
+    Raises:
+        LlcpsError: the stored goal is malformed (the store is untrusted input).
+    """
+    from llcps.scenarios import get_scenario, is_path
+    from llcps.scenarios.goal import parse_goal
+
+    if trial.snapshot_id is not None:
+        scene = store.get_snapshot(trial.snapshot_id).scene
+        atoms = scene.get("goal") if isinstance(scene, dict) else None
+        if atoms is not None:
+            names = [str(e.get("name")) for e in scene.get("entities", ()) if isinstance(e, dict)]
+            names += [str(f.get("name")) for f in scene.get("fixtures", ()) if isinstance(f, dict)] + ["table"]
+            try:
+                if not isinstance(atoms, list):
+                    raise ValueError("not a list of atoms")
+                return parse_goal(atoms, names)
+            except ValueError as exc:
+                raise LlcpsError(
+                    f"snapshot {trial.snapshot_id} of trial {trial.id} holds a malformed goal: {exc}",
+                    hint="the store was written by something else; replay another trial",
+                ) from None
+    if not trial.scenario or is_path(trial.scenario):
+        return None
+    scenario = get_scenario(trial.scenario)
+    return scenario.goal_pos, scenario.goal_neg
+
+
 def replay(
     store: Store,
     trial_id: int,
@@ -76,15 +108,13 @@ def replay(
         LlcpsError: the trial does not exist or has no stored start state; its snapshot
             fails its hash, size or structure checks (see :mod:`llcps.sim.snapshot`).
     """
-    from llcps.scenarios import get_scenario
-
     if gif is not None:
         check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
     trial = store.get_trial(trial_id)
-    goal = get_scenario(trial.scenario) if trial.scenario else None  # a stored name is checked before any physics
+    goal = trial_goal(store, trial)  # a stored goal (or scenario name) is checked before any physics
     (done,) = reenact(store, [Shot(trial, PHASES.get(trial.source, trial.source))], gif=gif, gui=gui, progress=progress)
     result = done.result
-    solved = goal.goal_reached(result.after) if goal is not None else False
+    solved = goal is not None and goal[0] <= result.after and not (goal[1] & result.after)
     return ReplayReport(
         trial=trial,
         outcome=result.outcome,

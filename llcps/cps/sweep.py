@@ -68,6 +68,7 @@ class Sweep:
 def sweep(
     scenario: Scenario,
     *,
+    variant: int = 0,
     stop_at_first: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> Sweep:
@@ -75,15 +76,16 @@ def sweep(
 
     Args:
         scenario: the scenario (its novelty condition is swept).
+        variant: the scene variant (0: the canonical scene).
         stop_at_first: stop at the first resolving candidate.
         progress: called as ``progress(done, total)`` after every candidate.
     """
-    config = SolveConfig(scenario=scenario.name)
+    config = SolveConfig(scenario=scenario.name, variant=variant)
     found = Sweep(scenario=scenario.name)
     with Store.open("sqlite://", create=True) as store:
         branch = store.current_branch()
         result = SolveResult(scenario=scenario.name, condition="novelty", model="-", measure="-", seed=0, branch=branch)
-        world = World.from_scene(scenario.scene("novelty"))
+        world = World.from_scene(scenario.scene("novelty", variant))
         try:
             world.settle(max_steps=SETTLE_STEPS)
             agent = Agent(store=store, branch=branch, world=world, scenario=scenario, config=config, result=result, records=[])
@@ -92,7 +94,7 @@ def sweep(
             found.plan, found.plan_repairs, found.failed_action = result.plan, result.plan_repairs, result.failed_action
             if failure is None or failure.snapshot is None:
                 return found
-            candidates = enumerate_candidates(failed=agent.controller_call(failure.step), entities=agent.kinds, grid=config.grid)
+            candidates = enumerate_candidates(failed=agent.controller_call(failure.step), entities=agent.kinds, grid=config.candidate_grid(scenario))
             found.candidates = len(candidates)
             for index, spec in enumerate(candidates):
                 trial, _ = agent.execute(spec, source="exploration", snapshot_id=failure.snapshot, start=failure.snapshot)

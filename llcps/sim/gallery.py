@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Mapping
 
 from llcps.domain import ACTIONS, ControllerParams, TrialSpec
-from llcps.sim.entities import bucket, inside, open_box, solid
+from llcps.sim.builders import bucket, inside, open_box, solid
 from llcps.sim.render import CLOSE, GifRecorder, render_png
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import SceneSpec, World

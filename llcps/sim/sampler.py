@@ -17,27 +17,39 @@ floor beside it.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
-from typing import Sequence
+from dataclasses import dataclass, replace
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, ControllerParams, TrialSpec
-from llcps.sim.entities import (
-    CATALOG,
-    EntitySpec,
-    FixtureSpec,
-    TableSpec,
-    bucket,
-    inside,
-    open_box,
-    shelf,
-    solid,
-    stacked,
-)
+from llcps.sim.builders import bucket, inside, open_box, shelf, solid, stacked
+from llcps.sim.specs import EntitySpec, FixtureSpec, TableSpec
 from llcps.sim.geometry import in_interior
 from llcps.sim.perception import CAMERA
 from llcps.sim.world import SceneSpec, World
+
+
+@dataclass(frozen=True)
+class CatalogItem:
+    """A kind of object the robot meets: shape and a size range (m), mass from density."""
+
+    shape: str
+    min_size: tuple[float, ...]
+    max_size: tuple[float, ...]
+
+
+#: Objects of the catalog. Sizes are ranges of the ``size`` argument of :func:`solid`.
+#: Everything up to 7 cm wide fits the gripper (8 cm opening).
+CATALOG: Mapping[str, CatalogItem] = {
+    "ball": CatalogItem("sphere", (0.035,), (0.065,)),
+    "cube": CatalogItem("box", (0.035, 0.035, 0.035), (0.06, 0.06, 0.06)),
+    "brick": CatalogItem("box", (0.04, 0.06, 0.03), (0.06, 0.12, 0.05)),
+    "can": CatalogItem("cylinder", (0.035, 0.05), (0.065, 0.1)),
+    "tall_block": CatalogItem("box", (0.05, 0.07, 0.14), (0.06, 0.12, 0.2)),
+    "tall_can": CatalogItem("cylinder", (0.05, 0.14), (0.065, 0.2)),
+}
+
 
 #: Controller settings drawn for pretraining: rate log-uniform (m/s), magnitude uniform (m).
 RATE_RANGE: tuple[float, float] = (0.05, 1.0)

@@ -26,26 +26,12 @@ from pybullet_utils import bullet_client
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.sim import CONTROLLERS_REVISION, native_output_silenced
 from llcps.sim import snapshot as snapshots
-from llcps.sim.entities import (
-    Entity,
-    EntitySpec,
-    FIXTURE_RGBA,
-    FixtureSpec,
-    TableSpec,
-    build_entity,
-    build_fixture,
-)
+from llcps.sim.bodies import Entity, build_entity, build_fixture
+from llcps.sim.specs import FIXTURE_RGBA, FLOOR, TABLE, FixtureSpec, SceneSpec
 from llcps.sim.robot import Robot
-
-#: Names reserved for the built-in fixtures.
-TABLE = "table"
-FLOOR = "floor"
 
 #: zlib level of serialized states (a scene's state shrinks from ~90 kB to ~40 kB in ~1 ms).
 STATE_COMPRESSION = 3
-
-#: Most entities and fixtures a scene may hold.
-MAX_SCENE_BODIES = 64
 
 #: Reference states (a freshly built scene, raw) by scene key, for checking stored states.
 _REFERENCES: dict[str, bytes] = {}
@@ -99,84 +85,6 @@ class PhysicsSettings:
         data = asdict(self)
         data["gravity"] = list(self.gravity)
         return data
-
-
-@dataclass(frozen=True)
-class SceneSpec:
-    """Everything needed to rebuild a world: table geometry, fixtures, entities.
-
-    Attributes:
-        entities: manipulable objects and containers, built in this order.
-        fixtures: static boxes beyond the table and floor (lips, walls, shelves).
-        table: the table's geometry.
-        name: a label (scenario and condition, or "pretrain").
-    """
-
-    entities: tuple[EntitySpec, ...] = ()
-    fixtures: tuple[FixtureSpec, ...] = ()
-    table: TableSpec = field(default_factory=TableSpec)
-    name: str = ""
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "entities", tuple(self.entities))
-        object.__setattr__(self, "fixtures", tuple(self.fixtures))
-        names = [e.name for e in self.entities] + [f.name for f in self.fixtures] + [TABLE, FLOOR]
-        dupes = sorted({n for n in names if names.count(n) > 1})
-        if dupes:
-            raise ValueError(f"scene names must be unique (table and floor are reserved): {dupes}")
-
-    def entity(self, name: str) -> EntitySpec:
-        for e in self.entities:
-            if e.name == name:
-                return e
-        raise UnknownNameError("entity", name, [e.name for e in self.entities])
-
-    def replace(self, *specs: EntitySpec) -> "SceneSpec":
-        """The scene with some entities replaced by name (or appended when new)."""
-        by_name = {s.name: s for s in specs}
-        kept = [by_name.pop(e.name, e) for e in self.entities]
-        return SceneSpec(tuple(kept) + tuple(by_name.values()), self.fixtures, self.table, self.name)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "table": self.table.to_dict(),
-            "fixtures": [f.to_dict() for f in self.fixtures],
-            "entities": [e.to_dict() for e in self.entities],
-        }
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "SceneSpec":
-        """Rebuild a scene from :meth:`to_dict` output, checking it (it may come from a database).
-
-        Raises:
-            LlcpsError: not a scene description, or one beyond :data:`MAX_SCENE_BODIES` bodies
-                or the bounds of :mod:`llcps.sim.entities`.
-        """
-        try:
-            if not isinstance(data, Mapping):
-                raise TypeError(f"expected a JSON object, got {type(data).__name__}")
-            entities, fixtures = data.get("entities", ()), data.get("fixtures", ())
-            if not isinstance(entities, list | tuple) or not isinstance(fixtures, list | tuple):
-                raise TypeError("entities and fixtures must be lists")
-            if len(entities) + len(fixtures) > MAX_SCENE_BODIES:
-                raise ValueError(f"more than {MAX_SCENE_BODIES} entities and fixtures")
-            return cls(
-                entities=tuple(EntitySpec.from_dict(_object(e)) for e in entities),
-                fixtures=tuple(FixtureSpec.from_dict(_object(f)) for f in fixtures),
-                table=TableSpec.from_dict(_object(data.get("table", {}))),
-                name=str(data.get("name", ""))[:200],
-            )
-        except (TypeError, ValueError, AttributeError, KeyError) as exc:
-            raise LlcpsError(
-                f"not a valid scene description: {exc}", hint="scenes come from SceneSpec.to_dict()"
-            ) from exc
-
-
-def _object(value: Any) -> Mapping[str, Any]:
-    if not isinstance(value, Mapping):
-        raise TypeError(f"expected a JSON object, got {type(value).__name__}")
-    return value
 
 
 class World:

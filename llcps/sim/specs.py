@@ -1,0 +1,305 @@
+"""Scene descriptions: JSON-able, frozen specs of the entities, fixtures and table
+from which :class:`~llcps.sim.world.World` builds the same bodies in the same order.
+
+An *entity* is something the robot acts on: a manipulable **object** (sphere, box
+or cylinder) or a **container** (an open box on the table, a bucket on the
+floor). A *fixture* is static scenery: the table, the floor, and any wall, lip or
+shelf a scene adds. Nothing here imports the physics engine: scenario files are
+read and checked into these specs before any simulator is needed.
+
+Geometry conventions (see docs/world.md): the world frame has the robot base at
+the origin, +x pointing away from the robot over the table, +z up and the table
+top at z = 0. ``EntitySpec.position`` is the centre of the entity's bounding box
+and ``size`` its bounding-box dimensions along the entity's own axes (x, y, z),
+which are rotated by ``yaw`` about +z.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import asdict, dataclass, field
+from typing import Any, Mapping, Sequence
+
+from llcps.domain import COLORS, SHAPES
+from llcps.errors import LlcpsError, UnknownNameError
+
+#: Names reserved for the built-in fixtures.
+TABLE = "table"
+FLOOR = "floor"
+
+#: Entity kinds.
+KINDS: tuple[str, ...] = ("object", "container")
+
+#: Display colours (RGBA) of the entity colours of Table 1.
+RGBA: Mapping[str, tuple[float, float, float, float]] = {
+    "red": (0.85, 0.15, 0.15, 1.0),
+    "blue": (0.15, 0.3, 0.85, 1.0),
+    "green": (0.15, 0.7, 0.25, 1.0),
+}
+
+#: Colours of fixtures (not part of Table 1: fixtures are never action arguments).
+FIXTURE_RGBA: Mapping[str, tuple[float, float, float, float]] = {
+    "wood": (0.72, 0.56, 0.38, 1.0),
+    "gray": (0.55, 0.55, 0.58, 1.0),
+    "dark": (0.3, 0.3, 0.32, 1.0),
+    "floor": (0.9, 0.9, 0.88, 1.0),
+}
+
+#: Wall and floor thickness of containers (m).
+DEFAULT_WALL = 0.01
+
+
+#: Bounds of what a scene may describe (m, kg): a stored scene is untrusted input, and
+#: a kilometre-wide box or a million-kilogram cube would stall the engine.
+MAX_EXTENT = 10.0
+MAX_DISTANCE = 100.0
+MAX_MASS = 1000.0
+MAX_NAME = 64
+
+#: Most entities and fixtures a scene may hold.
+MAX_SCENE_BODIES = 64
+
+
+def _triple(values: Sequence[float], what: str, bound: float) -> tuple[float, float, float]:
+    if isinstance(values, (str, bytes)) or len(values) != 3:
+        raise ValueError(f"{what} needs 3 numbers, got {values!r}")
+    out = tuple(_number(v, what, bound) for v in values)
+    return out  # type: ignore[return-value]
+
+
+def _number(value: object, what: str, bound: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not -bound <= float(value) <= bound:
+        raise ValueError(f"{what} must be a number within +-{bound:g}, got {value!r}")
+    return float(value)
+
+
+def _name(value: object, what: str) -> None:
+    if not isinstance(value, str) or not value.strip() or len(value) > MAX_NAME or not value.isprintable():
+        raise ValueError(f"{what} needs a printable name of at most {MAX_NAME} characters, got {value!r}")
+
+
+@dataclass(frozen=True)
+class EntitySpec:
+    """A JSON-able description of one entity, from which it is rebuilt exactly.
+
+    Attributes:
+        name: unique name; it is the entity's symbol in fluents and plans.
+        kind: ``"object"`` or ``"container"``.
+        shape: one of SHAPES (a bucket is a cylinder, an open box a box).
+        color: one of COLORS.
+        size: bounding-box dimensions along the entity's axes (m); a sphere has
+            three equal values, a cylinder equal x and y (its diameter).
+        mass: kg.
+        position: centre of the bounding box in the world frame (m).
+        yaw: rotation about +z (rad).
+        wall: wall and floor thickness of a container (m); unused for objects.
+    """
+
+    name: str
+    kind: str
+    shape: str
+    color: str
+    size: tuple[float, float, float]
+    mass: float
+    position: tuple[float, float, float]
+    yaw: float = 0.0
+    wall: float = DEFAULT_WALL
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "size", _triple(self.size, "size", MAX_EXTENT))
+        object.__setattr__(self, "position", _triple(self.position, "position", MAX_DISTANCE))
+        object.__setattr__(self, "yaw", _number(self.yaw, "yaw", MAX_DISTANCE))
+        object.__setattr__(self, "mass", _number(self.mass, "mass", MAX_MASS))
+        object.__setattr__(self, "wall", _number(self.wall, "wall", MAX_EXTENT))
+        _name(self.name, "an entity")
+        if self.kind not in KINDS:
+            raise ValueError(f"unknown entity kind {self.kind!r}; expected one of {KINDS}")
+        if self.shape not in SHAPES:
+            raise ValueError(f"unknown shape {self.shape!r}; expected one of {SHAPES}")
+        if self.color not in COLORS:
+            raise ValueError(f"unknown color {self.color!r}; expected one of {COLORS}")
+        if min(self.size) <= 0 or self.mass <= 0:
+            raise ValueError(f"entity {self.name!r} needs a positive size and mass")
+        sx, sy, sz = self.size
+        if self.shape == "sphere" and not (sx == sy == sz):
+            raise ValueError(f"sphere {self.name!r} needs three equal size values")
+        if self.shape == "cylinder" and sx != sy:
+            raise ValueError(f"cylinder {self.name!r} needs equal x and y size (its diameter)")
+        if self.kind == "container":
+            if self.shape == "sphere":
+                raise ValueError(f"container {self.name!r} must be a box or a cylinder")
+            if not 0 < 2 * self.wall < min(sx, sy) or not self.wall < sz:
+                raise ValueError(f"container {self.name!r}: wall {self.wall} too thick for size {self.size}")
+
+    @property
+    def volume(self) -> float:
+        """Volume of the entity's envelope (m^3): a container counts its opening too."""
+        sx, sy, sz = self.size
+        if self.shape == "sphere":
+            return math.pi * sx**3 / 6.0
+        if self.shape == "cylinder":
+            return math.pi * (sx / 2.0) ** 2 * sz
+        return sx * sy * sz
+
+    def moved(self, position: Sequence[float], yaw: float | None = None) -> "EntitySpec":
+        """The same entity elsewhere."""
+        return EntitySpec(**{**asdict(self), "position": tuple(position), "yaw": self.yaw if yaw is None else yaw})
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["size"] = list(self.size)
+        d["position"] = list(self.position)
+        return d
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "EntitySpec":
+        return cls(**dict(data))
+
+
+@dataclass(frozen=True)
+class FixtureSpec:
+    """A static box: a lip along a table edge, a wall, a shelf.
+
+    Attributes:
+        name: unique name (fluents may mention it, e.g. ``touching``).
+        size: box dimensions (m) along its own axes.
+        position: box centre in the world frame (m).
+        yaw: rotation about +z (rad).
+        color: a key of FIXTURE_RGBA.
+    """
+
+    name: str
+    size: tuple[float, float, float]
+    position: tuple[float, float, float]
+    yaw: float = 0.0
+    color: str = "gray"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "size", _triple(self.size, "size", MAX_EXTENT))
+        object.__setattr__(self, "position", _triple(self.position, "position", MAX_DISTANCE))
+        object.__setattr__(self, "yaw", _number(self.yaw, "yaw", MAX_DISTANCE))
+        _name(self.name, "a fixture")
+        if min(self.size) <= 0:
+            raise ValueError(f"fixture {self.name!r} needs a positive size")
+        if self.color not in FIXTURE_RGBA:
+            raise ValueError(f"unknown fixture color {self.color!r}; expected one of {tuple(FIXTURE_RGBA)}")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["size"] = list(self.size)
+        d["position"] = list(self.position)
+        return d
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "FixtureSpec":
+        return cls(**dict(data))
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """The table: a solid block whose top is the plane z = 0, resting on the floor.
+
+    The robot base stands on it at the origin; the defaults leave about 0.25 m of
+    table beyond the arm's top-down reach so that some objects can be out of reach.
+    """
+
+    x_min: float = -0.3
+    x_max: float = 1.05
+    y_half: float = 0.6
+    height: float = 0.45
+
+    def __post_init__(self) -> None:
+        for name in ("x_min", "x_max", "y_half", "height"):
+            object.__setattr__(self, name, _number(getattr(self, name), f"table {name}", MAX_EXTENT))
+        if not (self.x_max > self.x_min and self.y_half > 0 and self.height > 0):
+            raise ValueError(f"invalid table {self}")
+
+    @property
+    def floor_z(self) -> float:
+        return -self.height
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "TableSpec":
+        return cls(**dict(data))
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """Everything needed to rebuild a world: table geometry, fixtures, entities.
+
+    Attributes:
+        entities: manipulable objects and containers, built in this order.
+        fixtures: static boxes beyond the table and floor (lips, walls, shelves).
+        table: the table's geometry.
+        name: a label (scenario and condition, or "pretrain").
+    """
+
+    entities: tuple[EntitySpec, ...] = ()
+    fixtures: tuple[FixtureSpec, ...] = ()
+    table: TableSpec = field(default_factory=TableSpec)
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "entities", tuple(self.entities))
+        object.__setattr__(self, "fixtures", tuple(self.fixtures))
+        names = [e.name for e in self.entities] + [f.name for f in self.fixtures] + [TABLE, FLOOR]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ValueError(f"scene names must be unique (table and floor are reserved): {dupes}")
+
+    def entity(self, name: str) -> EntitySpec:
+        for e in self.entities:
+            if e.name == name:
+                return e
+        raise UnknownNameError("entity", name, [e.name for e in self.entities])
+
+    def replace(self, *specs: EntitySpec) -> "SceneSpec":
+        """The scene with some entities replaced by name (or appended when new)."""
+        by_name = {s.name: s for s in specs}
+        kept = [by_name.pop(e.name, e) for e in self.entities]
+        return SceneSpec(tuple(kept) + tuple(by_name.values()), self.fixtures, self.table, self.name)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "table": self.table.to_dict(),
+            "fixtures": [f.to_dict() for f in self.fixtures],
+            "entities": [e.to_dict() for e in self.entities],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "SceneSpec":
+        """Rebuild a scene from :meth:`to_dict` output, checking it (it may come from a database).
+
+        Raises:
+            LlcpsError: not a scene description, or one beyond :data:`MAX_SCENE_BODIES` bodies
+                or the bounds above.
+        """
+        try:
+            if not isinstance(data, Mapping):
+                raise TypeError(f"expected a JSON object, got {type(data).__name__}")
+            entities, fixtures = data.get("entities", ()), data.get("fixtures", ())
+            if not isinstance(entities, list | tuple) or not isinstance(fixtures, list | tuple):
+                raise TypeError("entities and fixtures must be lists")
+            if len(entities) + len(fixtures) > MAX_SCENE_BODIES:
+                raise ValueError(f"more than {MAX_SCENE_BODIES} entities and fixtures")
+            return cls(
+                entities=tuple(EntitySpec.from_dict(_object(e)) for e in entities),
+                fixtures=tuple(FixtureSpec.from_dict(_object(f)) for f in fixtures),
+                table=TableSpec.from_dict(_object(data.get("table", {}))),
+                name=str(data.get("name", ""))[:200],
+            )
+        except (TypeError, ValueError, AttributeError, KeyError) as exc:
+            raise LlcpsError(
+                f"not a valid scene description: {exc}", hint="scenes come from SceneSpec.to_dict()"
+            ) from exc
+
+
+def _object(value: Any) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise TypeError(f"expected a JSON object, got {type(value).__name__}")
+    return value

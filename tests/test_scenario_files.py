@@ -1,0 +1,289 @@
+"""Scenario files: the shipped ones round-trip and build, variants are scenes of their own,
+and a bad file is refused with one line naming the file and the field."""
+
+from __future__ import annotations
+
+import copy
+import json
+import tomllib
+from pathlib import Path
+from typing import Any, Callable
+
+import pytest
+import tomli_w
+from typer.testing import CliRunner
+
+from llcps.cli.main import app
+from llcps.scenarios import CONDITIONS, SCENARIOS, get_scenario
+from llcps.scenarios.loader import read_text
+from llcps.sim.specs import SceneSpec
+from llcps.sim.world import World
+
+runner = CliRunner()
+NAMES = list(SCENARIOS)
+FIXTURES = Path(__file__).parent / "fixtures"
+
+
+def show(*args: str) -> str:
+    result = runner.invoke(app, ["scenario", "show", *args])
+    assert result.exit_code == 0, result.stderr
+    return result.stdout
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_shipped_file_round_trips_through_show(tmp_path: Path, name: str) -> None:
+    """What `scenario show` prints loads back to the same file, goal and scenes."""
+    original = SCENARIOS[name]
+    assert original.source is not None
+    for fmt in ("toml", "json"):
+        text = show(name, "--format", fmt)
+        data = json.loads(text) if fmt == "json" else tomllib.loads(text)
+        assert data == dict(original.source.data)
+        again = read_text(tomli_w.dumps(data), where=f"{name}.{fmt}")
+        assert again.model == original.source.model
+        assert (again.goal_pos, again.goal_neg) == (original.goal_pos, original.goal_neg)
+        for condition in CONDITIONS:
+            assert again.scene(condition, 0) == original.scene(condition, 0)
+            assert again.scene(condition, 3) == original.scene(condition, 3)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_shown_variant_is_a_file_of_that_scene(tmp_path: Path, name: str) -> None:
+    """`show --variant N` writes a file whose canonical scene is variant N's."""
+    path = tmp_path / "variant.toml"
+    path.write_text(show(name, "--variant", "2"))
+    mine = get_scenario(str(path))
+    for condition in CONDITIONS:
+        drawn, written = SCENARIOS[name].scene(condition, 2), mine.scene(condition, 0)
+        assert written.entities == drawn.entities and written.fixtures == drawn.fixtures and written.table == drawn.table
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_shipped_file_builds_in_pybullet(name: str) -> None:
+    """Every condition of variants 0 and 1 becomes a world with each entity and fixture in it,
+    each object where the scene puts it."""
+    scenario = SCENARIOS[name]
+    for variant in (0, 1):
+        for condition in CONDITIONS:
+            scene = scenario.scene(condition, variant)
+            with World.from_scene(scene) as world:
+                assert sorted(world.entities) == sorted(e.name for e in scene.entities)
+                assert set(world.fixtures) >= {f.name for f in scene.fixtures}
+                for entity in (e for e in scene.entities if e.kind == "object"):  # a solid's centre of mass is its box centre
+                    position, _ = world.client.getBasePositionAndOrientation(world.entities[entity.name].body_id)
+                    assert position == pytest.approx(entity.position, abs=1e-6)
+
+
+def test_variant_zero_is_the_canonical_scene() -> None:
+    """Variant 0 of each shipped file is the scene the documentation and results describe,
+    bit for bit (the fixture holds the scenes as they were before scenarios were files)."""
+    canonical = json.loads((FIXTURES / "canonical_scenes.json").read_text())
+    assert set(canonical) == {f"{name}/{condition}" for name in NAMES for condition in CONDITIONS}
+    for key, scene in canonical.items():
+        name, condition = key.split("/")
+        assert SCENARIOS[name].scene(condition, 0).to_dict() == scene
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_same_variant_same_scene_other_variants_other_scenes(name: str) -> None:
+    """A variant is a scene: drawn again (from a fresh read of the file) it is the same, bit
+    for bit; variants 0..5 are six different scenes."""
+    scenario = SCENARIOS[name]
+    assert scenario.source is not None and scenario.varies
+    fresh = read_text(scenario.source.text, where=name)
+    scenes = []
+    for variant in range(6):
+        first = scenario.scene("novelty", variant).to_dict()
+        assert json.dumps(fresh.scene("novelty", variant).to_dict()) == json.dumps(first)
+        scenes.append(json.dumps(first, sort_keys=True))
+    assert len(set(scenes)) == len(scenes)
+
+
+def _entity_position(name: str, variant: int, entity: str) -> tuple[float, float, float]:
+    return SCENARIOS[name].scene("original", variant).entity(entity).position
+
+
+def test_a_variant_draws_within_the_declared_ranges() -> None:
+    """Scenario 2 declares the can's x in [0.60, 0.64]: every variant's can lies there."""
+    xs = {_entity_position("scenario2", v, "can")[0] for v in range(1, 12)}
+    assert all(0.60 <= x <= 0.64 for x in xs) and len(xs) > 1
+
+
+# --- bad files ---------------------------------------------------------------------------
+
+BASE: dict[str, Any] = tomllib.loads(SCENARIOS["scenario2"].source.text)  # type: ignore[union-attr]
+
+#: Each broken file: how scenario2 is changed, and what the error line must name.
+BAD: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
+    "unknown key": (lambda d: d["entities"][0].update(colour="red"), "entities[0].colour: unknown key"),
+    "wrong type": (lambda d: d["entities"][0].update(mass="heavy"), "entities[0].mass:"),
+    "empty range": (lambda d: d["entities"][0].update(x=[]), "entities[0].x: an empty range"),
+    "empty colors": (lambda d: d["entities"][0].update(color=[]), "entities[0].color:"),
+    "inverted range": (lambda d: d["entities"][0].update(x=[0.64, 0.6]), "entities[0].x: the range [0.64, 0.6] is inverted"),
+    "inverted condition range": (
+        lambda d: d["conditions"]["novelty"]["entities"]["bin"].update(x=[1.08, 1.04]),
+        "conditions.novelty.entities.bin.x:",
+    ),
+    "goal names a missing entity": (lambda d: d.update(goal=["(in can crate)"]), "goal[0]: '(in can crate)' names 'crate'"),
+    "overlapping bodies": (lambda d: d["entities"][2].update(x=0.62, y=-0.05), "overlaps 'block'"),
+    "floating body": (lambda d: d["entities"][2].update(x=0.98, y=-0.3), "entities[2] (block): floats"),
+    "reachable entity out of reach": (lambda d: d["entities"][0].update(x=0.9, y=0.0), "entities[0] (can): is 0.90 m from the robot base"),
+    "unreachable entity within reach": (
+        lambda d: d["conditions"]["novelty"]["entities"]["bin"].update(x=0.45, y=0.3, on="table", size=[0.2, 0.2, 0.1]),
+        "entities[1] (bin): is 0.54 m from the robot base, within",
+    ),
+}
+
+
+def _bad_file(tmp_path: Path, change: Callable[[dict[str, Any]], None]) -> Path:
+    data = copy.deepcopy(BASE)
+    data["name"] = "mine"
+    data.pop("alias", None)
+    change(data)
+    path = tmp_path / "mine.toml"
+    path.write_text(tomli_w.dumps(data))
+    return path
+
+
+def _assert_one_error(result: Any, path: Path, field: str) -> None:
+    assert result.exit_code == 2, (result.exit_code, result.stdout, result.stderr)
+    assert isinstance(result.exception, SystemExit)
+    lines = result.stderr.splitlines()
+    errors = [line for line in lines if line.startswith("error:")]
+    assert len(errors) == 1, lines
+    assert errors[0].startswith(f"error: {path}: ") and field in errors[0], errors[0]
+    assert any(line.startswith("hint: ") for line in lines)
+    assert "Traceback" not in result.stderr + result.stdout
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_bad_file_is_one_error_naming_file_and_field(tmp_path: Path, case: str) -> None:
+    change, field = BAD[case]
+    path = _bad_file(tmp_path, change)
+    for command in (["scenario", "show", str(path)], ["scenario", "render", str(path), "--out-dir", str(tmp_path / "out")]):
+        _assert_one_error(runner.invoke(app, command), path, field)
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_file_stores_nothing(tmp_path: Path) -> None:
+    """`solve BAD.toml` refuses the file before it touches the store."""
+    db = tmp_path / "llcps.db"
+    created = runner.invoke(app, ["--db", str(db), "db", "init"])
+    assert created.exit_code == 0, created.stderr
+    before = db.read_bytes()
+    path = _bad_file(tmp_path, BAD["overlapping bodies"][0])
+    result = runner.invoke(app, ["--db", str(db), "solve", str(path)])
+    _assert_one_error(result, path, BAD["overlapping bodies"][1])
+    assert db.read_bytes() == before
+
+
+def test_a_file_may_not_take_a_shipped_name(tmp_path: Path) -> None:
+    data = copy.deepcopy(BASE)
+    data.pop("alias", None)
+    path = tmp_path / "copy.toml"
+    path.write_text(tomli_w.dumps(data))
+    _assert_one_error(runner.invoke(app, ["scenario", "show", str(path)]), path, "name: 'scenario2' is the shipped scenario")
+
+
+def test_not_toml_is_one_error(tmp_path: Path) -> None:
+    path = tmp_path / "broken.toml"
+    path.write_text("name = \n")
+    _assert_one_error(runner.invoke(app, ["scenario", "show", str(path)]), path, "not valid TOML")
+
+
+# --- variants in episodes ----------------------------------------------------------------
+
+
+def _episode(path: Path, variant: int) -> tuple[list[tuple[object, ...]], list[dict[str, Any]]]:
+    """The trials (what is compared bit for bit) and stored scenes of one short episode."""
+    from llcps.cps.agent import solve
+    from llcps.cps.episode import SolveConfig
+    from llcps.store import Store
+
+    with Store.open(str(path), create=True) as store:
+        result = solve(store, branch=None, config=SolveConfig(scenario="scenario3", budget=2, seed=0, variant=variant))
+        assert result.variant == variant
+        trials = store.visible_trials("main")
+        rows = [(t.source, t.spec, t.features, t.outcome, t.solved, t.sim_steps, t.scenario) for t in trials]
+        scenes = [store.get_snapshot(t.snapshot_id).scene for t in trials if t.snapshot_id is not None]
+        if variant:
+            from llcps.cps.replay import replay
+
+            report = replay(store, trials[-1].id)  # the scene is in the store: no variant flag
+            assert report.matches, report.as_json()
+    return rows, scenes
+
+
+def test_same_variant_gives_identical_trials_and_other_variants_other_scenes(tmp_path: Path) -> None:
+    first, first_scenes = _episode(tmp_path / "a.db", 3)
+    again, again_scenes = _episode(tmp_path / "b.db", 3)
+    assert first and first == again and first_scenes == again_scenes
+    canonical = SCENARIOS["scenario3"].scene("novelty", 0).to_dict()
+    drawn = SCENARIOS["scenario3"].scene("novelty", 3).to_dict()
+    assert drawn != canonical
+    assert first_scenes and all({k: v for k, v in s.items() if k != "goal"} == drawn for s in first_scenes)
+    _, other_scenes = _episode(tmp_path / "c.db", 0)
+    assert all({k: v for k, v in s.items() if k != "goal"} == canonical for s in other_scenes)
+
+
+# --- check ------------------------------------------------------------------------------
+
+
+def test_check_fails_on_a_novelty_that_changes_nothing(tmp_path: Path) -> None:
+    """A file whose novelty is the original scene fails `check` (exit 1), the property named."""
+    data = copy.deepcopy(BASE)
+    data["name"] = "no_novelty"
+    data.pop("alias", None)
+    data.pop("conditions")
+    path = tmp_path / "no_novelty.toml"
+    path.write_text(tomli_w.dumps(data))
+    result = runner.invoke(app, ["scenario", "check", str(path), "--quick", "--json"])
+    assert result.exit_code == 1, result.stderr
+    report = json.loads(result.stdout)
+    (variant,) = report["variants"]
+    assert variant["properties"]["original_solved"] is True
+    assert variant["properties"]["novelty_defeats_plan"] is False
+    assert "novelty_defeats_plan" in variant["reasons"]
+    plain = runner.invoke(app, ["scenario", "check", str(path), "--quick"])
+    assert plain.exit_code == 1 and "variant 0: novelty_defeats_plan does not hold" in plain.stderr
+
+
+def _judged(status: str = "solved", explored: int = 0, **found: Any) -> Any:
+    from llcps.cps.check import VariantCheck, judge
+    from llcps.cps.sweep import Sweep
+
+    defaults: dict[str, Any] = {"plan": ["(push cube)"], "failed_action": "(push cube)", "candidates": 10, "tried": 10, "resolving": [3]}
+    report = VariantCheck(0, status, explored, Sweep(scenario="s", **{**defaults, **found}), quick=False)
+    judge(report)
+    return report
+
+
+@pytest.mark.parametrize(
+    ("case", "failed"),
+    [
+        ({}, set()),
+        ({"status": "budget_exhausted"}, {"original_solved"}),
+        ({"explored": 2}, {"original_solved"}),
+        ({"failed_action": None}, {"novelty_defeats_plan"}),
+        ({"plan_repairs": [{"plan": ["(pick cube)"], "failed_action": None}]}, {"novelty_defeats_plan"}),
+        ({"resolving": []}, {"resolvable", "ranking_matters"}),
+        ({"resolving": [0, 4]}, {"ranking_matters"}),
+    ],
+)
+def test_check_judges_each_property_with_a_reason(case: dict[str, Any], failed: set[str]) -> None:
+    from llcps.cps.check import PROPERTIES
+
+    report = _judged(**case)
+    assert set(report.properties) == set(PROPERTIES)
+    assert {p for p, held in report.properties.items() if not held} == failed
+    assert set(report.reasons) == failed and all(report.reasons.values())
+    assert report.passed is (not failed)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NAMES)
+def test_check_passes_on_every_shipped_scenario_at_variant_zero(name: str) -> None:
+    result = runner.invoke(app, ["scenario", "check", name, "--quick", "--json"])
+    assert result.exit_code == 0, result.stdout + result.stderr
+    report = json.loads(result.stdout)
+    assert report["passed"] and report["shares"] == {p: 1.0 for p in report["properties"]}
