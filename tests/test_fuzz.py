@@ -33,7 +33,8 @@ from llcps.symbolic.operators import learn_operator
 
 #: Examples Hypothesis runs per damaged table (each copies the store, damages one row, runs
 #: that table's readers): 60 in all.
-FUZZ_EXAMPLES = {"snapshots": 14, "trials": 12, "operators": 8, "world_models": 8, "episodes": 4, "branches": 8, "settings": 6}
+FUZZ_EXAMPLES = {"snapshots": 14, "trials": 12, "operators": 8, "world_models": 8, "episodes": 4, "branches": 8, "settings": 6,
+                 "trial_changes": 8, "operator_executions": 6}
 
 runner = CliRunner()
 
@@ -48,6 +49,9 @@ READERS: dict[str, list[tuple[list[str], set[int]]]] = {
     "episodes": [(["inspect", "runs", "--all"], {0}), (["inspect", "runs"], {0})],
     "branches": [(["db", "status"], {0}), (["db", "list"], {0}), (["inspect", "trials"], {0})],
     "settings": [(["db", "status"], {0}), (["inspect", "trials"], {0})],
+    "trial_changes": [(["db", "status"], {0}), (["inspect", "model", "--model", "nb"], {0})],
+    "operator_executions": [(["inspect", "knowledge"], {0}),
+                            (["solve", "scenario3", "--condition", "original", "--budget", "0", "--model", "nb"], {0, 1})],
 }  # fmt: skip
 
 #: Columns damaged, per table (JSON columns get JSON-shaped damage too).
@@ -59,8 +63,10 @@ COLUMNS: dict[str, list[str]] = {
     "episodes": ["summary"],
     "branches": ["name", "fork_point", "parent_id"],
     "settings": ["value"],
+    "trial_changes": ["before", "added", "deleted", "bodies", "source"],
+    "operator_executions": ["operator", "success", "context", "watermark"],
 }
-JSON_COLUMNS = {"scene", "features", "arguments", "extra", "definition", "meta", "summary"}
+JSON_COLUMNS = {"scene", "features", "arguments", "extra", "definition", "meta", "summary", "before", "added", "deleted", "bodies", "context"}
 
 
 @pytest.fixture(scope="module")
@@ -81,6 +87,9 @@ def template(tmp_path_factory: pytest.TempPathFactory) -> Path:
         episode = store.start_episode(run_id=run, branch="main", scenario="scenario3", condition="novelty", model="nb", measure="most-changes", seed=0)
         store.add_operator(branch="main", name=learned.name, pddl=learned.to_pddl(), definition={"operator": learned.to_json(), "refinement": None},
                            scenario="scenario3", episode_id=episode)  # fmt: skip
+        for success in (False, True):
+            store.add_operator_execution(branch="main", operator="remove_from_container", success=success,
+                                         context=[("in", "?o", "?c"), ("reachable", "?c")], episode_id=episode)  # fmt: skip
         store.finish_episode(episode, status="solved", summary={"exploration_trials": 1, "sim_seconds": 1.0, "wall_seconds": 2.0})
         store.finish_run(run, status="solved")
     return path
@@ -118,7 +127,7 @@ def _flip(raw: bytes, rng: random.Random) -> bytes:
 def _damage(db: Path, table: str, column: str, data: st.DataObject) -> tuple[Any, str]:
     """Damage ``table.column`` of one row; returns its key and a description for failure messages."""
     with closing(sqlite3.connect(db)) as conn, conn:
-        key = "key" if table == "settings" else "id"
+        key = {"settings": "key", "trial_changes": "trial_id"}.get(table, "id")
         ids = [r[0] for r in conn.execute(f"SELECT {key} FROM {table} ORDER BY {key}")]
         rng = data.draw(st.randoms(use_true_random=False), label="where")  # rows and bytes spread evenly
         row = rng.choice(ids)
