@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from llcps.cps.agent import solve
@@ -172,3 +173,20 @@ def test_branch_knowledge_is_costed_by_its_experience(store: Store, new_trial) -
     kb = load_knowledge(store, "main")
     assert kb.counts("push") == (0, 1) and kb.cost("push") == 1.5
     assert store.operator_experience("main")[0].context == (("visible", "?o"),)
+
+
+@pytest.mark.slow
+def test_a_life_never_explores_more_than_a_fresh_branch(pretrained: Path, fresh: dict[str, int]) -> None:
+    episodes = [(name, condition) for name in NAMES for condition in ("original", "novelty")]
+    rng = np.random.default_rng(7)
+    episodes += [episodes[i] for i in rng.choice(len(episodes), size=3, replace=False)]
+    order = [episodes[i] for i in rng.permutation(len(episodes))]
+    with Store.open(str(pretrained)) as store:
+        store.create_branch("life", from_branch="main", at="pretrain")
+        for name, condition in order:
+            result = solve(store, branch="life", config=_config(name, condition))
+            assert result.status == "solved", (name, condition, result.as_json())
+            ceiling = 0 if condition == "original" else fresh[name]
+            assert result.exploration_trials <= ceiling, (name, condition, result.exploration_trials, ceiling)
+
+
