@@ -98,6 +98,9 @@ def test_interrupt_keeps_completed_trials_and_marks_the_episode(tmp_path: Path) 
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # A suite started in the background of a non-interactive shell inherits SIGINT
+        # ignored; the solve must see Ctrl-C as a terminal would deliver it.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.monotonic() + 240
     explored = 0
