@@ -20,6 +20,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
+from llcps.cps.candidates import candidate_space_size
 from llcps.experiments.grid import (
     SCENARIO_SEQUENCE,
     condition_rank,
@@ -182,6 +183,11 @@ def exploration_distribution(
     for r in table:
         values.setdefault((r.model, r.measure, r.pretrain_size, r.condition, r.scenario), []).append(r.metric(metric))
     show_budget = budget is not None and metric == "exploration_trials"
+    cap_label = f"budget cap ({budget} trials)"
+    if show_budget and budget is not None and budget >= candidate_space_size():
+        # A whole-space budget: an episode stops where the candidates end, not at the number.
+        budget = candidate_space_size()
+        cap_label = f"whole candidate space ({budget} trials)"
     # Tall enough to read with one cell; the legend gets a row of its own beneath.
     height = max(3.0, 1.4 + 0.5 * max(len(cells), 1) * max(1, len(conditions)) ** 0.5)
     fig = Figure(figsize=(3.4 * len(scenarios) + 2.4, height))
@@ -223,7 +229,7 @@ def exploration_distribution(
     ]
     handles.append(matplotlib.lines.Line2D([], [], marker="o", linestyle="", markersize=4, color="#444444", label="one seed"))
     if show_budget:
-        handles.append(matplotlib.lines.Line2D([], [], color="#555555", linestyle="--", label=f"budget cap ({budget} trials)"))
+        handles.append(matplotlib.lines.Line2D([], [], color="#555555", linestyle="--", label=cap_label))
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.suptitle(f"{metric.replace('_', ' ')} per cell, one panel per scenario", fontsize=11, y=1 - 0.12 / height)
     return save(fig, stem)
