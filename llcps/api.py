@@ -302,16 +302,25 @@ class Workbench:
         preset: str = "smoke",
         *,
         seeds: int | Iterable[int] | None = None,
+        variants: range | None = None,
         workers: int = 1,
         out_dir: str | Path | None = None,
         html: bool = False,
         progress: Callable[[int, int, str], None] | None = None,
     ) -> RunSummary:
-        """``llcps experiment run``: every missing sequence of a grid, then its report in ``out_dir``."""
+        """``llcps experiment run``: every missing sequence of a grid, then its report in ``out_dir``.
+
+        ``variants`` (e.g. ``range(100, 110)``) takes the place of ``seeds``: seed N solves scene variant N.
+        """
         from llcps.experiments.runner import default_out_dir, results_table, run_experiment, write_report
 
-        summary = run_experiment(self.store, preset=preset, seeds=seeds, workers=workers, progress=progress)
-        table = results_table(self.store, summary.preset, summary.seeds)
+        if variants is not None and seeds is not None:
+            raise LlcpsError("give seeds or variants, not both: with variants, seed N solves variant N")
+        paired = variants is not None
+        summary = run_experiment(
+            self.store, preset=preset, seeds=variants if paired else seeds, variants=paired, workers=workers, progress=progress
+        )
+        table = results_table(self.store, summary.preset, summary.seeds, variants=paired)
         if len(table):
             write_report(table, out_dir if out_dir is not None else default_out_dir(summary.preset), store=self.store, html=html)
         return summary

@@ -466,3 +466,84 @@ def test_the_scheduler_keeps_twins_apart(store: Store) -> None:
     # the two sequences of seed 0 would simulate scenario 1 side by side: seed 1's goes second
     assert engine.submitted[:2] == [tasks[0].label, tasks[2].label]
     assert sorted(engine.submitted) == sorted(t.label for t in tasks) and len(summary.failed) == 4
+
+
+# -- scene variants, paired with seeds ----------------------------------------------------------
+def test_variant_sequences_name_their_variant_and_parse_back() -> None:
+    from llcps.experiments.grid import parse_branch
+
+    sequences = SMOKE.sequences([0, 3], variants=True)
+    assert {(s.seed, s.variant) for s in sequences} == {(0, 0), (3, 3)}
+    for seq in sequences:
+        assert seq.branch_name.endswith("-s3-v3" if seq.seed == 3 else "-s0")
+        for scenario in SCENARIO_SEQUENCE:
+            assert parse_branch(seq.episode_branch(scenario)).sequence == seq
+    # Variant 0 is the canonical scene: seed 0 of a variants run is seed 0 of a canonical run.
+    assert SMOKE.sequences([0], variants=True) == SMOKE.sequences([0])
+    assert parse_branch("exp-smoke-nb-most-changes-p4-update-s3-v03") is None  # not a name this module writes
+    tasks = plan_tasks(SMOKE, [5], variants=True)
+    assert {t.sequence.variant for t in tasks if isinstance(t, SequenceTask)} == {5}
+    assert [t.seed for t in tasks if isinstance(t, PretrainTask)] == [5]
+
+
+def test_a_variants_run_solves_each_seed_in_its_variant_and_reports_it(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    """`--variants 1:2` next to the canonical seeds 0-1: seed 1 solves variant 1; reports keep the scenes apart."""
+    db = tmp_path / "v.db"
+    with closing(sqlite3.connect(reference[0].url.split("///", 1)[1])) as src, closing(sqlite3.connect(db)) as dst:
+        src.backup(dst)
+    runner = CliRunner()
+    ran = runner.invoke(
+        app, ["--db", str(db), "experiment", "run", "--preset", "smoke", "--variants", "1:2", "--workers", "1",
+              "--out-dir", str(tmp_path / "v"), "--json"],
+    )  # fmt: skip
+    assert ran.exit_code == 0, ran.output
+    data = json.loads(ran.stdout)
+    assert data["run"]["seeds"] == [1] and data["run"]["variants"] == [1]
+    assert data["run"]["tasks_skipped"] == 1  # seed 1's pretraining is the canonical run's
+    assert data["overview"]["variants"] == [1] and data["overview"]["rows"] == len(SMOKE.cells()) * 3
+    with Store.open(str(db)) as store:
+        for seq in SMOKE.sequences([1], variants=True):
+            for scenario in SCENARIO_SEQUENCE:
+                (episode,) = [e for e in store.list_episodes(branch=seq.episode_branch(scenario)) if e.scenario == scenario]
+                assert episode.summary["variant"] == 1 and episode.seed == 1
+        both = results_table(store, "smoke")
+        assert {r.variant for r in both} == {0}  # the canonical rows only
+        assert {r.variant for r in results_table(store, "smoke", variants=True)} == {0, 1}  # seed 0 is variant 0
+    canonical = runner.invoke(app, ["--db", str(db), "experiment", "report", "--from-db", "--out", str(tmp_path / "c"), "--json"])
+    assert canonical.exit_code == 0, canonical.output
+    assert json.loads(canonical.stdout)["overview"]["variants"] == [0]
+    assert "left out" in canonical.stderr and "--variants" in canonical.stderr
+    paired = runner.invoke(
+        app, ["--db", str(db), "experiment", "report", "--from-db", "--variants", "0:2", "--out", str(tmp_path / "p"), "--json"]
+    )
+    assert paired.exit_code == 0, paired.output
+    report = json.loads(paired.stdout)
+    assert report["overview"]["variants"] == [0, 1]
+    assert {(v["scenario"], v["variant"]) for v in report["per_variant"]} == {(s, v) for s in SCENARIO_SEQUENCE for v in (0, 1)}
+    text = (tmp_path / "p" / "report.md").read_text()
+    assert "## Per scene variant" in text and "Scenes: variants 0-1" in text
+    assert {r.variant for r in ResultsTable.read(tmp_path / "p" / "results.csv")} == {0, 1}
+
+
+@pytest.mark.parametrize(
+    "argv, error",
+    [
+        (["experiment", "run", "--preset", "smoke", "--variants", "0:2", "--seeds", "2"], "drop --seeds and --first-seed"),
+        (["experiment", "run", "--preset", "smoke", "--variants", "2:1"], "not a range of variants"),
+        (["experiment", "report", "--from-db", "--variants", "50:60"], "no results on scene variants 50:60"),
+    ],
+)
+def test_bad_variants_are_one_error_line(reference: tuple[Store, Any], argv: list[str], error: str) -> None:
+    db = reference[0].url.split("///", 1)[1]
+    result = CliRunner().invoke(app, ["--db", db, *argv])
+    assert result.exit_code == 2 and error in result.stderr and "Traceback" not in result.output
+
+
+def test_results_written_before_variants_read_as_the_canonical_scene(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    table = results_table(reference[0], "smoke")
+    path = table.write_csv(tmp_path / "t.csv")
+    lines = path.read_text().splitlines()
+    column = lines[0].split(",").index("variant")
+    old = "\n".join(",".join(v for i, v in enumerate(line.split(",")) if i != column) for line in lines) + "\n"
+    (tmp_path / "old.csv").write_text(old)
+    assert ResultsTable.read_csv(tmp_path / "old.csv") == table

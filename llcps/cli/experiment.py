@@ -16,6 +16,7 @@ from llcps.errors import LlcpsError
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
 from llcps.experiments.grid import PRESETS
+from llcps.experiments.reporting import select_scenes
 from llcps.experiments.runner import (
     ENGINES,
     RunSummary,
@@ -26,6 +27,7 @@ from llcps.experiments.runner import (
     with_baseline,
     write_report,
 )
+from llcps.scenarios.variants import parse_range
 
 app = new_app(
     "Run the experiment grid (Figure 2 over many seeds) and report on it.",
@@ -39,6 +41,10 @@ OutDir = Annotated[
     Optional[Path],
     typer.Option("--out-dir", metavar="DIR", help="Report directory (default: results/<preset>).", show_default=False, file_okay=False),
 ]
+VARIANTS_HELP = (
+    "Scene variants A:B (A..B-1), paired with the seeds: seed N solves its scenarios in variant N, "
+    "so the statistics cover layouts as well as pretraining draws (variant 0 is the canonical scene)."
+)
 HtmlFlag = Annotated[
     bool,
     typer.Option("--html", help="Also write report.html: one self-contained page with every plot and a film of a resolving trial per scenario."),
@@ -67,6 +73,7 @@ _PRESET_HELP = "Grid to run: " + "; ".join(
         "llcps --db runs.db experiment run --preset paper --seeds 20 --workers 2",
         "llcps --db runs.db experiment run --preset paper --first-seed 20 --seeds 20   # another machine's share",
         "llcps --db runs.db experiment run --preset smoke --html --out-dir report/",
+        "llcps --db runs.db experiment run --preset vs_random --variants 100:110   # seeds 100-109 on variants 100-109",
     ),
 )
 def run_cli(
@@ -83,6 +90,10 @@ def run_cli(
             help="Start the seeds at K (K..K+N-1): runners on several machines sharing one PostgreSQL store take disjoint seeds.",
         ),
     ] = 0,
+    variants: Annotated[
+        Optional[str],
+        typer.Option("--variants", metavar="A:B", help=VARIANTS_HELP + " Takes the place of --seeds and --first-seed.", show_default=False),
+    ] = None,
     workers: Annotated[
         Optional[int],
         typer.Option("--workers", metavar="N", min=1, max=MAX_WORKERS, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
@@ -114,7 +125,12 @@ def run_cli(
     """
     name = str(preset.value)  # type: ignore[attr-defined]
     n_workers = workers if workers is not None else cpu_count()
-    seed_range = _seeds(name, seeds, first_seed)
+    if variants is not None and (seeds is not None or first_seed):
+        raise LlcpsError(
+            "--variants chooses the seeds itself (seed N solves variant N): drop --seeds and --first-seed",
+            hint=f"e.g. `llcps experiment run --preset {name} --variants 100:110`",
+        )
+    seed_range = _seeds(name, seeds, first_seed) if variants is None else _variant_seeds(variants)
     target = check_output_dir(out_dir if out_dir is not None else default_out_dir(name), what="--out-dir")
     try:
         with open_store(ctx, create=create) as store:
@@ -127,6 +143,7 @@ def run_cli(
                     store,
                     preset=name,
                     seeds=seed_range,
+                    variants=variants is not None,
                     workers=n_workers,
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
@@ -136,7 +153,7 @@ def run_cli(
             if summary.status == "interrupted":
                 message(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
                 raise typer.Exit(EXIT_INTERRUPTED)
-            table = results_table(store, name, summary.seeds)
+            table = results_table(store, name, summary.seeds, variants=variants is not None)
             for label, error in summary.failed:
                 message(f"task {label} failed: {error}")
             if summary.blocked:
@@ -163,6 +180,7 @@ def run_cli(
         "llcps experiment report results/paper                       # rebuild from results.csv",
         "llcps --db runs.db experiment report --from-db --preset paper --html",
         "llcps --db runs.db experiment report --from-db --preset paper --baseline-preset random --out-dir results/paper",
+        "llcps --db runs.db experiment report --from-db --preset vs_random --variants 100:110 --out-dir results/held-apart",
     ),
 )
 def report_cli(
@@ -185,6 +203,15 @@ def report_cli(
             show_default=False,
         ),
     ] = None,
+    variants: Annotated[
+        Optional[str],
+        typer.Option(
+            "--variants",
+            metavar="A:B",
+            help="Report on the sequences run with `experiment run --variants` over A..B-1 (default: the canonical scenes, or all when the results are of one variants run).",
+            show_default=False,
+        ),
+    ] = None,
     out_dir: Annotated[
         Optional[Path],
         typer.Option(
@@ -204,10 +231,18 @@ def report_cli(
     if (source is None) == (not from_db):
         raise LlcpsError("give a results directory or --from-db (one of them)", hint="e.g. `llcps experiment report results/paper`")
 
+    scenes = None if variants is None else parse_range(variants)
+
     def chosen(table: "ResultsTable") -> tuple[str, "ResultsTable", Path]:
         name, mine = one_preset(table, preset)
         if baseline_preset is not None:
             mine = with_baseline(mine, table, baseline_preset)
+        mine, left_out = select_scenes(mine, scenes)
+        if left_out:
+            message(
+                f"{left_out} episode(s) on other scenes left out: a report pairs seeds over one set of scenes"
+                + ("" if scenes is not None else " (report scene variants with --variants A:B)")
+            )
         target = out_dir
         if target is None:
             target = default_out_dir(name) if source is None else (source if source.is_dir() else source.parent)
@@ -227,6 +262,16 @@ def report_cli(
         message(f"report written to {written / 'report.md'}" + (f" and {analysis['report_html']}" if analysis.get("report_html") else ""))
         show_provenance(analysis)
         show_figure2(analysis)
+
+
+def _variant_seeds(text: str) -> range:
+    chosen = parse_range(text)
+    if chosen.stop - 1 > MAX_SEED or len(chosen) > MAX_SEEDS:
+        raise LlcpsError(
+            f"variants {chosen.start}..{chosen.stop - 1} cannot pair with seeds: at most {MAX_SEEDS} seeds up to {MAX_SEED}",
+            hint="choose a smaller range",
+        )
+    return chosen
 
 
 def _seeds(preset: str, count: int | None, first: int) -> range:

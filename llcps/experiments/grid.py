@@ -83,11 +83,18 @@ class Cell:
 
 @dataclass(frozen=True, order=True)
 class Sequence:
-    """One run of :data:`SCENARIO_SEQUENCE` for one cell and one seed, on its own branch."""
+    """One run of :data:`SCENARIO_SEQUENCE` for one cell and one seed, on its own branch.
+
+    ``variant`` is the scene variant every scenario of the sequence is solved in (0: the
+    canonical scenes). A run over scene variants pairs them with seeds: seed N solves
+    variant N (:meth:`Preset.sequences`), so each seed draws both its pretraining and its
+    scenes, and update/reset or model/random stay paired by seed.
+    """
 
     preset: str
     cell: Cell
     seed: int
+    variant: int = 0
 
     def __post_init__(self) -> None:
         if not _FIELD.match(self.preset):
@@ -97,6 +104,8 @@ class Sequence:
             )
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise LlcpsError(f"seed must be a non-negative integer, not {self.seed!r}")
+        if isinstance(self.variant, bool) or not isinstance(self.variant, int) or self.variant < 0:
+            raise LlcpsError(f"variant must be a non-negative integer, not {self.variant!r}")
         # Fail at construction, not halfway through a run, if a name would be too long.
         longest = self.episode_branch(SCENARIO_SEQUENCE[-1])
         if len(longest) > MAX_BRANCH_NAME:
@@ -104,11 +113,16 @@ class Sequence:
 
     @property
     def branch_name(self) -> str:
-        """The sequence's branch, e.g. ``exp-paper-nb-most-changes-p200-update-s3``."""
+        """The sequence's branch, e.g. ``exp-paper-nb-most-changes-p200-update-s3``.
+
+        A sequence on scene variant N > 0 ends in ``-vN`` (``...-update-s3-v3``); variant 0
+        is the canonical scene, so its sequences keep the plain name.
+        """
         c = self.cell
-        return SEP.join(
-            (BRANCH_PREFIX, self.preset, c.model, c.measure, f"p{c.pretrain_size}", c.condition, f"s{self.seed}")
-        )
+        fields = [BRANCH_PREFIX, self.preset, c.model, c.measure, f"p{c.pretrain_size}", c.condition, f"s{self.seed}"]
+        if self.variant:
+            fields.append(f"v{self.variant}")
+        return SEP.join(fields)
 
     def episode_branch(self, scenario: str) -> str:
         """The branch one scenario of this sequence is solved on.
@@ -146,7 +160,9 @@ class ParsedBranch:
     scenario: str | None
 
 
-_TAIL = re.compile(r"^p(?P<pretrain>\d+)-(?P<condition>[a-z]+)-s(?P<seed>\d+)(?:-(?P<scenario>[a-z0-9_]+))?$")
+_TAIL = re.compile(
+    r"^p(?P<pretrain>\d+)-(?P<condition>[a-z]+)-s(?P<seed>\d+)(?:-v(?P<variant>\d+))?(?:-(?P<scenario>[a-z0-9_]+))?$"
+)
 
 
 def parse_branch(name: str) -> ParsedBranch | None:
@@ -176,7 +192,7 @@ def parse_branch(name: str) -> ParsedBranch | None:
         return None
     try:
         cell = Cell(model, measure, int(match["pretrain"]), condition)
-        sequence = Sequence(preset, cell, int(match["seed"]))
+        sequence = Sequence(preset, cell, int(match["seed"]), int(match["variant"] or 0))
     except LlcpsError:
         return None
     # Only names this module would write round-trip (no leading zeros, etc.).
@@ -239,14 +255,18 @@ class Preset:
             for condition in self.conditions
         )
 
-    def sequences(self, seeds: int | Iterable[int] | None = None) -> tuple[Sequence, ...]:
+    def sequences(self, seeds: int | Iterable[int] | None = None, *, variants: bool = False) -> tuple[Sequence, ...]:
         """Every sequence of the grid; seeds grouped outermost so a partial run covers all cells.
 
         Args:
             seeds: a count ``n`` (seeds ``0..n-1``), explicit seeds, or ``None`` for the default count.
+            variants: solve seed N's scenarios in scene variant N (paired, not crossed:
+                one variant per seed); otherwise every seed uses the canonical scenes.
         """
         chosen = _seed_list(self.default_seeds if seeds is None else seeds)
-        return tuple(Sequence(self.name, cell, seed) for seed in chosen for cell in self.cells())
+        return tuple(
+            Sequence(self.name, cell, seed, seed if variants else 0) for seed in chosen for cell in self.cells()
+        )
 
 
 def _seed_list(seeds: int | Iterable[int]) -> tuple[int, ...]:

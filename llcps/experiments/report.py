@@ -53,6 +53,20 @@ PRETRAIN_NAMES = {200: "Apriori Training", 4: "No Apriori Training"}
 
 
 @dataclass(frozen=True)
+class VariantResult:
+    """One scenario in one scene variant: each cell's exploration (None: not run).
+
+    ``results`` maps a cell label (``model / measure / pN / condition``) to the metric's
+    value and whether the episode solved.
+    """
+
+    scenario: str
+    variant: int
+    seed: int
+    results: Mapping[str, tuple[float, bool] | None]
+
+
+@dataclass(frozen=True)
 class Analysis:
     """Every statistic of one results table, computed once for the files and the page."""
 
@@ -69,11 +83,41 @@ class Analysis:
     survival: tuple[SurvivalComparison, ...] = ()
     #: Kaplan–Meier curve per cell, condition and scenario.
     curves: tuple[SurvivalCurve, ...] = ()
+    #: Per scene variant and scenario, each cell's result (only when the table spans variants).
+    per_variant: tuple[VariantResult, ...] = ()
 
     @property
     def comparisons(self) -> int:
         """How many p-values the report corrects together."""
         return sum(not math.isnan(r.p_value) for rows in (self.figure2, self.survival, self.random) for r in rows)
+
+
+def per_variant(table: ResultsTable, metric: str) -> tuple[VariantResult, ...]:
+    """The table scenario by scenario and variant by variant, when it spans several variants."""
+    variants = sorted(table.unique("variant"))
+    if len(variants) < 2:
+        return ()
+    cells = sorted(
+        {r.cell for r in table},
+        key=lambda c: (model_rank(c.model), measure_rank(c.measure), -c.pretrain_size, condition_rank(c.condition)),
+    )
+    by_key = {(r.scenario, r.variant, r.cell): r for r in table}
+    out = []
+    for scenario in [s for s in SCENARIO_SEQUENCE if s in table.unique("scenario")]:
+        for variant in variants:
+            rows = [by_key.get((scenario, variant, c)) for c in cells]
+            seed = next((r.seed for r in rows if r is not None), None)
+            if seed is None:
+                continue
+            out.append(
+                VariantResult(
+                    scenario,
+                    variant,
+                    seed,
+                    {c.label: None if r is None else (r.metric(metric), r.solved) for c, r in zip(cells, rows)},
+                )
+            )
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -111,7 +155,9 @@ def _overview(table: ResultsTable) -> dict[str, Any]:
     sequences = {r.sequence for r in table}
     unsolved = [r for r in table if not r.solved]
     seeds = sorted(table.unique("seed"))
+    variants = sorted(table.unique("variant"))
     return {
+        "variants": variants,
         "rows": len(table),
         "presets": list(table.unique("preset")),
         "models": sorted(table.unique("model"), key=model_rank),
@@ -159,6 +205,7 @@ def analyse(
         overview=_overview(table),
         survival=survival,
         curves=survival_curves(table),
+        per_variant=per_variant(table, metric),
     )
 
 
@@ -204,6 +251,10 @@ def analysis_json(analysis: Analysis) -> dict[str, Any]:
             "best_versus_random": [asdict(r) for r in best_versus_random(analysis.random)],
             "survival": [asdict(r) for r in analysis.survival],
             "kaplan_meier": [asdict(c) for c in analysis.curves],
+            "per_variant": [
+                {**asdict(v), "results": {k: None if r is None else {"value": r[0], "solved": r[1]} for k, r in v.results.items()}}
+                for v in analysis.per_variant
+            ],
         }
     )
 
@@ -496,6 +547,15 @@ def summary_lines(analysis: Analysis) -> list[str]:
     return lines
 
 
+def scenes_text(variants: Sequence[int]) -> str:
+    """Which scenes a report covers, from the variants its episodes ran in."""
+    if not variants or list(variants) == [0]:
+        return "Scenes: the canonical scene of each scenario (variant 0)."
+    contiguous = list(variants) == list(range(variants[0], variants[-1] + 1))
+    span = f"{variants[0]}-{variants[-1]}" if contiguous else ", ".join(str(v) for v in variants)
+    return f"Scenes: variants {span} of each scenario, paired with the seeds (seed N solves variant N; variant 0 is the canonical scene)."
+
+
 def overview_text(analysis: Analysis) -> str:
     """The report's first paragraph: what the results hold."""
     o = analysis.overview
@@ -503,8 +563,26 @@ def overview_text(analysis: Analysis) -> str:
     return (
         f"Preset(s) {', '.join(o['presets'])}: {o['cells']} cells, {o['seeds']} seeds{seed_range}, "
         f"{o['sequences']} sequences ({o['complete_sequences']} complete), {o['rows']} episodes, "
-        f"{o['unsolved_episodes']} unsolved. Simulated {o['sim_seconds']:.0f} s in {o['wall_seconds']:.0f} s of wall time."
+        f"{o['unsolved_episodes']} unsolved. Simulated {o['sim_seconds']:.0f} s in {o['wall_seconds']:.0f} s of wall time. "
+        + scenes_text(o.get("variants", [0]))
     )
+
+
+def _variant_table(rows: tuple[VariantResult, ...], metric: str) -> list[str]:
+    labels = list(rows[0].results) if rows else []
+    body = [
+        [
+            v.scenario,
+            str(v.variant),
+            *(
+                "-" if v.results[label] is None
+                else _num(v.results[label][0], 0 if metric == "exploration_trials" else 1) + ("" if v.results[label][1] else " (unsolved)")
+                for label in labels
+            ),
+        ]
+        for v in rows
+    ]
+    return _table(["scenario", "variant", *labels], body)
 
 
 def method_text(analysis: Analysis) -> str:
@@ -610,6 +688,15 @@ def render_markdown(
                 *_random_table(best),
                 "",
             ]
+    if analysis.per_variant:
+        lines += [
+            "## Per scene variant",
+            "",
+            f"{metric.capitalize()} of each episode, scenario by scenario and variant by variant (one seed per variant).",
+            "",
+            *_variant_table(analysis.per_variant, analysis.metric),
+            "",
+        ]
     lines += ["## Plots", ""]
     captions = {
         "distribution": f"{metric} per cell and condition",

@@ -13,11 +13,51 @@ from llcps.store import Store
 RESULTS_DIR = Path("results")
 
 
-def results_table(store: Store, preset: str, seeds: Iterable[int] | None = None) -> ResultsTable:
-    """The results of one preset (optionally some seeds) from the store's episodes."""
+def results_table(
+    store: Store, preset: str, seeds: Iterable[int] | None = None, *, variants: bool = False
+) -> ResultsTable:
+    """The results of one preset (optionally some seeds) from the store's episodes.
+
+    ``variants``: the sequences where seed N solved scene variant N; otherwise those on
+    the canonical scenes (variant 0). Seed 0 of either is the same sequence.
+    """
     wanted = None if seeds is None else set(seeds)
     table = table_from_episodes(store.list_episodes()).table
-    return ResultsTable(r for r in table if r.preset == preset and (wanted is None or r.seed in wanted))
+    return ResultsTable(
+        r
+        for r in table
+        if r.preset == preset and (wanted is None or r.seed in wanted) and r.variant == (r.seed if variants else 0)
+    )
+
+
+def select_scenes(table: ResultsTable, variants: range | None = None) -> tuple[ResultsTable, int]:
+    """The rows of one set of scenes, and how many rows of other scenes were left out.
+
+    Statistics pair sequences by seed, so a report covers one set of scenes: with
+    ``variants`` (A..B-1), the sequences where seed N solved variant N for N in the range;
+    without, the whole table when it is all canonical (variant 0) or all paired, else its
+    canonical rows.
+    """
+    if variants is not None:
+        chosen = ResultsTable(r for r in table if r.variant == r.seed and r.seed in variants)
+        if len(chosen) == 0:
+            held = sorted({r.variant for r in table if r.variant})
+            raise LlcpsError(
+                f"no results on scene variants {variants.start}:{variants.stop}",
+                hint=(
+                    f"the results hold variants {_span(held)}" if held else "they hold the canonical scenes only: omit --variants"
+                )
+                + f"; run `llcps experiment run --variants {variants.start}:{variants.stop}` first",
+            )
+        return chosen, len(table) - len(chosen)
+    if all(r.variant == 0 for r in table) or all(r.variant == r.seed for r in table):
+        return table, 0
+    chosen = ResultsTable(r for r in table if r.variant == 0)
+    return chosen, len(table) - len(chosen)
+
+
+def _span(values: list[int]) -> str:
+    return f"{values[0]}-{values[-1]}" if values else "none"
 
 
 def one_preset(table: ResultsTable, preset: str | None = None) -> tuple[str, ResultsTable]:
@@ -98,4 +138,4 @@ def write_report(
     return paths.out_dir, analysis
 
 
-__all__ = ["RESULTS_DIR", "default_out_dir", "one_preset", "results_table", "with_baseline", "write_report"]
+__all__ = ["RESULTS_DIR", "default_out_dir", "one_preset", "results_table", "select_scenes", "with_baseline", "write_report"]

@@ -43,6 +43,8 @@ class ResultRow:
     wall_seconds: float
     episode_id: int | None
     branch: str
+    #: The scene variant (0: the canonical scene).
+    variant: int = 0
 
     @property
     def cell(self) -> Cell:
@@ -50,7 +52,7 @@ class ResultRow:
 
     @property
     def sequence(self) -> Sequence:
-        return Sequence(self.preset, self.cell, self.seed)
+        return Sequence(self.preset, self.cell, self.seed, self.variant)
 
     @property
     def key(self) -> tuple[Sequence, str]:
@@ -69,6 +71,7 @@ COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(ResultRow))
 _PARSERS: dict[str, Callable[[str], Any]] = {
     "pretrain_size": int,
     "seed": int,
+    "variant": int,
     "exploration_trials": int,
     "sim_seconds": float,
     "wall_seconds": float,
@@ -85,7 +88,11 @@ def _parse_bool(text: str) -> bool:
 
 
 def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
-    """Build a row from strings (CSV) or JSON values, with one clear error per bad field."""
+    """Build a row from strings (CSV) or JSON values, with one clear error per bad field.
+
+    Results written before scene variants existed have no ``variant`` column: variant 0.
+    """
+    data = {"variant": 0, **data}
     missing = [c for c in COLUMNS if c not in data]
     if missing:
         raise LlcpsError(
@@ -155,7 +162,7 @@ class ResultsTable:
         if name not in COLUMNS:
             raise LlcpsError(f"unknown column {name!r}", hint=f"columns: {', '.join(COLUMNS)}")
         values = [getattr(r, name) for r in self._rows]
-        if name in METRICS or name in ("pretrain_size", "seed"):
+        if name in METRICS or name in ("pretrain_size", "seed", "variant"):
             return np.asarray(values, dtype=float if name in METRICS else int)
         if name == "solved":
             return np.asarray(values, dtype=bool)
@@ -305,6 +312,9 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
         if summary.get("model") != seq.cell.model or summary.get("measure") != seq.cell.measure:
             skip("model or measure does not match its branch")
             continue
+        if summary.get("variant", 0) != seq.variant:
+            skip("scene variant does not match its branch")
+            continue
         try:
             row = ResultRow(
                 preset=seq.preset,
@@ -320,6 +330,7 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
                 wall_seconds=float(summary["wall_seconds"]),
                 episode_id=None if summary.get("episode_id") is None else int(summary["episode_id"]),
                 branch=str(summary["branch"]),
+                variant=seq.variant,
             )
         except (KeyError, TypeError, ValueError):
             skip("malformed summary")

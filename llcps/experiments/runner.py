@@ -41,6 +41,7 @@ def run_experiment(
     *,
     preset: Preset | str = "smoke",
     seeds: int | Iterable[int] | None = None,
+    variants: bool = False,
     workers: int = 1,
     engine: str = "local",
     ray_address: str | None = None,
@@ -53,6 +54,8 @@ def run_experiment(
         store: the experience store; the only writer of this run.
         preset: a :class:`Preset` or a name in :data:`~llcps.experiments.grid.PRESETS`.
         seeds: a count (seeds ``0..n-1``), explicit seeds, or None for the preset's default.
+        variants: seed N solves its scenarios in scene variant N (paired with the seeds,
+            not crossed); otherwise every seed solves the canonical scenes (variant 0).
         workers: processes (local) or concurrent Ray tasks.
         engine: one of :data:`ENGINES`.
         ray_address: a Ray cluster (None: start a local instance with ``workers`` CPUs).
@@ -75,18 +78,27 @@ def run_experiment(
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise LlcpsError(f"workers must be at least 1, not {workers!r}", hint="pass --workers 1 or more")
     shared = cache_url(store, remote_workers=ray_address is not None) if cache else None
-    tasks = plan_tasks(grid, seeds, cache_url=shared)
+    tasks = plan_tasks(grid, seeds, variants=variants, cache_url=shared)
     seed_list = tuple(dict.fromkeys(task_seed(t) for t in tasks))
-    summary = RunSummary(preset=grid.name, seeds=seed_list, engine=engine, workers=workers, tasks=len(tasks))
+    summary = RunSummary(
+        preset=grid.name, seeds=seed_list, variants=variants, engine=engine, workers=workers, tasks=len(tasks)
+    )
     existing = existing_branches(store)
     check_partial(tasks, existing)
     todo = [t for t in tasks if not all(b in existing for b in t.branches)]
     summary.skipped = len(tasks) - len(todo)
     started = time.perf_counter()
     summary.run_id = store.start_run(
-        command=f"{COMMAND} --preset {grid.name}",
+        command=f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else ""),
         seed=None,
-        config={"preset": grid.name, "seeds": list(seed_list), "workers": workers, "engine": engine, "cache": cache},
+        config={
+            "preset": grid.name,
+            "seeds": list(seed_list),
+            "variants": variants,
+            "workers": workers,
+            "engine": engine,
+            "cache": cache,
+        },
         branch=MAIN_BRANCH,
     )
     runner = None

@@ -35,6 +35,8 @@ class RunSummary:
     engine: str
     workers: int
     tasks: int = 0
+    #: Whether seed N solved scene variant N (otherwise every seed the canonical scenes).
+    variants: bool = False
     done: int = 0
     skipped: int = 0
     failed: list[tuple[str, str]] = field(default_factory=list)
@@ -67,6 +69,7 @@ class RunSummary:
         return {
             "preset": self.preset,
             "seeds": list(self.seeds),
+            "variants": list(self.seeds) if self.variants else [0],
             "engine": self.engine,
             "workers": self.workers,
             "status": self.status,

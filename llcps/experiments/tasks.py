@@ -92,10 +92,15 @@ def task_seed(task: Task) -> int:
     return task.seed if isinstance(task, PretrainTask) else task.sequence.seed
 
 
-def plan_tasks(preset: Preset, seeds: int | Iterable[int] | None = None, *, cache_url: str | None = None) -> list[Task]:
-    """Every task of a run, seed by seed: the seed's pretraining, then its sequences."""
+def plan_tasks(
+    preset: Preset, seeds: int | Iterable[int] | None = None, *, variants: bool = False, cache_url: str | None = None
+) -> list[Task]:
+    """Every task of a run, seed by seed: the seed's pretraining, then its sequences.
+
+    ``variants``: seed N solves scene variant N (see :meth:`Preset.sequences`).
+    """
     chosen = _seed_list(preset.default_seeds if seeds is None else seeds)
-    sequences = preset.sequences(chosen)
+    sequences = preset.sequences(chosen, variants=variants)
     tasks: list[Task] = []
     budget = preset.exploration_budget()
     for seed in chosen:

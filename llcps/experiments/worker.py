@@ -184,6 +184,7 @@ def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str,
             model=seq.cell.model,
             measure=seq.cell.measure,
             seed=seq.seed,
+            variant=seq.variant,
             budget=task.budget,
             refit_every=task.refit_every,
         )
