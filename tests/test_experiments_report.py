@@ -331,3 +331,33 @@ def test_report_json_of_a_table_without_pairs_has_no_figure2_rows() -> None:
     data = report_json(table, resamples=200)
     assert data["figure2"] == [] and data["reduction"]["ours"] == []
     assert all(not isinstance(v, float) or math.isfinite(v) for v in data["overview"].values())
+
+
+def test_a_report_of_one_condition_draws_no_empty_figure2(tmp_path) -> None:  # noqa: ANN001
+    """A reset-only table (the vs_random preset's shape) has no Figure 2: the page says so and
+    keeps the comparison with the random order; no empty heatmap is drawn."""
+    paths = build_report(synthetic_table(seeds=3).filter(condition="reset"), tmp_path, resamples=200)
+    md = paths.report_md.read_text()
+    assert "## Figure 2" not in md and "## How often updating reduced" not in md
+    assert "pair no `update` sequence with a `reset` one" in md
+    assert "## Model-guided vs random order" in md
+    assert "figure2" not in paths.plots and not (tmp_path / "plots" / "figure2.png").exists()
+
+
+def test_a_report_over_scene_variants_names_them_and_tabulates_each() -> None:
+    from dataclasses import replace
+
+    table = ResultsTable(
+        replace(r, variant=r.seed, branch=replace(r.sequence, variant=r.seed).episode_branch(r.scenario))
+        for r in synthetic_table(seeds=3)
+    )
+    data = report_json(table, resamples=200)
+    assert data["overview"]["variants"] == [0, 1, 2]
+    cells = {f"{c.model} / {c.measure} / p{c.pretrain_size} / {c.condition}" for c in TEST_PRESET.cells()}
+    assert len(data["per_variant"]) == 3 * len(SCENARIO_SEQUENCE)
+    for v in data["per_variant"]:
+        assert v["seed"] == v["variant"] and set(v["results"]) == cells
+        row = table.filter(scenario=v["scenario"], seed=v["seed"], model="nb", condition="update").rows[0]
+        label = f"nb / {row.measure} / p{row.pretrain_size} / update"
+        assert v["results"][label]["value"] == row.exploration_trials
+    assert report_json(synthetic_table(seeds=3), resamples=200)["per_variant"] == []  # canonical scenes only

@@ -170,7 +170,7 @@ def run_cli(
     else:
         show_run(summary, out_dir)
         show_provenance(analysis)
-        show_figure2(analysis)
+        show_results(analysis)
     raise typer.Exit(EXIT_OK if summary.status == "ok" else EXIT_FAILED)
 
 
@@ -261,7 +261,7 @@ def report_cli(
     else:
         message(f"report written to {written / 'report.md'}" + (f" and {analysis['report_html']}" if analysis.get("report_html") else ""))
         show_provenance(analysis)
-        show_figure2(analysis)
+        show_results(analysis)
 
 
 def _variant_seeds(text: str) -> range:
@@ -323,6 +323,42 @@ def _p(value: Any) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "n/a"
     return "<0.001" if value < 0.001 else f"{value:.3f}"
+
+
+def show_results(analysis: dict[str, Any]) -> None:
+    """Our Figure 2 when the results pair update with reset, and the comparison with the
+    random order when they hold it (a reset-only preset such as vs_random has only that)."""
+    if analysis.get("figure2"):
+        show_figure2(analysis)
+    if analysis.get("random_comparison"):
+        show_random(analysis)
+    if not analysis.get("figure2") and not analysis.get("random_comparison"):
+        message("no update/reset pairs and no random-order results to compare: see the report's tables")
+
+
+def show_random(analysis: dict[str, Any]) -> None:
+    """Model-guided against the random order, per cell and scenario (medians, Holm-corrected p)."""
+    rows = analysis.get("random_comparison", [])
+    print_table(
+        f"median {analysis.get('metric', 'exploration')}: model-guided vs random order (negative: the model explored less)",
+        ("model", "measure", "pretrain", "condition", "scenario", "n", "median", "median random", "% change", "p", "Holm p"),
+        [
+            (
+                r["model"],
+                r["measure"],
+                r["pretrain_size"],
+                r["condition"],
+                r["scenario"],
+                r["n_model"],
+                _num(r["median_model"]),
+                _num(r["median_random"]),
+                _pct(r["pct_change_median"]),
+                _p(r["p_value"]),
+                _p(r["p_holm"]),
+            )
+            for r in rows
+        ],
+    )
 
 
 def show_figure2(analysis: dict[str, Any]) -> None:

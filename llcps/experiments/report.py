@@ -646,24 +646,33 @@ def render_markdown(
         "",
         *[f"- {line}" for line in summary_lines(analysis)],
         "",
-        "## Figure 2: % change in exploration with model updates (capped means), ours beside the paper's",
-        "",
-        *_figure2_side_by_side(analysis.figure2),
     ]
-    if "figure2" in plot_paths:
-        lines += [f"![Figure 2 heatmap]({_rel(plot_paths['figure2'][0], out_dir)})", ""]
-    lines += [
-        "## How often updating reduced exploration",
-        "",
-        *_reduction_table(analysis),
-        "",
-        "## Every cell, every scenario",
-        "",
-        f"{SCENARIO_SEQUENCE[0]} is a control: both conditions start it from the pretraining set.",
-        "",
-        *_figure2_long(analysis.figure2),
-        "",
-    ]
+    if analysis.figure2:
+        lines += [
+            "## Figure 2: % change in exploration with model updates (capped means), ours beside the paper's",
+            "",
+            *_figure2_side_by_side(analysis.figure2),
+        ]
+        if "figure2" in plot_paths:
+            lines += [f"![Figure 2 heatmap]({_rel(plot_paths['figure2'][0], out_dir)})", ""]
+        lines += [
+            "## How often updating reduced exploration",
+            "",
+            *_reduction_table(analysis),
+            "",
+            "## Every cell, every scenario",
+            "",
+            f"{SCENARIO_SEQUENCE[0]} is a control: both conditions start it from the pretraining set.",
+            "",
+            *_figure2_long(analysis.figure2),
+            "",
+        ]
+    else:
+        lines += [
+            "These results pair no `update` sequence with a `reset` one (the preset runs one condition), "
+            "so there is no Figure 2; the comparisons below are what they hold.",
+            "",
+        ]
     if analysis.survival:
         lines += [
             "## Censoring-aware: trials to resolution, unsolved episodes censored at the budget",
@@ -773,10 +782,11 @@ def build_report(
     film_paths = dict(films) if films is not None else artifacts.existing_films(out)
     plot_dir = out / "plots"
     plot_paths = {
-        "figure2": plots.figure2_heatmap(analysis.figure2, plot_dir / "figure2"),
         "distribution": plots.exploration_distribution(table, plot_dir / "distribution", metric=metric, budget=table_budget(table)),
         "cumulative": plots.cumulative_plot(analysis.cumulative, plot_dir / "cumulative", metric=metric),
     }
+    if analysis.figure2:  # a preset of one condition has no Figure 2 to draw
+        plot_paths = {"figure2": plots.figure2_heatmap(analysis.figure2, plot_dir / "figure2"), **plot_paths}
     plot_paths.update({f"survival_{s}": paths for s, paths in plots.survival_plots(analysis.curves, plot_dir).items()})
     survival_csv = None
     if analysis.survival:
