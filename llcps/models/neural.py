@@ -63,6 +63,26 @@ def build_network(
     return nn.Sequential(*layers[:-1])
 
 
+def network_arrays(network: nn.Module) -> dict[str, np.ndarray]:
+    """A network's weights as ``net/<parameter>`` arrays for the store."""
+    return {f"net/{key}": value.detach().numpy().copy() for key, value in network.state_dict().items()}
+
+
+def load_weights(network: nn.Module, arrays: Mapping[str, np.ndarray]) -> nn.Module:
+    """``network`` (built to the stored shape) with the weights of :func:`network_arrays`, in eval mode.
+
+    Every array is checked for its name, shape and finiteness (:func:`array`), so a
+    damaged row raises a project error instead of loading garbage.
+    """
+    state = {
+        key: torch.from_numpy(array(arrays, f"net/{key}", tuple(value.shape)).astype(np.float32))
+        for key, value in network.state_dict().items()
+    }
+    network.load_state_dict(state, strict=True)
+    network.eval()
+    return network
+
+
 class NeuralNetworkModel(EncodedWorldModel):
     """Paper model 1: a multi-label feed-forward network."""
 
@@ -181,7 +201,7 @@ class NeuralNetworkModel(EncodedWorldModel):
 
     def _export_learner(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         assert self._network is not None
-        arrays = {f"net/{key}": value.detach().numpy().copy() for key, value in self._network.state_dict().items()}
+        arrays = network_arrays(self._network)
         meta = {
             "hidden": list(self.hidden),
             "training": self.training_log,
@@ -191,14 +211,7 @@ class NeuralNetworkModel(EncodedWorldModel):
         return arrays, meta
 
     def _import_learner(self, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
-        network = build_network(self.hidden, None)
-        state = {
-            key: torch.from_numpy(array(arrays, f"net/{key}", tuple(value.shape)).astype(np.float32))
-            for key, value in network.state_dict().items()
-        }
-        network.load_state_dict(state, strict=True)
-        network.eval()
-        self._network = network
+        self._network = load_weights(build_network(self.hidden, None), arrays)
         self.training_log = dict(meta.get("training", {}))
 
 
@@ -268,16 +281,8 @@ class NeuralGoal(GoalLearner):
 
     def export(self) -> dict[str, np.ndarray]:
         assert self._network is not None
-        arrays = {f"net/{key}": value.detach().numpy().copy() for key, value in self._network.state_dict().items()}
-        return {**arrays, **self.scaler.export("scaler")}
+        return {**network_arrays(self._network), **self.scaler.export("scaler")}
 
     def load(self, arrays: Mapping[str, np.ndarray]) -> None:
         self.scaler.load(arrays, "scaler")
-        network = build_network(self.hidden, None, inputs=N_GOAL_FEATURES, outputs=N_STRATA)
-        state = {
-            key: torch.from_numpy(array(arrays, f"net/{key}", tuple(value.shape)).astype(np.float32))
-            for key, value in network.state_dict().items()
-        }
-        network.load_state_dict(state, strict=True)
-        network.eval()
-        self._network = network
+        self._network = load_weights(build_network(self.hidden, None, inputs=N_GOAL_FEATURES, outputs=N_STRATA), arrays)
