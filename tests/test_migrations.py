@@ -209,3 +209,13 @@ def test_runs_stored_before_provenance_upgrade_and_new_runs_record_it(tmp_path: 
     assert new.provenance == env
     assert env.python_version == platform.python_version() and env.cpu_count >= 1 and env.host
     assert env.numpy_version == np.__version__ and env.pybullet_version and env.torch_version and env.sklearn_version
+
+
+def test_a_revision_is_named_with_its_place_in_the_chain() -> None:
+    """Revision ids are names, not an order: `db upgrade` says where each sits in the chain."""
+    from llcps.store.migrations import head_revision, known_revisions, revision_label
+
+    chain = known_revisions()
+    assert revision_label(head_revision()) == f"{head_revision()} ({len(chain)} of {len(chain)})"
+    assert revision_label(chain[0]) == f"{chain[0]} (1 of {len(chain)})"
+    assert revision_label("not-a-revision") == "not-a-revision"

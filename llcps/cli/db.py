@@ -299,7 +299,13 @@ def upgrade_cli(
         )
     if as_json:
         print_json({"from": before, "to": after, "changed": before != after, "changes": report.as_json()})
-    message(f"upgraded from schema {before} to {after}" if before != after else f"already at schema {after}")
+    from llcps.store.migrations import revision_label
+
+    message(
+        f"upgraded from schema {revision_label(before)} to {revision_label(after)}"
+        if before != after
+        else f"already at schema {revision_label(after)}"
+    )
     if report.total:
         message(
             f"trial changes: {report.replayed} replayed, {report.unknown} unknown "

@@ -54,6 +54,15 @@ def known_revisions() -> list[str]:
     return [rev.revision for rev in reversed(list(_script().walk_revisions()))]
 
 
+def revision_label(revision: str | None) -> str:
+    """A revision with its place in the chain, ``0004 (6 of 6)``: revision ids are names, not
+    an order (a later migration may carry a smaller number)."""
+    chain = known_revisions()
+    if revision not in chain:
+        return str(revision)
+    return f"{revision} ({chain.index(revision) + 1} of {len(chain)})"
+
+
 def current_revision(connection: Connection) -> str | None:
     """The revision recorded in the database, or None if it has no llcps version table."""
     if not inspect(connection).has_table(VERSION_TABLE):
