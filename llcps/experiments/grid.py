@@ -77,8 +77,23 @@ class Cell:
 
     @property
     def label(self) -> str:
-        """A short human label, e.g. ``nb / most-changes / p200 / update``."""
-        return f"{self.model} / {self.measure} / p{self.pretrain_size} / {self.condition}"
+        """A short human label, e.g. ``nb / most-changes / p200 / update`` (``random order / p200 / reset``)."""
+        return f"{cell_title(self.model, self.measure, self.pretrain_size)} / {self.condition}"
+
+
+#: The model that ranks nothing: a seeded random order (the baseline every comparison uses).
+RANDOM_ORDER_MODEL = "random"
+
+
+def cell_title(model: str, measure: str, pretrain_size: int) -> str:
+    """How tables and plots name a cell without its condition: ``nb / goal-directed / p200``.
+
+    The random order ignores the measure (and its training data), so it is named for
+    what it is: ``random order / p200``.
+    """
+    if model == RANDOM_ORDER_MODEL:
+        return f"random order / p{pretrain_size}"
+    return f"{model} / {measure} / p{pretrain_size}"
 
 
 @dataclass(frozen=True, order=True)

@@ -23,6 +23,7 @@ from matplotlib.figure import Figure
 from llcps.cps.candidates import candidate_space_size
 from llcps.experiments.grid import (
     SCENARIO_SEQUENCE,
+    cell_title,
     condition_rank,
     measure_rank,
     model_rank,
@@ -221,7 +222,7 @@ def exploration_distribution(
         ax.set_xlabel(metric.replace("_", " "), fontsize=8)
         ax.grid(axis="x", alpha=0.3)
         ax.set_xlim(left=0)
-    axes[0].set_yticks(range(len(cells)), [f"{m} / {me} / p{s}" for m, me, s in cells], fontsize=8)
+    axes[0].set_yticks(range(len(cells)), [cell_title(*cell) for cell in cells], fontsize=8)
     axes[0].set_ylim(len(cells) - 0.5, -0.5)
     handles = [
         matplotlib.patches.Patch(facecolor=CONDITION_COLORS.get(c, "grey"), alpha=0.5, label=f"{c}: box = quartiles, line = median")
@@ -309,7 +310,7 @@ def survival_plot(curves: Sequence[SurvivalCurve], stem: str | Path, *, scenario
             low = np.concatenate(([1.0], km.ci_low, [km.ci_low[-1] if km.ci_low else 1.0]))
             high = np.concatenate(([1.0], km.ci_high, [km.ci_high[-1] if km.ci_high else 1.0]))
             color = colors(k)
-            label = f"{cell[0]} / {cell[1]} / p{cell[2]}"
+            label = cell_title(*cell)
             ax.step(x, y, where="post", color=color, linewidth=1.2, label=label)
             ax.fill_between(x, low, high, step="post", color=color, alpha=0.12, linewidth=0)
             if km.events < km.n:  # censored at the budget

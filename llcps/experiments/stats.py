@@ -27,6 +27,7 @@ from llcps.errors import LlcpsError
 from llcps.experiments.grid import (
     PAPER_MEASURES,
     PAPER_MODELS,
+    RANDOM_ORDER_MODEL,
     SCENARIO_SEQUENCE,
     condition_rank,
     measure_rank,
@@ -43,7 +44,7 @@ FIGURE2_SCENARIOS: tuple[str, ...] = ("scenario2", "scenario3")
 DEFAULT_RESAMPLES = 10_000
 ALPHA = 0.05
 #: The model whose order every other model is compared against.
-BASELINE_MODEL = "random"
+BASELINE_MODEL = RANDOM_ORDER_MODEL
 
 
 # --------------------------------------------------------------------------------------
