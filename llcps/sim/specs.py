@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import asdict, dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Self, Sequence
 
 from llcps.domain import COLORS, SHAPES
 from llcps.errors import LlcpsError, UnknownNameError
@@ -79,8 +79,20 @@ def _name(value: object, what: str) -> None:
         raise ValueError(f"{what} needs a printable name of at most {MAX_NAME} characters, got {value!r}")
 
 
+class _Record:
+    """JSON data of a frozen spec and back: tuples become lists, and ``from_dict`` goes
+    through the constructor, so its checks see every stored scene."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}  # type: ignore[call-overload]
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Self:
+        return cls(**dict(data))
+
+
 @dataclass(frozen=True)
-class EntitySpec:
+class EntitySpec(_Record):
     """A JSON-able description of one entity, from which it is rebuilt exactly.
 
     Attributes:
@@ -146,19 +158,10 @@ class EntitySpec:
         """The same entity elsewhere."""
         return EntitySpec(**{**asdict(self), "position": tuple(position), "yaw": self.yaw if yaw is None else yaw})
 
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["size"] = list(self.size)
-        d["position"] = list(self.position)
-        return d
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "EntitySpec":
-        return cls(**dict(data))
 
 
 @dataclass(frozen=True)
-class FixtureSpec:
+class FixtureSpec(_Record):
     """A static box: a lip along a table edge, a wall, a shelf.
 
     Attributes:
@@ -185,19 +188,10 @@ class FixtureSpec:
         if self.color not in FIXTURE_RGBA:
             raise ValueError(f"unknown fixture color {self.color!r}; expected one of {tuple(FIXTURE_RGBA)}")
 
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["size"] = list(self.size)
-        d["position"] = list(self.position)
-        return d
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "FixtureSpec":
-        return cls(**dict(data))
 
 
 @dataclass(frozen=True)
-class TableSpec:
+class TableSpec(_Record):
     """The table: a solid block whose top is the plane z = 0, resting on the floor.
 
     The robot base stands on it at the origin; the defaults leave about 0.25 m of
@@ -219,12 +213,6 @@ class TableSpec:
     def floor_z(self) -> float:
         return -self.height
 
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "TableSpec":
-        return cls(**dict(data))
 
 
 @dataclass(frozen=True)
