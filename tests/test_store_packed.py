@@ -43,3 +43,12 @@ def test_bytes_without_the_layout_are_refused(data: bytes) -> None:
 def test_names_with_the_separator_cannot_be_packed() -> None:
     with pytest.raises(LlcpsError):
         pack_features([EntityFeatures("bo\x1fx", 1.0, "red", 1.0, 0.0, 0.0, 1.0)])
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), float("-inf")])
+@pytest.mark.parametrize("where", range(5))
+def test_a_non_finite_number_is_refused(bad: float, where: int) -> None:
+    numbers = [0.001, 0.2, 1.0, 0.0, 0.0]
+    numbers[where] = bad
+    with pytest.raises(LlcpsError, match="not a finite number"):
+        unpack_features(b"\x01\x01" + struct.pack("<5d", *numbers) + b"box\x1fred")

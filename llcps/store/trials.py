@@ -91,6 +91,8 @@ def unpack_features(data: bytes) -> tuple[EntityFeatures, ...]:
     names = _names.get(tail) or _decode_names(tail)
     if n < 0 or names is None or len(names) != 2 * n or not all(names):
         raise LlcpsError("stored trial features are malformed", hint="the store may be damaged; `llcps db status`")
+    if not all(map(math.isfinite, numbers)):
+        raise LlcpsError("stored trial features hold a value that is not a finite number", hint="the store may be damaged; `llcps db status`")
     new, set_dict = object.__new__, object.__setattr__
     if n == 1:  # the common case, unrolled; see _frozen: complete, valid values only
         entity = new(EntityFeatures)
@@ -229,7 +231,6 @@ def gc_paused() -> Iterator[None]:
 
 
 _TRIAL_RECORD_FIELDS = frozenset(f.name for f in fields(TrialRecord))
-_ENTITY_NUMBERS = tuple(f.name for f in fields(EntityFeatures) if f.name not in ("shape", "color"))
 _SOURCES = frozenset(TRIAL_SOURCES)
 _SHAPES = frozenset(SHAPES)
 _COLORS = frozenset(COLORS)
@@ -289,11 +290,9 @@ class TrialDecoder:
                 found = unpack_features(data)
             except LlcpsError as exc:
                 raise _Malformed(exc.message) from None
-            for entity in found:
+            for entity in found:  # unpack_features checked that every number is finite
                 if entity.shape not in _SHAPES or entity.color not in _COLORS:
                     raise _Malformed(f"features name an unknown shape or color ({entity.shape!r}, {entity.color!r})")
-                if not all(math.isfinite(getattr(entity, k)) for k in _ENTITY_NUMBERS):
-                    raise _Malformed("features hold a value that is not a finite number")
             self._features[bytes(data)] = found
         return found
 
