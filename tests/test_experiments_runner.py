@@ -373,6 +373,9 @@ def test_report_rebuilds_from_a_directory_and_from_the_store(reference: tuple[St
     assert again.exit_code == 0, again.output
     assert json.loads(again.stdout)["figure2"] == data["figure2"]
     assert (tmp_path / "b" / "results.csv").read_text() == (tmp_path / "a" / "results.csv").read_text()
+    # where the runs ran travels with the results into the new directory
+    assert json.loads((tmp_path / "b" / "provenance.json").read_text()) == json.loads((tmp_path / "a" / "provenance.json").read_text())
+    assert json.loads((tmp_path / "a" / "provenance.json").read_text())  # the store recorded its runs
     text = runner.invoke(app, ["experiment", "report", str(tmp_path / "a")])
     assert text.exit_code == 0 and "scenario3" in text.stdout
 

@@ -251,7 +251,9 @@ def report_cli(
     with progress_display("report", "reading the results") as bar:
         if source is not None:
             _, table, target = chosen(ResultsTable.read(source))
-            written, analysis = write_report(table, target, html=html, progress=bar)
+            written, analysis = write_report(
+                table, target, source_dir=source if source.is_dir() else source.parent, html=html, progress=bar
+            )
         else:
             with open_store(ctx) as store:
                 _, table, target = chosen(table_from_episodes(store.list_episodes()).table)

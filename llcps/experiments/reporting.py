@@ -111,13 +111,16 @@ def write_report(
     out_dir: str | Path,
     *,
     store: Store | None = None,
+    source_dir: Path | None = None,
     html: bool = False,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> tuple[Path, dict[str, Any]]:
     """Build every report file into ``out_dir``; returns it and the analysis as JSON data.
 
     With the ``store`` the results came from, the report records where their runs ran
-    and, with ``html``, films a resolving trial per scenario for report.html.
+    and, with ``html``, films a resolving trial per scenario for report.html. Without a
+    store, where the runs ran comes from the report directory the results were read
+    from (``source_dir``), else from what ``out_dir`` holds.
     """
     import json
 
@@ -125,6 +128,8 @@ def write_report(
     from llcps.experiments.report import build_report
 
     provenance = films = None
+    if store is None and source_dir is not None and Path(source_dir).resolve() != Path(out_dir).resolve():
+        provenance = artifacts.read_provenance(Path(source_dir)) or None
     if store is not None:
         provenance = artifacts.table_provenance(store, table)
         if html:
