@@ -41,6 +41,3 @@ def native_output_silenced() -> Iterator[None]:
         for fd in (*saved, devnull):
             os.close(fd)
 
-
-with native_output_silenced():
-    import pybullet  # noqa: F401  (imported once here, quietly; the modules below reuse it)

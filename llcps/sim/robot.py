@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-import pybullet as p
+from llcps.sim.engine import pybullet as p
 import pybullet_data
 from scipy.spatial import ConvexHull
 
@@ -49,14 +49,6 @@ FINGER_OPEN = 0.04  # per finger (m): an 8 cm opening
 
 #: Tool point height above the fingertips (m).
 TOOL_ABOVE_TIPS = 0.011
-
-#: Horizontal distances from the base (m) at which the tool reaches top-down onto things
-#: 5-20 cm above the table (measured with :meth:`Robot.reach_error` in every direction);
-#: beyond ``BEYOND_REACH`` it reaches nothing. Scenario files check declared reach with these.
-TOP_DOWN_REACH: tuple[float, float] = (0.3, 0.78)
-BEYOND_REACH = 0.82
-#: Half width of the square the robot's base stands on (m): nothing may be placed there.
-BASE_HALF = 0.12
 
 #: Collision group bit of the robot; perception rays ignore it.
 ROBOT_GROUP = 1 << 5

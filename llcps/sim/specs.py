@@ -57,6 +57,14 @@ MAX_DISTANCE = 100.0
 MAX_MASS = 1000.0
 MAX_NAME = 64
 
+#: Horizontal distances from the base (m) at which the tool reaches top-down onto things
+#: 5-20 cm above the table (measured with :meth:`llcps.sim.robot.Robot.reach_error` in every direction);
+#: beyond ``BEYOND_REACH`` it reaches nothing. Scenario files check declared reach with these.
+TOP_DOWN_REACH: tuple[float, float] = (0.3, 0.78)
+BEYOND_REACH = 0.82
+#: Half width of the square the robot's base stands on (m): nothing may be placed there.
+BASE_HALF = 0.12
+
 #: Most entities and fixtures a scene may hold.
 MAX_SCENE_BODIES = 64
 

@@ -20,7 +20,7 @@ from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as package_version
 from typing import Any, Callable, Mapping
 
-import pybullet as p
+from llcps.sim.engine import pybullet as p
 from pybullet_utils import bullet_client
 
 from llcps.errors import LlcpsError, UnknownNameError
