@@ -11,8 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Mapping
 
-from llcps.sim.robot import BASE_HALF, BEYOND_REACH, TOP_DOWN_REACH
-from llcps.sim.specs import EntitySpec, FixtureSpec, SceneSpec
+from llcps.sim.specs import BASE_HALF, BEYOND_REACH, TOP_DOWN_REACH, EntitySpec, FixtureSpec, SceneSpec
 
 #: Boxes that share less than this depth along some axis only touch (m).
 TOLERANCE = 0.001
