@@ -26,7 +26,7 @@ def results_table(
     return ResultsTable(
         r
         for r in table
-        if r.preset == preset and (wanted is None or r.seed in wanted) and r.variant == (r.seed if variants else 0)
+        if r.preset == preset and (wanted is None or r.seed in wanted) and r.on_scenes(paired=variants)
     )
 
 
@@ -39,7 +39,7 @@ def select_scenes(table: ResultsTable, variants: range | None = None) -> tuple[R
     canonical rows.
     """
     if variants is not None:
-        chosen = ResultsTable(r for r in table if r.variant == r.seed and r.seed in variants)
+        chosen = ResultsTable(r for r in table if r.on_scenes(paired=True) and r.seed in variants)
         if len(chosen) == 0:
             held = sorted({r.variant for r in table if r.variant})
             raise LlcpsError(
@@ -50,9 +50,9 @@ def select_scenes(table: ResultsTable, variants: range | None = None) -> tuple[R
                 + f"; run `llcps experiment run --variants {variants.start}:{variants.stop}` first",
             )
         return chosen, len(table) - len(chosen)
-    if all(r.variant == 0 for r in table) or all(r.variant == r.seed for r in table):
+    if all(r.on_scenes(paired=False) for r in table) or all(r.on_scenes(paired=True) for r in table):
         return table, 0
-    chosen = ResultsTable(r for r in table if r.variant == 0)
+    chosen = ResultsTable(r for r in table if r.on_scenes(paired=False))
     return chosen, len(table) - len(chosen)
 
 

@@ -59,6 +59,11 @@ class ResultRow:
         """What identifies a row: at most one row per (sequence, scenario)."""
         return (self.sequence, self.scenario)
 
+    def on_scenes(self, paired: bool) -> bool:
+        """Whether the row ran on the canonical scenes (variant 0) or, ``paired``, on its
+        seed's own variant (``experiment run --variants``); seed 0 is both."""
+        return self.variant == (self.seed if paired else 0)
+
     def metric(self, name: str) -> float:
         """The value of one of :data:`METRICS`."""
         if name not in METRICS:
