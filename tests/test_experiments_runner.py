@@ -471,6 +471,46 @@ def test_the_scheduler_keeps_twins_apart(store: Store) -> None:
     assert sorted(engine.submitted) == sorted(t.label for t in tasks) and len(summary.failed) == 4
 
 
+
+class _ImportingEngine(_RecordingEngine):
+    """Finishes the newest task first, each successfully (the scheduler's import is faked)."""
+
+    def wait(self, handles: Any, timeout: float) -> list[str]:
+        return list(handles)[-1:]
+
+    def result(self, handle: str) -> Any:
+        from llcps.experiments.tasks import TaskOutput
+
+        return TaskOutput(handle, payload=None, wall_seconds=0.0)  # type: ignore[arg-type]
+
+
+def test_a_pretraining_being_imported_is_waited_for_rather_than_running_a_twin(
+    store: Store, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Seed 1's pretraining finishes while seed 0's update runs: before its import only seed 0's
+    reset (a twin) is ready; the scheduler waits for the import and starts seed 1's update."""
+    from llcps.experiments import scheduler
+
+    planned = plan_tasks(SMOKE, 2)
+    for name in [t for t in planned if isinstance(t, PretrainTask) and t.seed == 0][0].branches:
+        store.create_branch(name, from_branch="main", at=0)
+    tasks = [t for t in planned if not (isinstance(t, PretrainTask) and t.seed == 0)]  # U0, R0, P1, U1, R1
+
+    def fake_import(store_: Store, payload: Any, task: Any) -> bool:
+        for name in task.branches:
+            store_.create_branch(name, from_branch="main", at=0)
+        return True
+
+    monkeypatch.setattr(scheduler, "_import", fake_import)
+    monkeypatch.setattr(scheduler, "export_branches", lambda *a, **k: None)
+    engine = _ImportingEngine()
+    summary = scheduler.RunSummary(preset="smoke", seeds=(0, 1), engine="importing", workers=2)
+    scheduler.schedule(store, engine, tasks, {b.name for b in store.list_branches()}, summary, {}, None)
+    u0, r0, p1, u1, r1 = tasks
+    assert engine.submitted[:3] == [u0.label, p1.label, u1.label]  # not r0, which would repeat u0's physics
+    assert sorted(engine.submitted) == sorted(t.label for t in tasks) and summary.done == 5 and not summary.failed
+
+
 # -- scene variants, paired with seeds ----------------------------------------------------------
 def test_variant_sequences_name_their_variant_and_parse_back() -> None:
     from llcps.experiments.grid import parse_branch

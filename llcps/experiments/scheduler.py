@@ -132,7 +132,8 @@ def schedule(
     def blocked(task: Task) -> bool:
         return isinstance(task, SequenceTask) and task.pretrain_branch in failed_pretraining
 
-    def refill() -> None:
+    def refill(*, twins: bool = True) -> None:
+        """Start ready tasks on idle workers; a twin of a running task only if ``twins``."""
         for task in [t for t in pending if blocked(t)]:
             summary.blocked += 1
             pending.remove(task)
@@ -142,7 +143,9 @@ def schedule(
             # A sequence whose twin (same seed and cell, other condition) is running would
             # simulate the same first scenario at the same time; run something else first,
             # and the twin's trials come from the physics cache when it starts.
-            task = next((t for t in candidates if twin_key(t) not in busy), None) or next(iter(candidates), None)
+            task = next((t for t in candidates if twin_key(t) not in busy), None)
+            if task is None and twins:
+                task = next(iter(candidates), None)
             if task is None:
                 return
             pending.remove(task)
@@ -167,7 +170,10 @@ def schedule(
                 if isinstance(task, PretrainTask):
                     failed_pretraining.update(task.branches)
             else:
-                refill()  # keep the workers busy while the parent writes
+                # Keep the workers busy while the parent writes, but not with a twin of a
+                # running task: the import may make better tasks ready (a pretraining's
+                # sequences), and a twin run alongside repeats its physics.
+                refill(twins=False)
                 if _import(store, output.payload, task):
                     summary.done += 1
                     summary.task_seconds[task.label] = output.wall_seconds
