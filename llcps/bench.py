@@ -286,6 +286,12 @@ def bench_exploration(quick: bool = False, progress: Progress | None = None) -> 
         figure(f"{p}.step_cost", 1e6 * physics["cpu"] / max(physics["calls"], 1), "us cpu", note="per physics step in the episode, contacts included"),
         figure(f"{p}.control_loop_cost", 1e6 / bound_cpu, "us cpu", note="per control-loop step in free air (IK + motors + step)"),
         figure(f"{p}.control_loop_share", loop / split.cpu_seconds, "ratio", note="episode CPU in physics steps, IK and motor commands (instrumented run)"),
+        figure(
+            f"{p}.efficiency_ceiling",
+            (split.sim_steps / loop) / bound_cpu,
+            "ratio",
+            note="efficiency with no agent overhead: the control loop's rate in the scene (contacts) / in free air",
+        ),
         figure(f"{p}.agent_overhead", (split.cpu_seconds - loop) / split.cpu_seconds, "ratio", note="episode CPU outside the control loop: restores, snapshots, perception, models, store, planner"),
     ]
 
@@ -470,8 +476,11 @@ class ExperimentRun:
     status: str
 
 
-def run_scaling_grid(workers: int, *, preset: str = SCALING_PRESET) -> ExperimentRun:
-    """Run ``preset``'s experiment grid into a fresh temporary store on ``workers`` processes."""
+def run_scaling_grid(workers: int, *, preset: str = SCALING_PRESET, cache: bool = True) -> ExperimentRun:
+    """Run ``preset``'s experiment grid into a fresh temporary store on ``workers`` processes.
+
+    With ``cache`` the workers share the store's physics cache, cold at the start.
+    """
     import resource
 
     from llcps.experiments.runner import run_experiment
@@ -483,13 +492,14 @@ def run_scaling_grid(workers: int, *, preset: str = SCALING_PRESET) -> Experimen
 
     cpu0, kids0 = time.process_time(), children()
     with tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp, Store.open(str(Path(tmp) / "bench.db"), create=True) as store:
-        summary = run_experiment(store, preset=preset, workers=workers)
+        summary = run_experiment(store, preset=preset, workers=workers, cache=cache)
     cpu = time.process_time() - cpu0 + children() - kids0
     return ExperimentRun(summary.wall_seconds, sum(summary.task_seconds.values()), cpu, summary.status)
 
 
 def bench_scaling(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
-    """The smoke experiment grid on 1 and 2 worker processes (wall time) and the speed-up.
+    """The smoke experiment grid on 1 and 2 worker processes (wall time) and the speed-up,
+    with the physics cache (cold at the start of each grid) and without it.
 
     Worker processes are spawned, so a script calling this needs the
     ``if __name__ == "__main__":`` guard.
@@ -498,15 +508,16 @@ def bench_scaling(quick: bool = False, progress: Progress | None = None) -> list
 
     load_before = os.getloadavg()[0]
     runs = {}
-    for workers in (1, 2):
-        _say(progress, f"scaling: {SCALING_PRESET} grid on {workers} worker(s)")
-        run = run_scaling_grid(workers)
-        if run.status != "ok":
-            raise LlcpsError(f"the {SCALING_PRESET} experiment ended {run.status} on {workers} worker(s)")
-        runs[workers] = run
+    for cache in (True, False):
+        for workers in (1, 2):
+            _say(progress, f"scaling: {SCALING_PRESET} grid on {workers} worker(s){'' if cache else ', no physics cache'}")
+            run = run_scaling_grid(workers, cache=cache)
+            if run.status != "ok":
+                raise LlcpsError(f"the {SCALING_PRESET} experiment ended {run.status} on {workers} worker(s)")
+            runs[workers, cache] = run
     figures = []
-    for workers, run in runs.items():
-        p = f"scaling.workers{workers}"
+    for (workers, cache), run in runs.items():
+        p = f"scaling.workers{workers}" + ("" if cache else ".no_cache")
         figures += [
             figure(p, run.wall, "s wall", note=f"{SCALING_PRESET} preset grid"),
             figure(f"{p}.task_seconds", run.task_seconds, "s wall", note="the tasks' own wall seconds, summed"),
@@ -514,7 +525,13 @@ def bench_scaling(quick: bool = False, progress: Progress | None = None) -> list
             figure(f"{p}.core_share", run.cpu / (run.wall * workers), "ratio", note="CPU seconds per worker per wall second: below 1, the cores were busy elsewhere"),
         ]
     return figures + [
-        figure("scaling.speedup", runs[1].wall / runs[2].wall, "ratio", at_least=1.7, note="1-worker / 2-worker wall time"),
+        figure("scaling.speedup", runs[1, True].wall / runs[2, True].wall, "ratio", at_least=1.7, note="1-worker / 2-worker wall time"),
+        figure(
+            "scaling.speedup_no_cache",
+            runs[1, False].wall / runs[2, False].wall,
+            "ratio",
+            note="the same without the physics cache: one worker alone gets the cache hits of a twin run before",
+        ),
         figure("scaling.load_average", load_before, "runnable", note=f"1-minute load average before, on {os.cpu_count()} CPUs"),
         figure("scaling.load_average_after", os.getloadavg()[0], "runnable"),
     ]
