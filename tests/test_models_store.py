@@ -96,3 +96,35 @@ def test_a_tampered_stored_model_is_refitted_not_executed(store, candidates, cap
     assert np.array_equal(model.predict_proba(candidates), honest.predict_proba(candidates))
     latest = store.latest_world_model("main", "nb", 0)
     assert latest.artifact == artifact  # the refit replaced the tampered row as the latest
+
+
+@pytest.mark.parametrize("name", ["nb", "nn"])
+def test_a_process_fits_one_training_set_once_across_stores(tmp_path, candidates, monkeypatch, name):
+    """Two stores holding the same trials: the second gets a copy of the first's fit, the
+    same model (artifact bytes) a fit gives; another seed or one more trial fits again."""
+    from llcps.models import persistence
+    from llcps.models.registry import world_model_entry
+    from llcps.store import Store
+
+    cls = world_model_entry(name).model_class()
+    fits = []
+    real_fit = cls.fit
+    monkeypatch.setattr(cls, "fit", lambda self, *a, **k: (fits.append(self.seed), real_fit(self, *a, **k))[1])
+    monkeypatch.setattr(persistence, "_FITS", type(persistence._FITS)())
+    stores = [Store.open(str(tmp_path / f"{i}.db"), create=True) for i in range(2)]
+    try:
+        for store in stores:
+            add_toy_trials(store, 40, seed=1)
+        first = fit_or_load(stores[0], "main", name, 0)
+        second = fit_or_load(stores[1], "main", name, 0)
+        assert fits == [0]
+        assert second is not first and second.to_artifact()[0] == first.to_artifact()[0]
+        assert stores[1].latest_world_model("main", name, 0).artifact == first.to_artifact()[0]  # stored all the same
+        assert np.array_equal(second.predict_proba(candidates), first.predict_proba(candidates))
+        fit_or_load(stores[1], "main", name, 1)
+        add_toy_trials(stores[0], 1, seed=2)
+        assert fit_or_load(stores[0], "main", name, 0).n_trials == 41
+        assert fits == [0, 1, 0]
+    finally:
+        for store in stores:
+            store.close()

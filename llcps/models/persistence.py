@@ -6,12 +6,22 @@ so a stored model whose watermark equals the branch's current one was fitted on
 exactly today's training set and is loaded instead of refitted. Artifacts load
 without executing anything (see :mod:`llcps.models.base`); one that fails to load
 is refitted and replaced, with a warning.
+
+Within one process, fits are also remembered by the content of their training set
+(:func:`training_digest`): a process that solves many episodes on copies of the
+same trials in different stores (an experiment worker runs every measure and both
+conditions of a seed from the same pretraining set) fits each model once and copies
+it after. A fit is deterministic for its seed and training set, so the copy is the
+model a fit would give, and it is stored on the branch all the same.
 """
 
 from __future__ import annotations
 
+import copy
+import hashlib
 import logging
 import time
+from collections import OrderedDict
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
@@ -24,6 +34,43 @@ if TYPE_CHECKING:
     from llcps.store import Store
 
 logger = logging.getLogger(__name__)
+
+#: Fitted models this process remembers by (name, seed, training digest), least recent first.
+_FITS: OrderedDict[tuple[str, int, str], WorldModel] = OrderedDict()
+#: How many fitted models :data:`_FITS` keeps.
+FIT_MEMO_SIZE = 8
+
+
+def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> str:
+    """A digest of everything a fit reads from its training set, in order.
+
+    That is each trial's id, seed, spec, features and outcome, and its known change
+    (the state before, the atoms added and deleted, the scene's bodies); provenance
+    (branch, run, timestamps, wall seconds) is left out, since no model reads it.
+    """
+    digest = hashlib.blake2b(digest_size=20)
+    for r in records:
+        digest.update(f"{r.id}|{r.seed}|{r.spec!r}|{r.features!r}|{r.outcome!r}".encode())
+        change = changes.get(r.id) if r.id is not None else None
+        if change is None:
+            digest.update(b"|-\n")
+        else:
+            digest.update(f"|{sorted(change.before)!r}|{sorted(change.added)!r}|{sorted(change.deleted)!r}|{change.bodies!r}\n".encode())
+    return digest.hexdigest()
+
+
+def _fit(name: str, seed: int, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> WorldModel:
+    """A fresh fit, or a copy of this process's fit of the same training set."""
+    key = (name, seed, training_digest(records, changes))
+    remembered = _FITS.get(key)
+    if remembered is not None:
+        _FITS.move_to_end(key)
+        return copy.deepcopy(remembered)
+    model = world_model_entry(name)(seed).fit(records, changes)
+    _FITS[key] = copy.deepcopy(model)  # the caller updates its own model during exploration
+    while len(_FITS) > FIT_MEMO_SIZE:
+        _FITS.popitem(last=False)
+    return model
 
 
 def fit_or_load(
@@ -72,7 +119,7 @@ def fit_or_load(
         records = store.visible_trials(branch)
     if changes is None or len(changes) != known:
         changes = store.visible_changes(branch)
-    model = entry(seed).fit(records, changes)
+    model = _fit(name, seed, records, changes)
     artifact, meta = model.to_artifact()
     meta["changes"] = known
     store.save_world_model(branch=branch, name=name, seed=seed, watermark=watermark, artifact=artifact, meta=meta)
