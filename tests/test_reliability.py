@@ -115,6 +115,45 @@ def test_the_engine_crashes_on_that_state_only_inside_the_probe(db: Path) -> Non
         snapshots.probe_states(scene, [raw], check=False)
 
 
+
+def _child(behaviour: str) -> tuple[int, int]:
+    """Fork a child that reports through a pipe as the probe's child does: (pid, read end)."""
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child
+        try:
+            os.close(read_end)
+            if behaviour == "refuse":
+                os.write(write_end, b"no such body")
+                os._exit(2)
+            if behaviour == "hang":
+                time.sleep(60)
+        finally:
+            os._exit(0)
+    os.close(write_end)
+    return pid, read_end
+
+
+def test_the_probe_wait_returns_the_childs_message_and_status() -> None:
+    pid, read_end = _child("refuse")
+    try:
+        status, detail = snapshots._wait(pid, read_end, 10.0)
+    finally:
+        os.close(read_end)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 2 and detail == "no such body"
+
+
+def test_a_hung_probe_child_is_killed_at_the_timeout() -> None:
+    pid, read_end = _child("hang")
+    try:
+        with pytest.raises(snapshots.StateError, match="did not finish within 0.3 s"):
+            snapshots._wait(pid, read_end, 0.3)
+    finally:
+        os.close(read_end)
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)  # killed and reaped
+
+
 # -- 2. a decompression bomb ------------------------------------------------------------------------
 
 

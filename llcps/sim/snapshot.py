@@ -31,6 +31,7 @@ import json
 import math
 import os
 import re
+import select
 import signal
 import struct
 import time
@@ -458,12 +459,12 @@ def probe_states(
             os._exit(code)
     os.close(write_end)
     try:
-        status = _wait(pid, timeout)
-        with os.fdopen(read_end, "rb") as fh:
-            detail = fh.read().decode(errors="replace")
+        status, detail = _wait(pid, read_end, timeout)
     except BaseException:
         _kill(pid)
         raise
+    finally:
+        os.close(read_end)
     if os.WIFSIGNALED(status):
         try:
             name = signal.Signals(os.WTERMSIG(status)).name
@@ -497,18 +498,32 @@ def _probe_in_child(scene: Mapping[str, Any], states: Sequence[bytes], *, check:
     return ""
 
 
-def _wait(pid: int, timeout: float) -> int:
+def _wait(pid: int, read_end: int, timeout: float) -> tuple[int, str]:
+    """The child's exit status and message, waiting at most ``timeout`` seconds in all.
+
+    The pipe tells when the child is done: it turns readable with the message, and at
+    end of file once the child has exited (crashed or not), so the wait ends the
+    moment the child does, with no polling interval to overshoot.
+    """
     deadline = time.monotonic() + timeout
-    delay = 0.001
+    chunks: list[bytes] = []
     while True:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0 or not select.select([read_end], [], [], remaining)[0]:
+            _kill(pid)
+            raise StateError(f"restoring the physics state did not finish within {timeout:g} s")
+        data = os.read(read_end, 4096)
+        if not data:
+            break
+        chunks.append(data)
+    while True:  # the child has closed its end: it is exiting, or a moment away from it
         done, status = os.waitpid(pid, os.WNOHANG)
         if done:
-            return status
+            return status, b"".join(chunks).decode(errors="replace")
         if time.monotonic() > deadline:
             _kill(pid)
             raise StateError(f"restoring the physics state did not finish within {timeout:g} s")
-        time.sleep(delay)
-        delay = min(delay * 2, 0.05)
+        time.sleep(0.0005)
 
 
 def _kill(pid: int) -> None:
