@@ -471,7 +471,6 @@ def test_the_scheduler_keeps_twins_apart(store: Store) -> None:
     assert sorted(engine.submitted) == sorted(t.label for t in tasks) and len(summary.failed) == 4
 
 
-
 class _ImportingEngine(_RecordingEngine):
     """Finishes the newest task first, each successfully (the scheduler's import is faked)."""
 

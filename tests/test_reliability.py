@@ -115,7 +115,6 @@ def test_the_engine_crashes_on_that_state_only_inside_the_probe(db: Path) -> Non
         snapshots.probe_states(scene, [raw], check=False)
 
 
-
 def _child(behaviour: str) -> tuple[int, int]:
     """Fork a child that reports through a pipe as the probe's child does: (pid, read end)."""
     read_end, write_end = os.pipe()

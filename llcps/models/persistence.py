@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 from llcps.domain import TrialChange, TrialRecord, check_seed
 from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
-from llcps.models.registry import world_model_entry
+from llcps.models.registry import WorldModelEntry, world_model_entry
 
 if TYPE_CHECKING:
     from llcps.store import Store
@@ -59,14 +59,14 @@ def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialC
     return digest.hexdigest()
 
 
-def _fit(name: str, seed: int, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> WorldModel:
+def _fit(entry: WorldModelEntry, seed: int, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> WorldModel:
     """A fresh fit, or a copy of this process's fit of the same training set."""
-    key = (name, seed, training_digest(records, changes))
+    key = (entry.name, seed, training_digest(records, changes))
     remembered = _FITS.get(key)
     if remembered is not None:
         _FITS.move_to_end(key)
         return copy.deepcopy(remembered)
-    model = world_model_entry(name)(seed).fit(records, changes)
+    model = entry(seed).fit(records, changes)
     _FITS[key] = copy.deepcopy(model)  # the caller updates its own model during exploration
     while len(_FITS) > FIT_MEMO_SIZE:
         _FITS.popitem(last=False)
@@ -119,7 +119,7 @@ def fit_or_load(
         records = store.visible_trials(branch)
     if changes is None or len(changes) != known:
         changes = store.visible_changes(branch)
-    model = _fit(name, seed, records, changes)
+    model = _fit(entry, seed, records, changes)
     artifact, meta = model.to_artifact()
     meta["changes"] = known
     store.save_world_model(branch=branch, name=name, seed=seed, watermark=watermark, artifact=artifact, meta=meta)
