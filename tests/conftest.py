@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 import uuid
 from collections import Counter
 from pathlib import Path
@@ -25,6 +26,9 @@ from store_writer import sample_trial  # noqa: E402
 from llcps.store import Store  # noqa: E402
 
 POSTGRES_URL = os.environ.get("LLCPS_TEST_POSTGRES_URL")
+
+# Physics cache seals under a secret of this test process (and the commands it starts), never the user's.
+os.environ["LLCPS_CACHE_KEY"] = str(Path(tempfile.mkdtemp(prefix="llcps-test-key-")) / "physics-cache.key")
 
 
 def _postgres_unavailable() -> str | None:

@@ -108,6 +108,68 @@ def test_a_stored_entry_is_shared_between_handles_and_checked_on_every_read(stor
     assert reader.get(key) is not None
 
 
+class _Calls:
+    """The check and trust a world would pass, counting what the cache calls."""
+
+    def __init__(self, refuse: bool = False) -> None:
+        self.checked = self.trusted = 0
+        self.refuse = refuse
+
+    def check(self, state: bytes) -> None:
+        self.checked += 1
+        if self.refuse:
+            raise pc.LlcpsError("refused")
+
+    def trust(self, state: bytes) -> None:
+        self.trusted += 1
+
+
+def test_a_sealed_entry_skips_the_checks_and_any_other_is_checked_then_sealed(store: Store, tmp_path: Path) -> None:
+    mine, theirs = tmp_path / "mine.key", tmp_path / "theirs.key"
+    key = trial_key(SETTINGS, SCENE, STATE, SPEC, 6000)
+    pc.StorePhysicsCache(store.engine, key_file=mine).put(key, RESULT, STATE)
+
+    def read(key_file: Path, refuse: bool = False) -> tuple[bool, int, int]:
+        cache, calls = pc.StorePhysicsCache(store.engine, key_file=key_file), _Calls(refuse)
+        got = cache.get(key, check=calls.check, trust=calls.trust)
+        cache.flush()
+        return got is not None, calls.checked, calls.trusted
+
+    def damage(**values: object) -> None:
+        with store.engine.begin() as conn:
+            conn.execute(update(PhysicsCacheEntry).where(PhysicsCacheEntry.key == key).values(**values))
+
+    assert read(mine) == (True, 0, 1)  # sealed by this machine: trusted, not checked
+    assert read(theirs, refuse=True) == (False, 1, 0)  # another secret: checked, refused, not sealed
+    assert read(mine) == (True, 0, 1)
+    assert read(theirs) == (True, 1, 0)  # checked, passes, sealed under their secret ...
+    assert read(theirs) == (True, 0, 1)
+    assert read(mine) == (True, 1, 0)  # ... which this machine cannot verify: checked again
+    other = zlib.compress(b"BULLET-other" + bytes(200))
+    damage(end_state=other, sha256=pc.content_hash(encode_result(RESULT), other))  # rehashed, seal left as it was
+    assert read(mine) == (True, 1, 0)
+    for seal in ("0" * 64, "é" * 64, b"\xff" * 64, 12345):  # forged or of the wrong type: checked, no crash
+        damage(seal=seal)
+        assert read(mine) == (True, 1, 0)
+    unusable = tmp_path / "a-file"
+    unusable.write_bytes(b"")
+    assert pc.load_secret(unusable / "key") is None  # its directory cannot exist
+    assert read(unusable / "key") == (True, 1, 0)  # no secret: every entry is checked, as before seals
+
+
+def test_the_seal_secret_is_made_once_private_and_read_back(tmp_path: Path) -> None:
+    path = tmp_path / "dir" / "physics-cache.key"
+    secret = pc.load_secret(path)
+    assert secret is not None and len(secret) == pc.SECRET_BYTES and path.read_bytes() == secret
+    assert path.stat().st_mode & 0o777 == 0o600
+    pc.load_secret.cache_clear()
+    assert pc.load_secret(path) == secret  # another process reads the same file
+    short = tmp_path / "short.key"
+    short.write_bytes(b"too short")
+    assert pc.load_secret(short) is None
+    assert list(path.parent.iterdir()) == [path]  # no temporary file left
+
+
 @pytest.mark.parametrize(
     "state", [b"", b"\x78\x9c garbage", zlib.compress(b"not a bullet file"), zlib.compress(b"BULLET" + bytes(100))[:-4]]
 )
@@ -165,6 +227,27 @@ def test_episodes_record_the_same_trials_without_the_cache_from_a_cold_one_and_f
         assert first.simulation_wall_seconds == first.wall_seconds
         assert again.simulation_wall_seconds == pytest.approx(first.wall_seconds, rel=1e-9)
         assert again.wall_seconds != again.simulation_wall_seconds
+
+
+def test_a_later_process_restores_sealed_end_states_without_checking_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from llcps.sim import snapshot
+
+    config = SolveConfig(scenario="scenario2", budget=6, seed=2)
+    with Store.open(str(tmp_path / "sealed.db"), create=True) as store:
+        pretrain(store, branch="main", n=4, seed=1)
+        for name in ("cold", "warm"):
+            store.create_branch(name, from_branch="main", at="pretrain")
+        solve(store, branch="cold", config=config, cache=pc.StorePhysicsCache(store.engine))
+        snapshot.TRUSTED.clear()  # what a new process knows
+
+        def no_probe(*args: object, **kwargs: object) -> None:
+            raise AssertionError("a sealed end state was probed")
+
+        monkeypatch.setattr(snapshot, "probe_states", no_probe)
+        warm = solve(store, branch="warm", config=config, cache=pc.StorePhysicsCache(store.engine))
+        trials = {n: [_row(t) for t in store.visible_trials(n) if t.source != "pretrain"] for n in ("cold", "warm")}
+    assert warm.cache_hits == len(trials["warm"]) > 0
+    assert trials["warm"] == trials["cold"]
 
 
 def test_workers_on_a_cluster_share_no_sqlite_file(store: Store) -> None:

@@ -195,8 +195,8 @@ class Agent:
         if snapshot_id is not None and self.cache is not None:
             key = trial_key(self.world.settings, self.world.scene.to_dict(), self._states[snapshot_id], spec, self.max_steps)
             # The end state comes from the database: checked like a stored snapshot (a state
-            # this process made, or checked before, costs a digest).
-            cached = self.cache.get(key, check=self.world.check_serialized)
+            # this process made, or checked before, or sealed by this machine costs a digest).
+            cached = self.cache.get(key, check=self.world.check_serialized, trust=self.world.trust_serialized)
             if cached is not None and cached.result.spec != spec:  # a damaged entry: simulate instead
                 cached = None
             if cached is None and start is None:

@@ -82,16 +82,21 @@ class CachedTrial:
 StateCheck = Callable[[bytes], object]
 """Raises :class:`~llcps.errors.LlcpsError` when an end state may not be restored."""
 
+StateTrust = Callable[[bytes], object]
+"""Marks an end state safe to restore without checks (it carries a valid seal)."""
+
 
 class PhysicsCache(Protocol):
     """What the agent needs of a physics cache (see :mod:`llcps.store.physics_cache`)."""
 
-    def get(self, key: str, *, check: StateCheck | None = None) -> CachedTrial | None:
+    def get(self, key: str, *, check: StateCheck | None = None, trust: StateTrust | None = None) -> CachedTrial | None:
         """The trial stored under ``key``, or None (absent, or failed validation).
 
         ``check`` (the restoring world's :meth:`~llcps.sim.world.World.check_serialized`)
         is called on the end state too; an entry it refuses counts as absent and is
-        replaced by the next simulation of its key.
+        replaced by the next simulation of its key. An entry the cache can vouch for
+        (a seal, see :mod:`llcps.store.physics_cache`) gets ``trust`` (the world's
+        :meth:`~llcps.sim.world.World.trust_serialized`) instead.
         """
 
     def put(self, key: str, result: TrialResult, end_state: bytes) -> None:

@@ -384,6 +384,17 @@ class World:
             snapshots.TRUSTED.add(key)
         return raw
 
+    def trust_serialized(self, state: bytes) -> None:
+        """Remember a serialized state as safe to restore into this world's scene without checks.
+
+        Only for a state vouched for by something the database cannot forge (the
+        physics cache's seal); anything else goes through :meth:`check_serialized`.
+
+        Raises:
+            StateError: the state does not inflate within the size cap.
+        """
+        self._trust(snapshots.decompress_state(state))
+
     def reference_state(self) -> bytes:
         """The raw state of this world's scene freshly built: what a stored state is checked against.
 

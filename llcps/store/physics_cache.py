@@ -15,6 +15,17 @@ process) and the restoring world's structure check
 world restores it. An entry that fails is ignored as a miss and replaced by the
 next simulation of its key.
 
+Seals: the structure check and the probe cost about 0.1 s for each end state a
+process has not seen before, and a resumed run sees every one for the first time.
+So an entry carries a seal: an HMAC-SHA256 of its key and content hash under a
+secret that never enters the store, a key file in the user's data directory
+(:func:`default_key_file`; ``LLCPS_CACHE_KEY`` names another). Only a process holding the
+secret can seal, and it seals only end states it saved from a world of the key's
+scene, or that passed the checks. An entry with a valid seal is restored without
+the checks (``trust``); one without (written before seals, on another machine, or
+altered in the store) goes through them and is sealed once it passes. Without a
+usable key file nothing is sealed and every entry is checked as before.
+
 Size: each entry is about 40 kB (the compressed end state dominates). The cache is
 bounded by :data:`DEFAULT_MAX_BYTES` unless a store setting says otherwise; an
 experiment run prunes it back to the bound when it ends, least recently used
@@ -23,17 +34,24 @@ first, and ``llcps cache prune`` does so on demand.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import hmac
+import os
+import secrets
+import tempfile
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from pathlib import Path
 from typing import Any, Callable
 
+import platformdirs
 from sqlalchemy import delete, func, insert, select, update
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 
 from llcps.errors import LlcpsError, StoreError
 from llcps.sim import snapshot as snapshots
-from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, StateCheck, decode_result, encode_result
+from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, StateCheck, StateTrust, decode_result, encode_result
 from llcps.sim.trial import TrialResult
 from llcps.store import engine as engines
 from llcps.store.schema import PhysicsCacheEntry
@@ -46,6 +64,10 @@ MAX_BYTES_SETTING = "physics_cache_max_bytes"
 MAX_STATE_BYTES = snapshots.MAX_COMPRESSED_STATE_BYTES
 #: Largest end state once decompressed (a scene's state is ~90 kB).
 MAX_RAW_STATE_BYTES = snapshots.MAX_STATE_BYTES
+#: Environment variable naming the file of the seal secret (default: :func:`default_key_file`).
+KEY_FILE_ENV = "LLCPS_CACHE_KEY"
+#: Bytes of a seal secret.
+SECRET_BYTES = 32
 #: Hits remembered before their use is written back (``last_used``, ``hits``).
 _FLUSH_EVERY = 64
 
@@ -84,6 +106,49 @@ def content_hash(result: bytes, end_state: bytes) -> str:
     return digest.hexdigest()
 
 
+def default_key_file() -> Path:
+    """Where this user's seal secret is kept: ``$LLCPS_CACHE_KEY``, else a file in the user data directory."""
+    named = os.environ.get(KEY_FILE_ENV)
+    return Path(named).expanduser() if named else platformdirs.user_data_path("llcps") / "physics-cache.key"
+
+
+@functools.lru_cache(maxsize=8)
+def load_secret(path: Path) -> bytes | None:
+    """The seal secret in ``path``, made (random, mode 0600) if the file is missing; None if unusable.
+
+    Processes starting together agree: the file appears whole (a hard link of a
+    finished temporary file), and a process that finds one made first reads it.
+    """
+    try:
+        if not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+            fd, temporary = tempfile.mkstemp(dir=path.parent, prefix=".physics-cache-key-")  # mode 0600
+            try:
+                os.write(fd, secrets.token_bytes(SECRET_BYTES))
+                os.close(fd)
+                try:
+                    os.link(temporary, path)
+                except FileExistsError:
+                    pass  # another process made it first: use theirs
+            finally:
+                os.unlink(temporary)
+        with open(path, "rb") as fh:
+            secret = fh.read(4 * SECRET_BYTES)
+    except OSError:
+        return None
+    return secret if len(secret) >= SECRET_BYTES else None
+
+
+def seal(secret: bytes, key: str, sha: str) -> str:
+    """The seal of the entry ``key`` whose content hash is ``sha``."""
+    return hmac.new(secret, f"{key}\x00{sha}".encode(), hashlib.sha256).hexdigest()
+
+
+def _sealed(value: Any, expected: str) -> bool:
+    """Whether a stored seal (untrusted: any type) is ``expected``."""
+    return isinstance(value, str) and value.isascii() and hmac.compare_digest(value, expected)
+
+
 def _now() -> datetime:
     return datetime.now(timezone.utc).replace(tzinfo=None)
 
@@ -120,22 +185,28 @@ class StorePhysicsCache:
     Args:
         engine: the store's SQLAlchemy engine (``Store.engine``).
         validator: the end-state check (default :func:`validate_state`).
+        key_file: the seal secret's file (default :func:`default_key_file`).
     """
 
-    def __init__(self, engine: Any, *, validator: StateValidator = validate_state) -> None:
+    def __init__(self, engine: Any, *, validator: StateValidator = validate_state, key_file: Path | None = None) -> None:
         self._engine = engine
         self._validator = validator
+        self._secret = load_secret(key_file if key_file is not None else default_key_file())
         self.counts = CacheCounts()
         self._used: dict[str, int] = {}
+        self._seals: dict[str, str] = {}
         self._rejected: set[str] = set()
 
-    def get(self, key: str, *, check: StateCheck | None = None) -> CachedTrial | None:
+    def get(self, key: str, *, check: StateCheck | None = None, trust: StateTrust | None = None) -> CachedTrial | None:
         """The entry under ``key``, or None when absent or when it fails validation.
 
         Args:
             key: a :func:`llcps.sim.cache.trial_key`.
-            check: also run on the end state (the restoring world's structure check);
-                an entry it refuses is a miss, replaced by the next :meth:`put`.
+            check: also run on the end state of an entry without a valid seal (the
+                restoring world's structure check); an entry it refuses is a miss,
+                replaced by the next :meth:`put`, and one it passes is sealed.
+            trust: run instead of ``check`` on the end state of a sealed entry (the
+                restoring world's :meth:`~llcps.sim.world.World.trust_serialized`).
         """
         try:
             with self._engine.connect() as conn:
@@ -146,6 +217,7 @@ class StorePhysicsCache:
                         PhysicsCacheEntry.sha256,
                         func.length(PhysicsCacheEntry.result),
                         func.length(PhysicsCacheEntry.end_state),
+                        func.substr(PhysicsCacheEntry.seal, 1, 64),
                     ).where(PhysicsCacheEntry.key == key)
                 ).first()
         except SQLAlchemyError as exc:
@@ -154,7 +226,7 @@ class StorePhysicsCache:
         if row is None:
             self.counts.misses += 1
             return None
-        entry = self._check(row, check)
+        entry = self._check(key, row, check, trust)
         if entry is None:
             self.counts.misses += 1
             self.counts.rejected += 1
@@ -166,8 +238,8 @@ class StorePhysicsCache:
             self.flush()
         return entry
 
-    def _check(self, row: Any, check: StateCheck | None) -> CachedTrial | None:
-        result, state, sha, result_size, state_size = row
+    def _check(self, key: str, row: Any, check: StateCheck | None, trust: StateTrust | None) -> CachedTrial | None:
+        result, state, sha, result_size, state_size, stored_seal = row
         if result_size is None or state_size is None or result_size > MAX_RESULT_BYTES or state_size > MAX_STATE_BYTES:
             return None
         result, state = bytes(result), bytes(state)
@@ -178,8 +250,14 @@ class StorePhysicsCache:
             if sha not in _validated:
                 self._validator(state)
                 _validated.add(sha)
-            if check is not None:
+            expected = None if self._secret is None else seal(self._secret, key, sha)
+            if expected is not None and _sealed(stored_seal, expected):
+                if trust is not None:
+                    trust(state)
+            elif check is not None:
                 check(state)
+                if expected is not None:
+                    self._seals[key] = expected  # written with the next flush
         except (ValueError, LlcpsError):
             return None
         return CachedTrial(result=decoded, end_state=state)
@@ -188,11 +266,13 @@ class StorePhysicsCache:
         """Keep a simulated trial; an entry already there (from another process) is kept."""
         encoded = encode_result(result)
         now = _now()
+        sha = content_hash(encoded, end_state)
         values = {
             "key": key,
             "result": encoded,
             "end_state": bytes(end_state),
-            "sha256": content_hash(encoded, end_state),
+            "sha256": sha,
+            "seal": None if self._secret is None else seal(self._secret, key, sha),
             "size": len(encoded) + len(end_state),
             "hits": 0,
             "created_at": now,
@@ -214,10 +294,12 @@ class StorePhysicsCache:
         self.counts.stored += 1
 
     def flush(self) -> None:
-        """Write back when entries were last used (least recently used go first when pruning)."""
-        if not self._used:
+        """Write back when entries were last used (least recently used go first when pruning),
+        and the seals of entries that passed the checks."""
+        if not self._used and not self._seals:
             return
         used, self._used = self._used, {}
+        seals, self._seals = self._seals, {}
         now = _now()
         try:
             with self._engine.connect() as conn:
@@ -229,6 +311,8 @@ class StorePhysicsCache:
                             .where(PhysicsCacheEntry.key == key)
                             .values(last_used=now, hits=PhysicsCacheEntry.hits + n)
                         )
+                    for key, value in seals.items():
+                        conn.execute(update(PhysicsCacheEntry).where(PhysicsCacheEntry.key == key).values(seal=value))
         except SQLAlchemyError:
             pass  # bookkeeping only: a busy store must not fail a trial
 

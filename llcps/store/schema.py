@@ -268,7 +268,6 @@ class WorldModel(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
-
 class PhysicsCacheEntry(Base):
     """A simulated trial's result and end state, keyed by everything its physics depends on.
 
@@ -284,6 +283,8 @@ class PhysicsCacheEntry(Base):
     end_state: Mapped[bytes] = mapped_column(LargeBinary)
     # sha256 of result, a NUL and end_state: checked before either is decoded.
     sha256: Mapped[str] = mapped_column(String(64))
+    # HMAC of key and sha256 under a secret outside the store: this machine made or checked the entry.
+    seal: Mapped[str | None] = mapped_column(String(64), nullable=True)
     size: Mapped[int] = mapped_column(Integer)
     hits: Mapped[int] = mapped_column(Integer, default=0)
     created_at: Mapped[datetime] = mapped_column(DateTime)
