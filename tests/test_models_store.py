@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from llcps.domain import TrialRecord
+from llcps.errors import LlcpsError
 from llcps.models import fit_or_load
 from llcps.models.synthetic import synthetic_trials
 
@@ -128,3 +129,36 @@ def test_a_process_fits_one_training_set_once_across_stores(tmp_path, candidates
     finally:
         for store in stores:
             store.close()
+
+
+@pytest.mark.parametrize("name", ["nb", "nn"])
+def test_a_model_fitted_without_its_goal_head_predicts_the_same_omega_and_is_refitted_when_the_head_is_asked_for(
+    tmp_path, candidates, monkeypatch, name
+):
+    from llcps.models import persistence
+    from llcps.models.registry import world_model_entry
+    from llcps.store import Store
+
+    cls = world_model_entry(name).model_class()
+    fits: list[bool] = []
+    real_fit = cls.fit
+    monkeypatch.setattr(cls, "fit", lambda self, *a, **k: (fits.append(k.get("goal", True)), real_fit(self, *a, **k))[1])
+    monkeypatch.setattr(persistence, "_FITS", type(persistence._FITS)())
+    with Store.open(str(tmp_path / "goal.db"), create=True) as store:
+        add_toy_trials(store, 30, seed=1)
+        bare = fit_or_load(store, "main", name, 0, goal=False)
+        artifact, meta = bare.to_artifact()
+        assert meta["goal"] is False and not any(k.startswith("goal_") for k in meta)
+        with pytest.raises(LlcpsError, match="without its goal-aware head"):
+            bare.predict_goal(None)
+        assert fit_or_load(store, "main", name, 0, goal=False).has_goal is False  # loaded, not refitted
+        assert fits == [False]
+        full = fit_or_load(store, "main", name, 0)  # the stored model lacks the head: fitted again
+        assert fits == [False, True] and full.has_goal
+        assert np.array_equal(full.predict_proba(candidates), bare.predict_proba(candidates))
+        assert fit_or_load(store, "main", name, 0, goal=False).has_goal  # a model with the head serves either
+        assert fits == [False, True]
+        again = cls.from_artifact(artifact, meta, 0)
+        assert again.has_goal is False and np.array_equal(again.predict_proba(candidates), bare.predict_proba(candidates))
+        with pytest.raises(LlcpsError, match="goal flag"):
+            cls.from_artifact(artifact, {**meta, "goal": "yes"}, 0)

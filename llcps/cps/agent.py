@@ -31,8 +31,9 @@ from llcps.cps.exploration import failure_point, rank_candidates
 from llcps.cps.knowledge import load_experience, load_knowledge
 from llcps.domain import PUSH_DIRECTION, ControllerParams, State, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
-from llcps.outputs import GIF_SUFFIXES, check_output_file
+from llcps.models.measures import get_measure
 from llcps.models.persistence import fit_or_load
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.scenarios.base import Scenario
 from llcps.scenarios.goal import goal_text
 from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
@@ -370,7 +371,8 @@ def solve(
         progress(f"fit world model {config.model}", 0, 0)
     records = list(store.visible_trials(branch_name))
     changes = store.visible_changes(branch_name)
-    model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes)
+    goal = get_measure(config.measure).uses_goal  # a measure ranking by Omega alone needs no goal head
+    model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes, goal=goal)
     kb = load_knowledge(store, branch_name)
     result.run_id = store.start_run(
         command=command, seed=config.seed, config=_config_json(config), branch=branch_name

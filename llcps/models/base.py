@@ -58,21 +58,32 @@ class WorldModel(ABC):
         self.seed = int(seed)
         self.n_trials = 0
         self.goal = GoalHead(self._goal_learner())
+        #: Whether the goal-aware head takes part (fitted with ``goal=True``, the default).
+        self.has_goal = True
 
     @abstractmethod
     def _goal_learner(self) -> GoalLearner:
         """A fresh learner of the model's own kind for the goal-aware head."""
 
-    def fit(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange] | None = None) -> WorldModel:
+    def fit(
+        self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange] | None = None, *, goal: bool = True
+    ) -> WorldModel:
         """Fit on the training set (any size, including 0), replacing earlier fits.
 
         Args:
             records: the trials.
             changes: their known symbolic changes by trial id (the goal-aware head
                 learns from the trials that have one).
+            goal: fit the goal-aware head too. A measure that ranks by Omega alone
+                never reads it, and its fit costs as much as Omega's; without it
+                :meth:`predict_goal` refuses.
         """
         self._fit_outcome(records)
-        self.goal.fit(records, changes or {})
+        self.has_goal = goal
+        if goal:
+            self.goal.fit(records, changes or {})
+        else:
+            self.goal = type(self.goal)(self._goal_learner())  # unfitted: what it learned before is gone
         return self
 
     def update(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange] | None = None) -> WorldModel:
@@ -84,7 +95,8 @@ class WorldModel(ABC):
         episode evidence (:mod:`llcps.models.goal`).
         """
         self._update_outcome(records)
-        self.goal.update(records, changes or {})
+        if self.has_goal:
+            self.goal.update(records, changes or {})
         return self
 
     @abstractmethod
@@ -100,7 +112,16 @@ class WorldModel(ABC):
         """Predicted P(bit = 1) per candidate: float64 (n, 6) in [0, 1], OUTCOME_NAMES order."""
 
     def predict_goal(self, query: GoalQuery) -> np.ndarray:
-        """P(each missing atom changes as needed) per candidate: (n_candidates, n_atoms) in [0, 1]."""
+        """P(each missing atom changes as needed) per candidate: (n_candidates, n_atoms) in [0, 1].
+
+        Raises:
+            LlcpsError: the model was fitted without its goal-aware head.
+        """
+        if not self.has_goal:
+            raise LlcpsError(
+                f"world model {self.name!r} was fitted without its goal-aware head",
+                hint="fit it with goal=True (fit_or_load does for a measure that uses the goal)",
+            )
         return self.goal.predict(query)
 
     @abstractmethod
@@ -115,9 +136,11 @@ class WorldModel(ABC):
     def to_artifact(self) -> tuple[bytes, dict[str, Any]]:
         """Serialize the fitted model to (bytes, meta) that load without executing code."""
         arrays, meta = self._export()
-        goal_arrays, goal_meta = self.goal.export()
-        arrays = {**arrays, **goal_arrays}
-        meta = {**meta, **goal_meta}
+        if self.has_goal:
+            goal_arrays, goal_meta = self.goal.export()
+            arrays = {**arrays, **goal_arrays}
+            meta = {**meta, **goal_meta}
+        meta["goal"] = self.has_goal
         data = pack_arrays(arrays)
         common = {
             "format": ARTIFACT_FORMAT,
@@ -158,7 +181,12 @@ class WorldModel(ABC):
         try:
             arrays = unpack_arrays(artifact)
             model = cls._import({k: v for k, v in arrays.items() if not k.startswith("goal/")}, meta, seed)
-            model.goal.load(arrays, meta)
+            has_goal = meta.get("goal", True)  # artifacts from before the flag all hold the head
+            if not isinstance(has_goal, bool):
+                raise ValueError("the goal flag must be true or false")
+            if has_goal:
+                model.goal.load(arrays, meta)
+            model.has_goal = has_goal
             model.n_trials = int(meta.get("n_trials", 0))
         except LlcpsError as exc:
             raise LlcpsError(f"{cls.name!r} world-model artifact rejected: {exc.message}", hint=hint) from None

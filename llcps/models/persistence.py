@@ -35,8 +35,8 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-#: Fitted models this process remembers by (name, seed, training digest), least recent first.
-_FITS: OrderedDict[tuple[str, int, str], WorldModel] = OrderedDict()
+#: Fitted models this process remembers by (name, seed, training digest, goal head), least recent first.
+_FITS: OrderedDict[tuple[str, int, str, bool], WorldModel] = OrderedDict()
 #: How many fitted models :data:`_FITS` keeps.
 FIT_MEMO_SIZE = 8
 
@@ -59,14 +59,16 @@ def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialC
     return digest.hexdigest()
 
 
-def _fit(entry: WorldModelEntry, seed: int, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> WorldModel:
+def _fit(
+    entry: WorldModelEntry, seed: int, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange], goal: bool
+) -> WorldModel:
     """A fresh fit, or a copy of this process's fit of the same training set."""
-    key = (entry.name, seed, training_digest(records, changes))
+    key = (entry.name, seed, training_digest(records, changes), goal)
     remembered = _FITS.get(key)
     if remembered is not None:
         _FITS.move_to_end(key)
         return copy.deepcopy(remembered)
-    model = entry(seed).fit(records, changes)
+    model = entry(seed).fit(records, changes, goal=goal)
     _FITS[key] = copy.deepcopy(model)  # the caller updates its own model during exploration
     while len(_FITS) > FIT_MEMO_SIZE:
         _FITS.popitem(last=False)
@@ -81,6 +83,7 @@ def fit_or_load(
     *,
     records: Sequence[TrialRecord] | None = None,
     changes: Mapping[int, TrialChange] | None = None,
+    goal: bool = True,
 ) -> WorldModel:
     """The world model ``name`` fitted on every trial ``branch`` sees.
 
@@ -92,11 +95,13 @@ def fit_or_load(
         records: the branch's visible trials, if the caller already loaded them
             (reloaded from the store when they do not reach its watermark).
         changes: their known symbolic changes, if the caller already loaded them.
+        goal: the model must have its goal-aware head (False for a measure that
+            ranks by Omega alone: the head is then neither fitted nor stored).
 
     Returns:
         The stored model when it is current (fitted on today's trials and on as many
-        known changes as the branch has: a backfill makes it stale), else a fresh fit
-        (which is stored).
+        known changes as the branch has: a backfill makes it stale) and has the goal
+        head if asked for, else a fresh fit (which is stored).
 
     Raises:
         UnknownNameError: ``name`` is not a registered world model.
@@ -110,7 +115,12 @@ def fit_or_load(
     except StoreError as exc:  # a damaged row: the model is derived data, so fit it again
         logger.warning("stored world model %s is unusable, refitting: %s", name, exc.message)
         stored = None
-    if stored is not None and stored.watermark == watermark and stored.meta.get("changes", known) == known:
+    if (
+        stored is not None
+        and stored.watermark == watermark
+        and stored.meta.get("changes", known) == known
+        and (stored.meta.get("goal", True) is True or not goal)
+    ):
         try:
             return entry.load(stored.artifact, stored.meta, seed)
         except LlcpsError as exc:
@@ -119,7 +129,7 @@ def fit_or_load(
         records = store.visible_trials(branch)
     if changes is None or len(changes) != known:
         changes = store.visible_changes(branch)
-    model = _fit(entry, seed, records, changes)
+    model = _fit(entry, seed, records, changes, goal)
     artifact, meta = model.to_artifact()
     meta["changes"] = known
     store.save_world_model(branch=branch, name=name, seed=seed, watermark=watermark, artifact=artifact, meta=meta)
