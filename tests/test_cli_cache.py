@@ -31,14 +31,18 @@ def test_status_limit_and_prune(tmp_path: Path) -> None:
         cache = pc.StorePhysicsCache(store.engine)
         for steps in range(3):
             cache.put(trial_key(SETTINGS, SCENE, STATE, SPEC, steps), RESULT, STATE)
+        (tmp_path / "a-file").write_bytes(b"")  # the key's directory is a file: no secret, no seal
+        unsealed = pc.StorePhysicsCache(store.engine, key_file=tmp_path / "a-file" / "key")
+        unsealed.put(trial_key(SETTINGS, SCENE, STATE, SPEC, 3), RESULT, STATE)
     status = json.loads(_llcps(db, "status", "--json").stdout)
-    assert status["entries"] == 3 and status["max_bytes"] == pc.DEFAULT_MAX_BYTES and status["bytes"] > 0
+    assert status["entries"] == 4 and status["max_bytes"] == pc.DEFAULT_MAX_BYTES and status["bytes"] > 0
+    assert status["sealed"] == 3
     assert _llcps(db, "limit", "1MB").exit_code == 0
     assert json.loads(_llcps(db, "status", "--json").stdout)["max_bytes"] == 10**6
     dry = json.loads(_llcps(db, "prune", "--to", "0", "--dry-run", "--json").stdout)
-    assert (dry["removed"], dry["dry_run"]) == (3, True)
+    assert (dry["removed"], dry["dry_run"]) == (4, True)
     done = _llcps(db, "prune", "--to", "0", "--json")
-    assert done.exit_code == 0 and json.loads(done.stdout)["removed"] == 3
+    assert done.exit_code == 0 and json.loads(done.stdout)["removed"] == 4
     assert json.loads(_llcps(db, "status", "--json").stdout)["entries"] == 0
     bad = _llcps(db, "prune", "--to", "lots")
     assert bad.exit_code == 2 and "error: not a size" in bad.stderr and "hint:" in bad.stderr

@@ -51,6 +51,7 @@ def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
         ("", ""),
         [
             ("entries", status.entries),
+            ("sealed", f"{status.sealed} (restored without the state checks by the user who sealed them)"),
             ("size", f"{_human(status.bytes)} of {_human(status.max_bytes)} allowed"),
             ("hits recorded", status.hits),
             ("last used", f"{status.oldest_use or '-'} .. {status.newest_use or '-'}"),

@@ -328,10 +328,13 @@ class CacheStatus:
     max_bytes: int
     oldest_use: str | None
     newest_use: str | None
+    #: Entries carrying a seal (of any secret; whether this user's verifies is known on reading).
+    sealed: int = 0
 
     def as_json(self) -> dict[str, Any]:
         return {
             "entries": self.entries,
+            "sealed": self.sealed,
             "bytes": self.bytes,
             "hits": self.hits,
             "max_bytes": self.max_bytes,
@@ -385,9 +388,10 @@ def set_max_bytes(store: Any, limit: int) -> None:
 def status(store: Any) -> CacheStatus:
     """How many entries and bytes the cache holds."""
     with store._read() as conn:
-        n, size, hits, oldest, newest = conn.execute(
+        n, sealed, size, hits, oldest, newest = conn.execute(
             select(
                 func.count(),
+                func.count(PhysicsCacheEntry.seal),
                 func.coalesce(func.sum(PhysicsCacheEntry.size), 0),
                 func.coalesce(func.sum(PhysicsCacheEntry.hits), 0),
                 func.min(PhysicsCacheEntry.last_used),
@@ -396,6 +400,7 @@ def status(store: Any) -> CacheStatus:
         ).one()
     return CacheStatus(
         entries=int(n),
+        sealed=int(sealed),
         bytes=int(size),
         hits=int(hits),
         max_bytes=max_bytes(store),
