@@ -148,7 +148,10 @@ def test_a_sealed_entry_skips_the_checks_and_any_other_is_checked_then_sealed(st
     other = zlib.compress(b"BULLET-other" + bytes(200))
     damage(end_state=other, sha256=pc.content_hash(encode_result(RESULT), other))  # rehashed, seal left as it was
     assert read(mine) == (True, 1, 0)
-    for seal in ("0" * 64, "é" * 64, b"\xff" * 64, 12345):  # forged or of the wrong type: checked, no crash
+    forged: list[object] = ["0" * 64, "é" * 64]
+    if store.engine.dialect.name == "sqlite":  # a typed column holds nothing but text
+        forged += [b"\xff" * 64, 12345]
+    for seal in forged:  # forged or of the wrong type: checked, no crash
         damage(seal=seal)
         assert read(mine) == (True, 1, 0)
     unusable = tmp_path / "a-file"
