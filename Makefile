@@ -26,19 +26,20 @@ run: setup
 	-$(BIN)/llcps --db $(DB) solve scenario3
 	$(BIN)/llcps --db $(DB) inspect episodes
 
-# The whole suite, slow tests included (what CI runs), on both cores. .ci/services.sh
+# The whole suite, slow tests included (what CI runs), on both cores, listing its 25
+# slowest tests at the end so the ~25 min budget is watched. .ci/services.sh
 # installs the system packages the tests need (as root); tests/services.sh runs the suite
 # beside a throwaway PostgreSQL server (installed first when missing) and stops it after.
 test: setup
 	bash .ci/services.sh
-	tests/services.sh $(BIN)/python -m pytest -n 2 --dist loadfile
+	tests/services.sh $(BIN)/python -m pytest -n 2 --dist loadfile --durations=25
 
 # The inner loop: everything but the slow tests (sweeps, lifelong sequences in physics).
 test-fast: setup
 	$(BIN)/python -m pytest -m "not slow"
 
 test-slow: setup
-	tests/services.sh $(BIN)/python -m pytest -n 2 --dist loadfile -m slow
+	tests/services.sh $(BIN)/python -m pytest -n 2 --dist loadfile --durations=25 -m slow
 
 clean:
 	rm -rf $(VENV) *.egg-info
