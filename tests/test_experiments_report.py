@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -11,7 +12,7 @@ import pytest
 from llcps.errors import LlcpsError
 from llcps.experiments import grid
 from llcps.experiments.grid import PRESETS, SCENARIO_SEQUENCE, Cell, Preset, Sequence, parse_branch
-from llcps.experiments.report import build_report, report_json
+from llcps.experiments.report import analyse, build_report, report_json, summary_lines
 from llcps.experiments.results import COLUMNS, ResultRow, ResultsTable, table_from_episodes
 
 # -- grid ----------------------------------------------------------------------------------
@@ -362,3 +363,23 @@ def test_a_report_over_scene_variants_names_them_and_tabulates_each() -> None:
         label = f"nb / {row.measure} / p{row.pretrain_size} / update"
         assert v["results"][label]["value"] == row.exploration_trials
     assert report_json(synthetic_table(seeds=3), resamples=200)["per_variant"] == []  # canonical scenes only
+
+
+@pytest.fixture(scope="module")
+def synthetic_analysis():  # noqa: ANN201
+    return analyse(synthetic_table(seeds=4), resamples=200)
+
+
+@pytest.mark.parametrize("holm_significant", [0, 1, 2])
+def test_the_summary_counts_cells_surviving_holm_with_a_verb_that_agrees(synthetic_analysis, holm_significant: int) -> None:  # noqa: ANN001
+    analysis = synthetic_analysis
+    rows = [r for r in analysis.figure2 if r.scenario != SCENARIO_SEQUENCE[0]]
+    assert len(rows) > holm_significant
+    forced = {id(r) for r in rows[:holm_significant]}
+    analysis = dataclasses.replace(
+        analysis,
+        figure2=tuple(dataclasses.replace(r, p_holm=0.001 if id(r) in forced else 1.0) for r in analysis.figure2),
+    )
+    line = next(line for line in summary_lines(analysis) if "after Holm's correction" in line and "Wilcoxon" in line)
+    verb = "remains" if holm_significant == 1 else "remain"
+    assert f"; {holm_significant} {verb} after Holm's correction" in line

@@ -492,7 +492,7 @@ def summary_lines(analysis: Analysis) -> list[str]:
         holm = [r for r in fig2 if r.p_holm < ALPHA]
         text = (
             f"{len(sig)} of {len(fig2)} Figure-2 cells differ between update and reset at p < {ALPHA} "
-            f"(paired Wilcoxon over seeds, uncorrected); {len(holm)} remain after Holm's correction"
+            f"(paired Wilcoxon over seeds, uncorrected); {len(holm)} {'remains' if len(holm) == 1 else 'remain'} after Holm's correction"
         )
         if holm:
             named = [f"{r.model}/{r.measure}/p{r.pretrain_size}/{r.scenario} {format_pct(r.pct_change)}" for r in holm]
@@ -519,7 +519,7 @@ def summary_lines(analysis: Analysis) -> list[str]:
         worst = max(control, key=lambda r: abs(r.pct_change) if not math.isnan(r.pct_change) else -1.0)
         lines.append(
             f"Control: in {SCENARIO_SEQUENCE[0]} both conditions start from the pretraining set, so they should agree. "
-            f"{len(identical)} of {len(control)} cells are identical seed by seed, {len(sig)} show a difference at p < {ALPHA}, "
+            f"{len(identical)} of {len(control)} cells are identical seed by seed, {len(sig)} {'shows' if len(sig) == 1 else 'show'} a difference at p < {ALPHA}, "
             f"the largest change is {format_pct(worst.pct_change)} ({worst.model}/{worst.measure}/p{worst.pretrain_size})."
         )
     if analysis.random:
