@@ -383,3 +383,13 @@ def test_the_summary_counts_cells_surviving_holm_with_a_verb_that_agrees(synthet
     line = next(line for line in summary_lines(analysis) if "after Holm's correction" in line and "Wilcoxon" in line)
     verb = "remains" if holm_significant == 1 else "remain"
     assert f"; {holm_significant} {verb} after Holm's correction" in line
+
+
+def test_the_summary_counts_only_log_rank_tests_that_were_made(synthetic_analysis) -> None:  # noqa: ANN001
+    analysis = synthetic_analysis
+    untested = [r for r in analysis.survival if math.isnan(r.p_value)]
+    assert untested and len(untested) < len(analysis.survival)  # the control scenario has none
+    line = next(line for line in summary_lines(analysis) if "log-rank" in line)
+    tested = len(analysis.survival) - len(untested)
+    assert f"of {tested} tested cells differ" in line
+    assert f"({len(untested)} more have no test" in line

@@ -531,12 +531,18 @@ def summary_lines(analysis: Analysis) -> list[str]:
             f"(Holm-corrected p < {ALPHA})."
         )
     if analysis.survival:
-        sig = [r for r in analysis.survival if r.p_adjusted < ALPHA]
+        tested = [r for r in analysis.survival if not math.isnan(r.p_value)]
+        sig = [r for r in tested if r.p_adjusted < ALPHA]
         censored = sum((r.n_seeds - r.solved_update) + (r.n_seeds - r.solved_reset) for r in analysis.survival)
         lines.append(
             f"Censoring-aware (unsolved episodes censored at the budget, {censored} of them in the paired cells): "
-            f"{len(sig)} of {len(analysis.survival)} cells differ between update and reset by the log-rank test "
-            f"after Holm's correction."
+            f"{len(sig)} of {len(tested)} tested cells differ between update and reset by the log-rank test "
+            f"after Holm's correction"
+            + (
+                f" ({untested} more have no test; the table says why, e.g. both conditions identical seed by seed)."
+                if (untested := len(analysis.survival) - len(tested))
+                else "."
+            )
         )
     unsolved = analysis.overview.get("unsolved_episodes", 0)
     if unsolved:
