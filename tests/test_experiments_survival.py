@@ -22,6 +22,10 @@ def test_kaplan_meier_by_hand() -> None:
     assert all(lo <= s <= hi for lo, s, hi in zip(km.ci_low, km.survival, km.ci_high))
     # censoring only at the budget: the restricted mean is the capped mean, 1 + 2 x 5/6 + 2 x 1/2
     assert km.rmst == pytest.approx(22 / 6)
+    # every episode resolved: S ends at 0, and so does its interval (it is undefined there)
+    done = survival.kaplan_meier([1, 2, 2, 4], [True] * 4, tau=5)
+    assert done.survival[-1] == 0 and done.ci_low[-1] == 0 and done.ci_high[-1] == 0
+    assert all(lo <= s <= hi for lo, s, hi in zip(done.ci_low, done.survival, done.ci_high))
     unresolved = survival.kaplan_meier([5, 5], [False, False], tau=5)
     assert unresolved.median is None and unresolved.rmst == 5 and unresolved.survival == (1.0,)
 

@@ -104,7 +104,10 @@ def kaplan_meier(times: Sequence[float], solved: Sequence[bool], *, tau: float) 
     with warnings.catch_warnings():  # an interval is undefined where S is 0 or 1: NaN there
         warnings.simplefilter("ignore")
         ci = sf.confidence_interval(0.95, method="log-log")
-    low, high = np.nan_to_num(ci.low.probabilities, nan=0.0), np.nan_to_num(ci.high.probabilities, nan=1.0)
+    # Where it is undefined the band closes on the estimate: once every episode has
+    # resolved (S = 0) nothing is left to be uncertain about, not everything.
+    low, high = np.asarray(ci.low.probabilities), np.asarray(ci.high.probabilities)
+    low, high = np.where(np.isnan(low), probabilities, low), np.where(np.isnan(high), probabilities, high)
     below = np.nonzero(probabilities <= 0.5)[0]
     return KaplanMeier(
         times=tuple(quantiles.tolist()),
