@@ -218,6 +218,33 @@ def test_a_learnable_relation_ranks_its_candidates_first(fitted, query, name):
     assert set(order[: len(wanted)].tolist()) == wanted
 
 
+@pytest.mark.parametrize("size", [4, 200])
+@pytest.mark.parametrize("name", LEARNED)
+def test_what_k_claims_is_mixed_in_where_the_learner_saw_nothing(fitted, query, name, size):
+    """A candidate whose action K claims makes the atom gets the novelty mix of certainty:
+    (1 - e) p + e instead of (1 - e) p + e r; nothing else moves."""
+    from llcps.models.goal import NOVELTY_MIX
+
+    model = fitted(name, size)
+    pushes = {c for c in query.candidates if c.action == "push" and c.arguments == TARGET[1:2]}
+    assert len(pushes) == 36
+    claimed = GoalQuery.from_missing(
+        query.candidates, missing_add=[TARGET], missing_del=[], bodies=query.bodies,
+        claims=lambda spec, atom, add: spec in pushes and atom == TARGET and add,
+    )  # fmt: skip
+    before, after = model.predict_goal(query)[:, 0], model.predict_goal(claimed)[:, 0]
+    lifted = np.array([c in pushes for c in query.candidates])
+    assert np.allclose(after[~lifted], before[~lifted])
+    assert np.all(after[lifted] > before[lifted])
+    assert np.allclose(after[lifted] - before[lifted], after[lifted][0] - before[lifted][0])  # one shift for all
+    assert after[lifted].min() >= NOVELTY_MIX - 1e-12
+
+
+def test_a_query_s_claims_must_match_its_candidates_and_atoms(query):
+    with pytest.raises(ValueError, match="one flag per candidate and atom"):
+        GoalQuery(query.candidates[:2], query.atoms, query.bodies, claimed=((True,),))
+
+
 def failing_trials(query, family, start_id, n):
     """``n`` trials of the candidates in ``family`` that changed nothing (the atom stayed false)."""
     before = frozenset({fluent("on", "entity0", "table")})
@@ -252,19 +279,19 @@ def test_a_family_that_keeps_failing_drops(toy, query, name):
     assert model.goal.watermark == 10_011
 
 
-def test_families_are_action_predicate_sign_roles_then_orientation_then_magnitude(query):
+def test_families_are_action_predicate_sign_roles_and_each_setting(query):
     rows = encode_queries(query)
-    coarse, fine, finest = family_keys(rows)
-    magnitudes = [c.params.movement_magnitude for c in query.candidates]
+    coarse, by_orientation, by_magnitude, by_rate = family_keys(rows)
+    settings = [c.params for c in query.candidates]
     actions = [c.action for c in query.candidates]
-    orientations = [c.params.orientation for c in query.candidates]
     for i in range(0, len(rows), 37):
         for j in range(0, len(rows), 41):
             same_args = query.candidates[i].arguments == query.candidates[j].arguments
             if actions[i] == actions[j] and same_args:
                 assert coarse[i] == coarse[j]
-                assert (fine[i] == fine[j]) == (orientations[i] == orientations[j])
-                same = orientations[i] == orientations[j] and magnitudes[i] == magnitudes[j]
-                assert (finest[i] == finest[j]) == same
+                assert (by_orientation[i] == by_orientation[j]) == (settings[i].orientation == settings[j].orientation)
+                assert (by_magnitude[i] == by_magnitude[j]) == (settings[i].movement_magnitude == settings[j].movement_magnitude)
+                assert (by_rate[i] == by_rate[j]) == (settings[i].rate == settings[j].rate)
             if actions[i] != actions[j]:
                 assert coarse[i] != coarse[j]
+                assert by_orientation[i] != by_orientation[j] and by_magnitude[i] != by_magnitude[j] and by_rate[i] != by_rate[j]

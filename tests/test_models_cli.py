@@ -86,3 +86,19 @@ def test_scenario_candidates_are_ranked_under_every_measure(db, scenario):
     assert set(orders) == set(MEASURES) and all(len(o) == 4 for o in orders.values())
     # a model trained on trials with structure orders candidates differently per measure
     assert len({tuple(order) for order in orders.values()}) > 1
+
+
+def test_inspect_shows_which_candidates_k_claims_and_their_lift(db):
+    """K's push(?o ?c) and place_in_container(?o ?c) add (in ?o ?c): in scenario2 those
+    candidates on the can claim the missing (in can bin), nothing else does, and every
+    claimed candidate gets at least the novelty mix."""
+    from llcps.models.goal import NOVELTY_MIX
+
+    result = run(db, "--scenario", "scenario2", "--limit", "1000", "--model", "nb", "--json")
+    assert result.exit_code == 0, result.output
+    ranked = json.loads(result.stdout)["scenario"]["rankings"]["nb"]["goal-directed"]
+    claimed = {c["trial"] for c in ranked if c["claimed"]}
+    expected = {c["trial"] for c in ranked if c["trial"].startswith(("push(can)", "place_in_container(can, bin)"))}
+    assert claimed == expected and len(expected) == 36 + 35  # the failed placement itself is no candidate
+    assert all(c["claimed"] == ["+(in can bin)"] for c in ranked if c["claimed"])
+    assert min(c["goal"]["+(in can bin)"] for c in ranked if c["claimed"]) >= NOVELTY_MIX - 1e-4

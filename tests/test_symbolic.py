@@ -395,3 +395,40 @@ def test_same_knowledge_compares_operators_with_different_parameters_without_err
     assert first.parameters != second.parameters
     assert not first.same_knowledge(second) and not second.same_knowledge(first)
     assert first.same_knowledge(first)
+
+
+# --------------------------------------------------------------------------- what K claims
+
+CAN_BIN = {"can": "item", "block": "item", "bin": "container"}
+FAST_FRONT = ControllerParams(1.0, 0.3, "front")
+
+
+@pytest.mark.parametrize(
+    "action, arguments, atom, add, claimed",
+    [
+        # push(?o) aimed at ?c adds (in ?o ?c): at any setting, for any container
+        ("push", ("can",), F("in", "can", "bin"), True, True),
+        ("push", ("block",), F("in", "can", "bin"), True, False),  # another object
+        ("push", ("can",), F("in", "can", "bin"), False, False),  # the wrong sign
+        ("push", ("bin",), F("in", "bin", "can"), True, False),  # ?o is an item, ?c a container
+        ("place_in_container", ("can", "bin"), F("in", "can", "bin"), True, True),
+        ("place_in_container", ("block", "bin"), F("in", "can", "bin"), True, False),
+        ("push_together", ("can", "bin"), F("in", "can", "bin"), True, False),
+        ("push_together", ("can", "block"), F("touching", "block", "can"), True, True),  # symmetric, read both ways
+        ("remove_from_container", ("can", "bin"), F("in", "can", "bin"), False, True),
+        ("remove_from_container", ("can", "bin"), F("on", "can", "table"), True, True),  # a constant in the effect
+    ],
+)
+def test_k_claims_the_effects_of_its_actions_for_the_call_s_arguments(action, arguments, atom, add, claimed):
+    call = TrialSpec(action, arguments, FAST_FRONT)
+    assert KB.claims(call, atom, add=add, objects=CAN_BIN) is claimed
+
+
+def test_a_learned_operator_claims_its_effects_only_at_its_own_settings():
+    op = learned_push()  # push(tray) from the front at 0.2 m/s over 0.3 m made the cube reachable
+    kb = KB.with_operator(op)
+    atom = F("reachable", "cube")
+    assert not KB.claims(PUSH_TRAY, atom, add=True, objects=TRAY_OBJECTS)
+    assert kb.claims(PUSH_TRAY, atom, add=True, objects=TRAY_OBJECTS)
+    other = TrialSpec("push", ("tray",), ControllerParams(1.0, 0.3, "front"))
+    assert not kb.claims(other, atom, add=True, objects=TRAY_OBJECTS)

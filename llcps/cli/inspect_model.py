@@ -124,11 +124,12 @@ def show(report: "ModelInspection") -> None:
             atoms = list(ranked[0].goal) if ranked else []
             print_table(
                 f"{model} / {measure}",
-                ("#", "trial", "score", *(f"P{a}" for a in atoms), "P(all)", *(_SHORT[name] for name in OUTCOME_NAMES)),
+                ("#", "trial", "K claims", "score", *(f"P{a}" for a in atoms), "P(all)", *(_SHORT[name] for name in OUTCOME_NAMES)),
                 [
                     (
                         c.position,
                         c.trial,
+                        " ".join(c.claimed) or "-",
                         f"{c.score:.3f}",
                         *(f"{c.goal[a]:.3f}" for a in atoms),
                         f"{c.joint:.3f}",

@@ -492,7 +492,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
     config = agent.config
     snapshot = failure.snapshot
     agent.restore(snapshot)
-    point = failure_point(agent, failure.monitor, failure.state)
+    point = failure_point(agent, failure.monitor, failure.state, kb)
     candidates = point.candidates
     result.candidates = len(candidates)
     remaining = list(range(len(candidates)))

@@ -17,10 +17,11 @@ import numpy as np
 
 from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.outcomes import desired_outcome
-from llcps.domain import Body, State, TrialSpec, WorldModelInput
+from llcps.domain import Body, Fluent, State, TrialSpec, WorldModelInput
 from llcps.models.base import WorldModel
 from llcps.models.measures import get_measure, rank
 from llcps.models.relational import GoalQuery
+from llcps.symbolic.knowledge import KnowledgeBase
 from llcps.symbolic.monitor import StepFailure
 
 if TYPE_CHECKING:
@@ -39,6 +40,8 @@ class FailurePoint:
         candidates: the candidate trials in the default order (focused, then defocused).
         inputs: each candidate's Table-1 input (Omega's question).
         desired: Omega-bit weights for the kinds of change a_f lacked (the fallback measure).
+        claimed: per candidate, the missing atoms (with their sign: True to add) that the
+            knowledge base claims its action has as an effect (the goal head's prior).
     """
 
     scenario: str
@@ -48,6 +51,7 @@ class FailurePoint:
     candidates: tuple[TrialSpec, ...]
     inputs: tuple[WorldModelInput, ...]
     desired: np.ndarray
+    claimed: tuple[frozenset[tuple[Fluent, bool]], ...] = ()
 
     @property
     def missing_effects(self) -> str:
@@ -56,18 +60,22 @@ class FailurePoint:
     def query(self, indices: Sequence[int] | None = None) -> GoalQuery:
         """The goal-aware question for some candidates (all by default): will they make
         the missing atoms hold (and the atoms that should go, go)?"""
-        specs = self.candidates if indices is None else tuple(self.candidates[i] for i in indices)
+        chosen = range(len(self.candidates)) if indices is None else indices
+        specs = tuple(self.candidates[i] for i in chosen)
+        claimed = {self.candidates[i]: self.claimed[i] for i in chosen} if self.claimed else {}
         return GoalQuery.from_missing(
             specs,
             missing_add=self.failure.missing_add,
             missing_del=self.failure.missing_del,
             bodies=self.bodies,
             before=self.state,
+            claims=(lambda spec, atom, add: (atom, add) in claimed[spec]) if claimed else None,
         )
 
 
-def failure_point(agent: Agent, failure: StepFailure, state: State) -> FailurePoint:
-    """The failure point of ``agent``'s world as it is now (just after a_f failed)."""
+def failure_point(agent: Agent, failure: StepFailure, state: State, kb: KnowledgeBase) -> FailurePoint:
+    """The failure point of ``agent``'s world as it is now (just after a_f failed);
+    ``kb`` says which candidates' actions claim the missing atoms as effects."""
     from llcps.sim.perception import entity_features, scene_bodies
 
     world = agent.world
@@ -76,6 +84,9 @@ def failure_point(agent: Agent, failure: StepFailure, state: State) -> FailurePo
     specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=agent.config.candidate_grid(agent.scenario))
     features = {name: entity_features(world, name) for name in agent.kinds}
     inputs = tuple(WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in specs)
+    objects = agent.task(state).objects
+    missing = [(atom, True) for atom in failure.missing_add] + [(atom, False) for atom in failure.missing_del]
+    claimed = tuple(frozenset(m for m in missing if kb.claims(c, m[0], add=m[1], objects=objects)) for c in specs)
     return FailurePoint(
         scenario=agent.scenario.name,
         failure=failure,
@@ -84,6 +95,7 @@ def failure_point(agent: Agent, failure: StepFailure, state: State) -> FailurePo
         candidates=tuple(specs),
         inputs=inputs,
         desired=desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del),
+        claimed=claimed,
     )
 
 

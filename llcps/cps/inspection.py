@@ -37,6 +37,8 @@ class RankedCandidate:
     Attributes:
         goal: predicted probability of each missing atom (``+(in a b)`` must become
             true, ``-(in a b)`` must stop), and ``joint`` their product.
+        claimed: the missing atoms the knowledge base claims the candidate's action has
+            as an effect (the goal head's prior, docs/world_models.md).
     """
 
     position: int
@@ -45,6 +47,7 @@ class RankedCandidate:
     outcome: dict[str, float]
     goal: dict[str, float]
     joint: float
+    claimed: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -107,6 +110,7 @@ def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top:
             outcome={name: round(float(p), 4) for name, p in zip(OUTCOME_NAMES, ranking.outcome[i])},
             goal={atom: round(float(p), 4) for atom, p in zip(atoms, goal[i])},
             joint=round(float(joint[i]), 6),
+            claimed=tuple(a.label for a in point.query([i]).atoms if (a.atom, a.add) in (point.claimed[i] if point.claimed else ())),
         )
         for position, i in enumerate(ranking.order[:top])
     ]
@@ -132,7 +136,8 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
         world.settle(max_steps=SETTLE_STEPS)
         result = SolveResult(scenario=spec.name, condition="novelty", model="-", measure="-", seed=seed, branch=branch)
         agent = Agent(store=store, branch=branch, world=world, scenario=spec, config=config, result=result, records=[])
-        failure = plan_and_repair(agent, load_knowledge(store, branch), perceive(world), result, store=False)
+        kb = load_knowledge(store, branch)
+        failure = plan_and_repair(agent, kb, perceive(world), result, store=False)
         if failure is None and result.status != "solved":
             raise LlcpsError(f"the knowledge base of {branch!r} has no plan for {spec.name}'s novelty condition")
         if failure is None or result.status == "solved":
@@ -144,7 +149,7 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
                 else "the novelty does not make the nominal plan fail (see docs/scenarios.md)",
             )
         world.restore_serialized(failure.physics)  # candidates start where a_f did
-        return failure_point(agent, failure.monitor, failure.state)
+        return failure_point(agent, failure.monitor, failure.state, kb)
     finally:
         world.close()
 

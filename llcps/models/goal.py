@@ -12,7 +12,8 @@ trial; it does not retrain the learner (a refit on tens of thousands of examples
 take many failures to move, and costs a second for some learners) but keeps
 *episode evidence*: every example of the trials the learner has not seen, grouped into
 families by :func:`~llcps.models.relational.family_keys` (action, predicate, sign and
-roles; then also the orientation; then also the movement magnitude). Physics is deterministic and every exploration trial
+roles; and that with the same orientation, with the same movement magnitude, with the
+same rate). Physics is deterministic and every exploration trial
 starts from the same state, so the outcomes of one family's parameterizations are not
 independent draws: either the family can work in this scene or it cannot. Each family
 is therefore a two-way mixture: it works here with belief ``b``, and then a share
@@ -23,18 +24,26 @@ the scene is novel, and the learner may not see why a family that works elsewher
 fails here). After ``n`` failures and no success the belief is
 ``b (1 - s)^n / (b (1 - s)^n + 1 - b)``, a success makes it 1, and every member's
 probability is scaled by posterior over prior belief. With the defaults every failure
-roughly halves a family's probability whatever the learner said, a failure with the
-same orientation halves it again, and one with the same orientation and magnitude
-again: exploration moves away from what failed, first in parameters, then in kind. The evidence lives for one fit: the next fit learns
+roughly halves a family's probability whatever the learner said, and halves it again
+for each setting (orientation, magnitude, rate) a member shares with the failure:
+exploration moves away from what failed in every setting, then in kind. (Without the
+rate, a learner that prefers slow trials tried the slow setting of every family before
+any fast one, and strikes are fast.) The evidence lives for one fit: the next fit learns
 from those trials anyway.
 
-**Nothing is ruled out.** A learner trained on random interactions gives a change
-it never saw (a push that lands an object in a container) a vanishing probability, and
-such a change is what a novelty may need. The head's probability is therefore the
-learner's mixed with the base rate of its kind of change (predicate and sign) over the
-training set: ``(1 - e) p + e r`` with ``e`` = :data:`NOVELTY_MIX`. The order among
-untried candidates is the learner's; a family that keeps failing falls below all of
-them.
+**Nothing is ruled out, and K is heard.** A learner trained on random interactions
+gives a change it never saw (a push that lands an object in a container) a vanishing
+probability, and such a change is what a novelty may need. The head's probability is
+therefore the learner's mixed with a prior: ``(1 - e) p + e q`` with ``e`` =
+:data:`NOVELTY_MIX`. ``q`` is 1 where the robot's knowledge base K claims the
+candidate's action has the effect (an operator of K whose controller is the candidate's
+action lists the atom among its effects, whatever the settings and preconditions:
+``GoalQuery.claimed``, filled by the agent from
+:meth:`~llcps.symbolic.knowledge.KnowledgeBase.claims`), and otherwise the base rate
+``r`` of its kind of change (predicate and sign) over the training set. So an action K
+believes can make the missing atom is tried early even where experience never saw it
+do so, and the learner orders everything else. A family that keeps failing falls below
+all untried candidates.
 
 **Several atoms.** A candidate's score is the product of its atoms' probabilities:
 the atoms are treated as independent given the candidate (:func:`joint_probability`).
@@ -261,17 +270,18 @@ class GoalHead:
         return self
 
     # --------------------------------------------------------------- predicting
-    def _base(self, features: np.ndarray) -> np.ndarray:
-        """The learner's probability mixed with its stratum's change rate (nothing is ruled out)."""
+    def _base(self, features: np.ndarray, claimed: np.ndarray | None = None) -> np.ndarray:
+        """The learner's probability mixed with what K claims, else its stratum's change
+        rate (nothing is ruled out; see the module docstring)."""
         if not len(features):
             return np.zeros(0)
         rate = self.rates[stratum_of(features)]
-        if not self.learned:
-            return rate
-        return (1.0 - NOVELTY_MIX) * np.clip(self.learner.predict(features), 0.0, 1.0) + NOVELTY_MIX * rate
+        learned = np.clip(self.learner.predict(features), 0.0, 1.0) if self.learned else rate
+        prior = rate if claimed is None else np.where(claimed, 1.0, rate)
+        return (1.0 - NOVELTY_MIX) * learned + NOVELTY_MIX * prior
 
-    def _corrected(self, features: np.ndarray) -> np.ndarray:
-        p = self._base(features)
+    def _corrected(self, features: np.ndarray, claimed: np.ndarray | None = None) -> np.ndarray:
+        p = self._base(features, claimed)
         if self._evidence is None or not len(features):
             return p
         *ev_levels, observed, expected = self._evidence
@@ -290,7 +300,7 @@ class GoalHead:
         n, k = len(query.candidates), len(query.atoms)
         if n == 0 or k == 0:
             return np.zeros((n, k))
-        return self._corrected(encode_queries(query)).reshape(n, k)
+        return self._corrected(encode_queries(query), query.claimed_rows()).reshape(n, k)
 
     def predict_rows(self, features: np.ndarray) -> np.ndarray:
         """P(label = 1) for encoded rows (held-out evaluation), evidence included."""

@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import zlib
 from dataclasses import dataclass
-from typing import Iterable, Mapping, Sequence
+from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -139,12 +139,25 @@ class GoalQuery:
         atoms: the missing effects of the failure.
         bodies: the scene the candidates would start from (the failure state).
         before: the symbolic state there.
+        claimed: per candidate, per atom: whether the robot's knowledge base claims
+            the candidate's action has that effect (empty: no claims known).
     """
 
     candidates: tuple[TrialSpec, ...]
     atoms: tuple[GoalAtom, ...]
     bodies: tuple[Body, ...]
     before: frozenset[Fluent] = frozenset()
+    claimed: tuple[tuple[bool, ...], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.claimed and (len(self.claimed) != len(self.candidates) or any(len(c) != len(self.atoms) for c in self.claimed)):
+            raise ValueError("claimed must hold one flag per candidate and atom")
+
+    def claimed_rows(self) -> np.ndarray:
+        """The claims as one flag per encoded row (candidate-major, as :func:`encode_queries`)."""
+        if not self.claimed:
+            return np.zeros(len(self.candidates) * len(self.atoms), dtype=bool)
+        return np.array(self.claimed, dtype=bool).reshape(-1)
 
     @classmethod
     def from_missing(
@@ -155,12 +168,20 @@ class GoalQuery:
         missing_del: Iterable[Fluent],
         bodies: Iterable[Body],
         before: Iterable[Fluent] = (),
+        claims: Callable[[TrialSpec, Fluent, bool], bool] | None = None,
     ) -> GoalQuery:
-        """A query for a failure's missing add and delete effects (sorted, so the order is fixed)."""
+        """A query for a failure's missing add and delete effects (sorted, so the order is fixed).
+
+        Args:
+            claims: ``claims(candidate, atom, add)``: whether the robot's knowledge base
+                claims the candidate makes ``atom`` true (``add``) or false.
+        """
         atoms = tuple(GoalAtom(a, True) for a in sorted(missing_add)) + tuple(
             GoalAtom(a, False) for a in sorted(missing_del)
         )
-        return cls(tuple(candidates), atoms, tuple(bodies), frozenset(before))
+        specs = tuple(candidates)
+        claimed = () if claims is None else tuple(tuple(bool(claims(c, g.atom, g.add)) for g in atoms) for c in specs)
+        return cls(specs, atoms, tuple(bodies), frozenset(before), claimed)
 
 
 class Scene:
@@ -457,7 +478,7 @@ class ExampleTable:
 
 
 #: Columns of the evidence keys: what makes two (candidate, atom) pairs one *family*,
-#: then what narrows it (the orientation; then the orientation and the magnitude).
+#: and the one-hot setting that narrows it (the orientation).
 FAMILY_COLUMNS: tuple[tuple[str, ...], ...] = (
     _onehot("action", ACTIONS) + _onehot("predicate", PREDICATES) + ("add",) + _onehot("role1", ROLES) + _onehot("role2", _ROLE2),
     _onehot("orientation", ORIENTATIONS),
@@ -465,22 +486,27 @@ FAMILY_COLUMNS: tuple[tuple[str, ...], ...] = (
 
 
 def family_keys(features: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Three nested family keys per row: (action, predicate, sign, roles); that and the
-    orientation; that and the movement magnitude.
+    """Four family keys per row: (action, predicate, sign, roles); that and the
+    orientation; that and the movement magnitude; that and the rate.
 
     Within one episode, pairs of a family share what matters physically: a family the
-    robot keeps failing with drops, and parameterizations near a failure drop more
-    (see :mod:`llcps.models.goal`).
+    robot keeps failing with drops, and so, once more for each setting it shares with
+    a failure, does each of its parameterizations: exploration moves away from what
+    failed in every setting (see :mod:`llcps.models.goal`).
     """
     coarse_cols = [_INDEX[c] for c in FAMILY_COLUMNS[0]]
-    fine_cols = [_INDEX[c] for c in FAMILY_COLUMNS[1]]
+    orientation_cols = [_INDEX[c] for c in FAMILY_COLUMNS[1]]
     bits = features[:, coarse_cols] > 0.5
-    coarse = bits @ (1 << np.arange(len(coarse_cols), dtype=np.int64))
-    orientation = (features[:, fine_cols] > 0.5) @ np.arange(1, len(fine_cols) + 1, dtype=np.int64)
-    fine = coarse * (len(fine_cols) + 1) + orientation
+    coarse = (bits @ (1 << np.arange(len(coarse_cols), dtype=np.int64))).astype(np.int64)
+    orientation = (features[:, orientation_cols] > 0.5) @ np.arange(1, len(orientation_cols) + 1, dtype=np.int64)
     magnitude = np.round(features[:, _INDEX["movement_magnitude"]] * 1e4).astype(np.int64)  # 0.1 mm steps
-    finest = fine * 100_003 + magnitude
-    return coarse.astype(np.int64), fine.astype(np.int64), finest
+    rate = np.round(features[:, _INDEX["rate"]] * 1e4).astype(np.int64)  # 0.1 mm/s steps
+    return (
+        coarse,
+        coarse * (len(orientation_cols) + 1) + orientation,
+        coarse * 100_003 + magnitude,
+        coarse * 100_003 + rate,
+    )
 
 
 #: (predicate, sign) strata of the rows: what kind of change is asked.

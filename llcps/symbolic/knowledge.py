@@ -21,7 +21,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass, field, replace
 from importlib import resources
-from typing import Iterable, Mapping
+from typing import Callable, Iterable, Mapping
 
 from lark.exceptions import LarkError
 from pddl.core import Domain, Problem
@@ -33,7 +33,7 @@ from pddl.logic.predicates import Predicate
 from pddl.logic.terms import Constant, Variable
 from pddl.requirements import Requirements
 
-from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, State, fluent
+from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, State, TrialSpec, fluent
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.symbolic.experience import Context, Experience, step_context
 from llcps.symbolic.operators import LearnedOperator, parse_operator_name
@@ -45,6 +45,7 @@ from llcps.symbolic.schema import (
     GroundAction,
     Operator,
     operator_parts_from_pddl,
+    is_variable,
     operator_to_pddl,
     sort_fluents,
 )
@@ -321,6 +322,36 @@ class KnowledgeBase:
                 return op
         raise UnknownNameError("learned operator", name, [op.name for op in self.learned])
 
+    def claims(self, call: TrialSpec, atom: Fluent, *, add: bool, objects: Mapping[str, str]) -> bool:
+        """Whether some operator of K, executed by this controller call, has the effect of
+        making ``atom`` true (``add``) or false.
+
+        Only effects count, not preconditions: after a novelty the preconditions are what
+        may no longer mean what K thinks. The call's arguments bind the operator's
+        controller arguments; its other parameters bind to any object of their type
+        (``push(?o)`` aimed at ``?c`` claims ``(in ?o ?c)`` for every container). A
+        naive action claims its effects for every controller setting; a learned operator
+        only for its own settings. A symmetric atom (``touching``) is read both ways.
+
+        Args:
+            objects: object name -> type, for the objects the atom and the call name
+                (constants are known to K).
+        """
+        types = {**self.constants, **objects}
+        readings = [atom, (atom[0], *reversed(atom[1:]))] if atom[0] in SYMMETRIC_PREDICATES else [atom]
+        for op in (*self.actions, *(learned.as_operator(0.0) for learned in self.learned)):
+            controller = op.controller
+            if controller.action != call.action or controller.params not in (None, call.params):
+                continue
+            parameter_types = dict(op.parameters)
+            binding = dict(zip(controller.arguments, call.arguments))
+            if not all(self.is_subtype(types.get(obj, ""), parameter_types[var]) for var, obj in binding.items()):
+                continue
+            effects = op.add if add else op.delete
+            if any(_unifies(e, a, binding, parameter_types, types, self.is_subtype) for e in effects for a in readings):
+                return True
+        return False
+
     def is_subtype(self, kind: str, ancestor: str) -> bool:
         """Whether an object of type ``kind`` may fill a parameter of type ``ancestor``."""
         seen: set[str] = set()
@@ -381,6 +412,33 @@ def _default_kb() -> KnowledgeBase:
 def default_domain_pddl() -> str:
     """The text of the package's naive domain, comments included."""
     return resources.files("llcps.symbolic").joinpath("pddl/domain.pddl").read_text(encoding="utf-8")
+
+
+def _unifies(
+    effect: Fluent,
+    atom: Fluent,
+    binding: Mapping[str, str],
+    parameter_types: Mapping[str, str],
+    types: Mapping[str, str],
+    is_subtype: Callable[[str, str], bool],
+) -> bool:
+    """Whether a lifted effect, under ``binding`` and free bindings of its other variables
+    to objects of their type, is ``atom``."""
+    if effect[0] != atom[0] or len(effect) != len(atom):
+        return False
+    bound = dict(binding)
+    for term, obj in zip(effect[1:], atom[1:]):
+        if not is_variable(term):
+            if term != obj:
+                return False
+        elif term in bound:
+            if bound[term] != obj:
+                return False
+        elif obj in types and is_subtype(types[obj], parameter_types[term]):
+            bound[term] = obj
+        else:
+            return False
+    return True
 
 
 def _symmetric_closure(state: Iterable[Fluent]) -> list[Fluent]:
