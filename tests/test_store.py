@@ -101,6 +101,8 @@ def test_fork_points(store: Store, new_trial) -> None:  # noqa: ANN001
         store.create_branch("bad2", from_branch="at-id", at=own)
     empty_root_child = store.create_branch("grandchild", from_branch="at-zero", at="pretrain")
     assert empty_root_child.fork_point == 0 and empty_root_child.visible_trials == 0
+    assert store.branch_names() == [b.name for b in store.list_branches()]
+    assert store.branch_names()[0] == MAIN_BRANCH and "grandchild" in store.branch_names()
 
 
 def test_checkout_and_current_branch(store: Store) -> None:

@@ -461,6 +461,11 @@ class Store:
             is_current=name == current,
         )
 
+    def branch_names(self) -> list[str]:
+        """Every branch's name, oldest first: what ``list_branches`` gives without counting trials."""
+        with self._read() as conn:
+            return [r.name for r in self._branches(conn)]
+
     def list_branches(self) -> list[BranchInfo]:
         """Every branch with its parent, fork point and trial counts, oldest first."""
         with self._read() as conn:
