@@ -64,7 +64,7 @@ from llcps.store.schema import (
     TrialChangeRow,
     WorldModel,
 )
-from llcps.store.visibility import BranchRow, Link
+from llcps.store.visibility import Link
 from llcps.store.changes import CHANGE_COLUMNS, UNKNOWN, ChangeDecoder, change_row
 from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, iso_timestamp, trial_row
 
@@ -403,8 +403,7 @@ class Store:
         return rows
 
     def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[Link]:
-        rows = self._branches(conn) if rows is None else rows
-        return visibility.chain([BranchRow(r.id, r.name, r.parent_id, r.fork_point) for r in rows], name)
+        return visibility.Tree(self._branches(conn) if rows is None else rows).chain(name)
 
     def _name(self, conn: Connection, name: str | None) -> str:
         if name is not None:
@@ -444,11 +443,11 @@ class Store:
             best = max(best, conn.scalar(stmt) or 0)
         return best
 
-    def _info(self, conn: Connection, name: str, rows: list[Any] | None = None, current: str | None = None) -> BranchInfo:
-        rows = self._branches(conn) if rows is None else rows
-        chain = self._chain(conn, name, rows)
-        row = next(r for r in rows if r.name == name)
-        parent = next((r.name for r in rows if r.id == row.parent_id), None)
+    def _info(self, conn: Connection, name: str, tree: visibility.Tree | None = None, current: str | None = None) -> BranchInfo:
+        tree = visibility.Tree(self._branches(conn)) if tree is None else tree
+        chain = tree.chain(name)
+        row = tree.by_name[name]
+        parent = tree.by_id[row.parent_id].name if row.parent_id is not None else None
         current = self._name(conn, None) if current is None else current
         return BranchInfo(
             id=row.id,
@@ -469,9 +468,9 @@ class Store:
     def list_branches(self) -> list[BranchInfo]:
         """Every branch with its parent, fork point and trial counts, oldest first."""
         with self._read() as conn:
-            rows = self._branches(conn)
+            tree = visibility.Tree(self._branches(conn))
             current = self._name(conn, None)
-            return [self._info(conn, r.name, rows, current) for r in rows]
+            return [self._info(conn, r.name, tree, current) for r in tree.rows]
 
     def create_branch(self, name: str, *, from_branch: str | None = None, at: int | str | None = None) -> BranchInfo:
         """Fork a new branch.

@@ -52,34 +52,52 @@ class Link:
     limit: int | None
 
 
-def chain(rows: Sequence[BranchRow], name: str) -> list[Link]:
-    """The visibility chain of branch ``name``: itself, then its ancestors with their limits.
+class Tree:
+    """Branch rows indexed once, so the chains of every branch take time linear in their depth.
 
-    Raises:
-        UnknownNameError: no branch of that name (the message lists the known ones).
-        StoreError: the rows do not form a tree (a cycle, a missing parent, a bad fork point).
+    Rows are anything with ``id``, ``name``, ``parent_id`` and ``fork_point``
+    (:class:`BranchRow`, or the database's rows themselves).
     """
-    by_id = {r.id: r for r in rows}
-    row = next((r for r in rows if r.name == name), None)
-    if row is None:
-        raise UnknownNameError("branch", name, [r.name for r in rows])
-    links: list[Link] = []
-    seen: set[int] = set()
-    limit: int | None = None
-    while True:
-        if row.id in seen:
-            raise StoreError(f"branch {name!r} descends from itself (a cycle of parents)", hint=_REPAIR)
-        seen.add(row.id)
-        links.append(Link(row.id, row.name, limit))
-        if row.parent_id is None:
-            return links
-        if not isinstance(row.fork_point, int) or row.fork_point < 0:
-            raise StoreError(f"branch {row.name!r} has an invalid fork point {row.fork_point!r}", hint=_REPAIR)
-        parent = by_id.get(row.parent_id)
-        if parent is None:
-            raise StoreError(f"branch {row.name!r} has a parent that does not exist (id {row.parent_id})", hint=_REPAIR)
-        limit = row.fork_point if limit is None else min(limit, row.fork_point)
-        row = parent
+
+    def __init__(self, rows: Iterable[Any]) -> None:
+        self.rows = list(rows)
+        self.by_id = {r.id: r for r in self.rows}
+        self.by_name: dict[str, Any] = {}
+        for r in self.rows:
+            self.by_name.setdefault(r.name, r)
+
+    def chain(self, name: str) -> list[Link]:
+        """The visibility chain of branch ``name``: itself, then its ancestors with their limits.
+
+        Raises:
+            UnknownNameError: no branch of that name (the message lists the known ones).
+            StoreError: the rows do not form a tree (a cycle, a missing parent, a bad fork point).
+        """
+        row = self.by_name.get(name)
+        if row is None:
+            raise UnknownNameError("branch", name, [r.name for r in self.rows])
+        links: list[Link] = []
+        seen: set[int] = set()
+        limit: int | None = None
+        while True:
+            if row.id in seen:
+                raise StoreError(f"branch {name!r} descends from itself (a cycle of parents)", hint=_REPAIR)
+            seen.add(row.id)
+            links.append(Link(row.id, row.name, limit))
+            if row.parent_id is None:
+                return links
+            if not isinstance(row.fork_point, int) or row.fork_point < 0:
+                raise StoreError(f"branch {row.name!r} has an invalid fork point {row.fork_point!r}", hint=_REPAIR)
+            parent = self.by_id.get(row.parent_id)
+            if parent is None:
+                raise StoreError(f"branch {row.name!r} has a parent that does not exist (id {row.parent_id})", hint=_REPAIR)
+            limit = row.fork_point if limit is None else min(limit, row.fork_point)
+            row = parent
+
+
+def chain(rows: Sequence[BranchRow], name: str) -> list[Link]:
+    """The visibility chain of branch ``name`` among ``rows`` (see :meth:`Tree.chain`)."""
+    return Tree(rows).chain(name)
 
 
 def sees(links: Sequence[Link], branch_id: int, position: int) -> bool:
