@@ -443,8 +443,17 @@ class Store:
             best = max(best, conn.scalar(stmt) or 0)
         return best
 
-    def _info(self, conn: Connection, name: str, tree: visibility.Tree | None = None, current: str | None = None) -> BranchInfo:
+    def _info(
+        self,
+        conn: Connection,
+        name: str,
+        tree: visibility.Tree | None = None,
+        current: str | None = None,
+        count: Callable[[Link], int] | None = None,
+    ) -> BranchInfo:
+        """A branch's row and trial counts; ``count`` counts one link's trials (default: a query each)."""
         tree = visibility.Tree(self._branches(conn)) if tree is None else tree
+        count = (lambda link: self._count(conn, [link])) if count is None else count
         chain = tree.chain(name)
         row = tree.by_name[name]
         parent = tree.by_id[row.parent_id].name if row.parent_id is not None else None
@@ -454,8 +463,8 @@ class Store:
             name=name,
             parent=parent,
             fork_point=row.fork_point,
-            own_trials=self._count(conn, chain[:1]),
-            visible_trials=self._count(conn, chain),
+            own_trials=count(chain[0]),
+            visible_trials=sum(count(link) for link in chain),  # a chain's branches are distinct
             created_at=iso_timestamp(row.created_at) or "",
             is_current=name == current,
         )
@@ -470,7 +479,18 @@ class Store:
         with self._read() as conn:
             tree = visibility.Tree(self._branches(conn))
             current = self._name(conn, None)
-            return [self._info(conn, r.name, tree, current) for r in tree.rows]
+            own = {b: int(n) for b, n in conn.execute(select(Trial.branch_id, func.count()).group_by(Trial.branch_id))}
+            upto: dict[tuple[int, int], int] = {}  # siblings share their parent's count up to the fork point
+
+            def count(link: Link) -> int:
+                if link.limit is None:
+                    return own.get(link.branch_id, 0)
+                key = (link.branch_id, link.limit)
+                if key not in upto:
+                    upto[key] = self._count(conn, [link])
+                return upto[key]
+
+            return [self._info(conn, r.name, tree, current, count) for r in tree.rows]
 
     def create_branch(self, name: str, *, from_branch: str | None = None, at: int | str | None = None) -> BranchInfo:
         """Fork a new branch.
