@@ -240,6 +240,38 @@ def test_what_k_claims_is_mixed_in_where_the_learner_saw_nothing(fitted, query, 
     assert after[lifted].min() >= NOVELTY_MIX - 1e-12
 
 
+@pytest.mark.parametrize("learner", ["nb", "logreg"])
+def test_a_setting_one_controller_needs_is_not_carried_over_to_another(learner):
+    """Slow grasps empty the bucket, fast pushes tip it over, slow pushes do nothing: the
+    learners without interactions learn each controller's settings apart (a learner
+    pooled over controllers ranks the slow push first, as the slow grasps outnumber)."""
+    from llcps.models.baselines import LogisticGoal
+    from llcps.models.goal import StratifiedLearner
+    from llcps.models.naive_bayes import NaiveBayesGoal
+
+    atom = ("in", "cube", "bucket")
+    specs = {
+        (action, rate): TrialSpec(action, args, ControllerParams(rate, 0.15, "left"))
+        for action, args in (("remove_from_container", ("cube", "bucket")), ("push", ("bucket",)))
+        for rate in (0.1, 1.0)
+    }
+    query = GoalQuery.from_missing(list(specs.values()), missing_add=[], missing_del=[atom], bodies=scene())
+    rows = dict(zip(specs, encode_queries(query)))
+    counts = {("remove_from_container", 0.1): (30, 1), ("remove_from_container", 1.0): (10, 0), ("push", 1.0): (5, 1), ("push", 0.1): (20, 0)}
+    features = np.concatenate([np.repeat(rows[key][None], n, axis=0) for key, (n, _) in counts.items()])
+    labels = np.concatenate([np.full(n, label, dtype=np.uint8) for n, label in counts.values()])
+    make = {"nb": NaiveBayesGoal, "logreg": LogisticGoal}[learner]
+    stratified = StratifiedLearner(0, make)
+    stratified.fit(features, labels, np.ones(len(labels)))
+    slow, fast = stratified.predict(np.stack([rows[("push", 0.1)], rows[("push", 1.0)]]))
+    assert fast > 0.5 > slow
+    if learner == "nb":
+        pooled = make(0)
+        pooled.fit(features, labels, np.ones(len(labels)))
+        pooled_slow, pooled_fast = pooled.predict(np.stack([rows[("push", 0.1)], rows[("push", 1.0)]]))
+        assert pooled_slow > pooled_fast  # what the strata are for
+
+
 def test_a_query_s_claims_must_match_its_candidates_and_atoms(query):
     with pytest.raises(ValueError, match="one flag per candidate and atom"):
         GoalQuery(query.candidates[:2], query.atoms, query.bodies, claimed=((True,),))

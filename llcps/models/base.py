@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
 #: ``meta["format"]`` of every artifact, and the version this code writes and reads.
 ARTIFACT_FORMAT = "llcps-world-model"
-ARTIFACT_VERSION = 2
+ARTIFACT_VERSION = 3
 
 #: Largest total (uncompressed) array payload an artifact may declare: a guard
 #: against a crafted archive that would exhaust memory when read.

@@ -60,11 +60,13 @@ from llcps.domain import TrialChange, TrialRecord
 from llcps.models.base import array
 from llcps.models.relational import (
     CONTINUOUS_MASK,
+    N_ACTION_STRATA,
     N_GOAL_FEATURES,
     N_STRATA,
     ExampleTable,
     Examples,
     GoalQuery,
+    action_stratum_of,
     encode_queries,
     family_keys,
     stratum_of,
@@ -108,26 +110,30 @@ class GoalLearner(ABC):
 
 
 class StratifiedLearner(GoalLearner):
-    """One sub-learner per (predicate, sign) stratum of the rows.
+    """One sub-learner per (action, predicate, sign) stratum of the rows.
 
     For learners without interactions (naive Bayes, a linear model), what predicts a
-    change depends on which change is asked: a push_together makes things touch and
-    never puts them in containers. Each stratum gets its own fit; a stratum with one
-    class in training predicts its weighted Laplace-smoothed change rate. The network
-    and the forest learn such interactions themselves and are fitted on all rows.
+    change depends on which change is asked and of which controller: a push_together
+    makes things touch and never puts them in containers, and a setting that helps one
+    controller make a change can hinder another (a slow, careful grasp lifts an object
+    out of a container; a slow push does not tip one over). Pooled over controllers,
+    such a learner would carry the settings of the controller that makes a change most
+    often over to every other. Each stratum gets its own fit; a stratum with one class
+    in training predicts its weighted Laplace-smoothed change rate. The network and the
+    forest learn such interactions themselves and are fitted on all rows.
     """
 
     def __init__(self, seed: int, make: Callable[[int], GoalLearner]) -> None:
         super().__init__(seed)
         self.name = make(seed).name  # type: ignore[misc]
         self._make = make
-        self.priors = np.full(N_STRATA, 0.5)
+        self.priors = np.full(N_ACTION_STRATA, 0.5)
         self.subs: dict[int, GoalLearner] = {}
 
     def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
-        strata = stratum_of(features)
+        strata = action_stratum_of(features)
         self.subs = {}
-        for k in range(N_STRATA):
+        for k in range(N_ACTION_STRATA):
             rows = strata == k
             y, w = labels[rows], weights[rows]
             self.priors[k] = (float(w @ y) + 1.0) / (float(w.sum()) + 2.0)
@@ -137,7 +143,7 @@ class StratifiedLearner(GoalLearner):
                 self.subs[k] = sub
 
     def predict(self, features: np.ndarray) -> np.ndarray:
-        strata = stratum_of(features)
+        strata = action_stratum_of(features)
         out = self.priors[strata]
         for k, sub in self.subs.items():
             rows = strata == k
@@ -146,17 +152,17 @@ class StratifiedLearner(GoalLearner):
         return out
 
     def export(self) -> dict[str, np.ndarray]:
-        arrays = {"priors": self.priors, "learned": np.array([k in self.subs for k in range(N_STRATA)])}
+        arrays = {"priors": self.priors, "learned": np.array([k in self.subs for k in range(N_ACTION_STRATA)])}
         for k, sub in self.subs.items():
             arrays.update({f"s{k}/{name}": value for name, value in sub.export().items()})
         return arrays
 
     def load(self, arrays: Mapping[str, np.ndarray]) -> None:
-        priors = array(arrays, "priors", (N_STRATA,))
+        priors = array(arrays, "priors", (N_ACTION_STRATA,))
         if np.any((priors <= 0) | (priors >= 1)):
             raise ValueError("stratum priors must lie strictly inside (0, 1)")
         self.priors = priors.astype(np.float64)
-        learned = array(arrays, "learned", (N_STRATA,), kind="b")
+        learned = array(arrays, "learned", (N_ACTION_STRATA,), kind="b")
         self.subs = {}
         for k in np.flatnonzero(learned):
             sub = self._make(self.seed)

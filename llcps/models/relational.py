@@ -518,3 +518,14 @@ def stratum_of(features: np.ndarray) -> np.ndarray:
     """Each row's (predicate, sign) stratum: ``2 * predicate index + add``."""
     predicate = np.argmax(features[:, _PREDICATE_COLUMNS], axis=1)
     return (2 * predicate + (features[:, _INDEX["add"]] > 0.5)).astype(np.int64)
+
+
+#: (action, predicate, sign) strata of the rows: which change is asked of which controller.
+N_ACTION_STRATA = len(ACTIONS) * N_STRATA
+_ACTION_COLUMNS = [_INDEX[f"action={a}"] for a in ACTIONS]
+
+
+def action_stratum_of(features: np.ndarray) -> np.ndarray:
+    """Each row's (action, predicate, sign) stratum: ``N_STRATA * action index + stratum_of``."""
+    action = np.argmax(features[:, _ACTION_COLUMNS], axis=1)
+    return (N_STRATA * action + stratum_of(features)).astype(np.int64)
