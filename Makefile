@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 DB ?= llcps.db
 
-.PHONY: setup run test test-fast test-slow clean
+.PHONY: setup run lint test test-fast test-slow clean
 
 $(BIN)/llcps: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,13 +26,17 @@ run: setup
 	-$(BIN)/llcps --db $(DB) solve scenario3
 	$(BIN)/llcps --db $(DB) inspect episodes
 
-# The whole suite, slow tests included (what CI runs), on both cores, listing its 25
+# The lint, then the whole suite, slow tests included (what CI runs), on both cores, listing its 25
 # slowest tests at the end so the ~25 min budget is watched. .ci/services.sh
 # installs the system packages the tests need (as root); tests/services.sh runs the suite
 # beside a throwaway PostgreSQL server (installed first when missing) and stops it after.
-test: setup
+test: lint
 	bash .ci/services.sh
 	tests/services.sh $(BIN)/python -m pytest -n 2 --dist loadfile --durations=25
+
+# Unused imports and variables, undefined names, syntax errors (pyproject.toml [tool.ruff]).
+lint: setup
+	$(BIN)/ruff check llcps tests migrations
 
 # The inner loop: everything but the slow tests (sweeps, lifelong sequences in physics).
 test-fast: setup

@@ -16,7 +16,6 @@ from typer.testing import CliRunner
 from llcps.cli.main import app
 from llcps.scenarios import CONDITIONS, SCENARIOS, get_scenario
 from llcps.scenarios.loader import read_text
-from llcps.sim.specs import SceneSpec
 from llcps.sim.world import World
 
 runner = CliRunner()

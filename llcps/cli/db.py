@@ -10,7 +10,6 @@ import typer
 
 from llcps.cli._common import (
     JsonFlag,
-    err_console,
     YesFlag,
     choice_enum,
     message,

@@ -37,7 +37,7 @@ from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 from llcps.domain import TrialChange, TrialRecord, check_id
 from llcps.provenance import Provenance
 from llcps.provenance import current as provenance_of_process
-from llcps.errors import LlcpsError, StoreError, UnknownNameError
+from llcps.errors import LlcpsError, StoreError
 from llcps.store import engine as engines
 from llcps.store import migrations, visibility
 from llcps.store.records import (

@@ -313,16 +313,14 @@ class TrialDecoder:
         """
         try:
             return self._decode(rows)
-        except (ValueError, TypeError, KeyError, AttributeError, RecursionError) as exc:
+        except (ValueError, TypeError, KeyError, AttributeError, RecursionError) as batch_exc:
+            trial, exc = "?", batch_exc  # a batch fails only through one of its rows, named below
             for row in rows:  # find the row to name: slow, but only on the way to an error
                 try:
                     self._decode([row])
                 except (ValueError, TypeError, KeyError, AttributeError, RecursionError) as row_exc:
-                    exc = row_exc
-                    trial = row[0]
+                    trial, exc = row[0], row_exc
                     break
-            else:  # pragma: no cover - a batch fails only through one of its rows
-                trial = "?"
             raise StoreError(
                 f"stored trial {trial} is malformed: {exc}",
                 hint="the row was changed outside llcps; delete it or restore the database from a copy",
