@@ -206,21 +206,29 @@ def _row(t):
 
 
 def test_episodes_record_the_same_trials_without_the_cache_from_a_cold_one_and_from_a_warm_one(tmp_path: Path) -> None:
-    config = SolveConfig(scenario="scenario2", budget=8, seed=1)  # re-plans twice after exploration
     with Store.open(str(tmp_path / "cache.db"), create=True) as store:
         cache = pc.StorePhysicsCache(store.engine)
         pretrain(store, branch="main", n=6, seed=3)
-        for name in ("plain", "cold", "warm"):
+        # An episode that re-plans after exploration (plan trials start from exploration's
+        # end states): the first of a few seeds whose episode does, as the goal head decides.
+        for seed in range(6):
+            config = SolveConfig(scenario="scenario2", budget=8, seed=seed)
+            store.create_branch(f"plain{seed}", from_branch="main", at="pretrain")
+            plain = solve(store, branch=f"plain{seed}", config=config)
+            sources = [t.source for t in store.visible_trials(f"plain{seed}") if t.source != "pretrain"]
+            if "plan" in sources[sources.index("exploration") :]:
+                break
+        else:
+            pytest.fail("no seed of 0-5 re-plans after exploration in scenario 2")
+        for name in ("cold", "warm"):
             store.create_branch(name, from_branch="main", at="pretrain")
-        plain = solve(store, branch="plain", config=config)
         cold = solve(store, branch="cold", config=config, cache=cache)
         simulated = cache.counts.misses
         warm = solve(store, branch="warm", config=config, cache=pc.StorePhysicsCache(store.engine))  # a later run
-        trials = {n: [t for t in store.visible_trials(n) if t.source != "pretrain"] for n in ("plain", "cold", "warm")}
+        trials = {n: [t for t in store.visible_trials(b) if t.source != "pretrain"] for n, b in (("plain", f"plain{seed}"), ("cold", "cold"), ("warm", "warm"))}
         recorded_hits = pc.status(store).hits  # written back when the episode ended
     assert plain.exploration_trials == cold.exploration_trials == warm.exploration_trials > 0
     assert plain.status == cold.status == warm.status
-    assert sum(1 for t in trials["plain"] if t.source == "plan") > 1  # plan trials after exploration: end states feed later physics
     assert [_row(t) for t in trials["plain"]] == [_row(t) for t in trials["cold"]] == [_row(t) for t in trials["warm"]]
     assert simulated == len(trials["cold"]) and cache.counts.stored == simulated
     assert (plain.cache_hits, cold.cache_hits, warm.cache_hits) == (0, 0, len(trials["warm"])) == (0, 0, recorded_hits)
