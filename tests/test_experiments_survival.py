@@ -3,6 +3,7 @@ hand-worked values, and the update-vs-reset table with unsolved episodes censore
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -63,3 +64,13 @@ def test_update_against_reset_with_unsolved_episodes_censored() -> None:
     assert survival.survival_table(ResultsTable(rows), resamples=300, seed=0) == (row,)  # seeded
     curves = survival.survival_curves(ResultsTable(rows))
     assert [(c.condition, c.estimate.events) for c in curves] == [("update", 4), ("reset", 3)]
+
+
+def test_a_whole_space_preset_is_censored_where_its_episodes_end() -> None:
+    """A whole-space budget is a number no episode reaches: an unsolved episode stops
+    when the candidates run out, so the horizon is the largest count observed."""
+    paper = [_row("nb", "most-changes", 4, "update", seed, "scenario2", t) for seed, t in enumerate((10, 150))]
+    assert survival.budget(paper) == 150.0  # the paper preset's budget of 150
+    whole = [dataclasses.replace(r, preset="lifelong", solved=s) for r, s in zip(paper, (True, False))]
+    assert survival.budget(whole) == 150.0  # not the 100,000 of WHOLE_SPACE
+    assert survival.kaplan_meier([10, 150], [True, False], tau=survival.budget(whole)).tau == 150.0

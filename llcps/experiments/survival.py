@@ -28,7 +28,7 @@ from typing import Iterable, Sequence
 import numpy as np
 from scipy import stats as sps
 
-from llcps.experiments.grid import PRESETS, condition_rank
+from llcps.experiments.grid import PRESETS, WHOLE_SPACE, condition_rank
 from llcps.experiments.results import ResultRow, ResultsTable
 from llcps.experiments.stats import DEFAULT_RESAMPLES, _group, _check_metric, cell_rng, figure2_order, pct_change
 
@@ -123,11 +123,18 @@ def kaplan_meier(times: Sequence[float], solved: Sequence[bool], *, tau: float) 
 
 
 def budget(rows: Iterable[ResultRow]) -> float:
-    """The horizon tau of some rows: their preset's budget, else the largest count observed."""
+    """The horizon tau of some rows: their preset's budget, else the largest count observed.
+
+    A preset whose budget is the whole candidate space (:data:`WHOLE_SPACE`) ends an
+    unsolved episode when its candidates run out, far below that number: its horizon is
+    the largest count observed.
+    """
     rows = list(rows)
     budgets = {PRESETS[r.preset].exploration_budget() for r in rows if r.preset in PRESETS}
     observed = max((r.exploration_trials for r in rows), default=0)
-    return float(max(budgets)) if len(budgets) == 1 and max(budgets) >= observed else float(observed)
+    if len(budgets) == 1 and observed <= max(budgets) < WHOLE_SPACE:
+        return float(max(budgets))
+    return float(observed)
 
 
 @dataclass(frozen=True)
