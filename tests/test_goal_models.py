@@ -277,7 +277,7 @@ def test_a_query_s_claims_must_match_its_candidates_and_atoms(query):
         GoalQuery(query.candidates[:2], query.atoms, query.bodies, claimed=((True,),))
 
 
-def failing_trials(query, family, start_id, n):
+def failing_trials(query, family, start_id, n, snapshot_id=None):
     """``n`` trials of the candidates in ``family`` that changed nothing (the atom stayed false)."""
     before = frozenset({fluent("on", "entity0", "table")})
     out, changes = [], {}
@@ -286,7 +286,7 @@ def failing_trials(query, family, start_id, n):
         features = tuple(EntityFeatures("box", 0.001, "red", 0.5, 1.0, 0.0, 0.0) for _ in spec.arguments)
         record = TrialRecord(
             branch="main", source="exploration", spec=spec, features=features, outcome=Outcome(), solved=False,
-            sim_steps=1, wall_seconds=0.0, seed=0, id=start_id + k,
+            sim_steps=1, wall_seconds=0.0, seed=0, id=start_id + k, snapshot_id=snapshot_id,
         )  # fmt: skip
         out.append(record)
         changes[record.id] = TrialChange(before, frozenset(), frozenset(), query.bodies, trial_id=record.id)
@@ -309,6 +309,30 @@ def test_a_family_that_keeps_failing_drops(toy, query, name):
     # evidence is kept until the next fit, which starts from all trials again
     model.fit(list(records) + tried, {**changes, **tried_changes})
     assert model.goal.watermark == 10_011
+
+
+@pytest.mark.parametrize("name", ["nb", "logreg"])
+def test_only_trials_from_the_ranked_start_state_are_episode_evidence(toy, query, name):
+    """A plan step run from the state a trial left behind says nothing certain about a
+    family at the failure point: with ``start`` set, only trials that started there count."""
+    records, changes = toy
+    p = make_world_model(name, 0).fit(records, changes).predict_goal(query)[:, 0]
+    family = [i for i in np.argsort(-p, kind="stable") if query.candidates[i].action == "place_in_container"][:36]
+    elsewhere, elsewhere_changes = failing_trials(query, family, 10_000, 6, snapshot_id=2)
+    here, here_changes = failing_trials(query, family[6:], 20_000, 6, snapshot_id=1)
+    trials, all_changes = list(records) + elsewhere + here, {**changes, **elsewhere_changes, **here_changes}
+
+    def after(start):
+        model = make_world_model(name, 0).fit(records, changes)
+        return model.update(trials, all_changes, start=start).predict_goal(query)[:, 0]
+
+    untried = family[12:]
+    only_here, every_trial = after(1), after(None)
+    assert np.all(only_here[untried] < p[untried])  # the trials from the start state count
+    assert np.all(every_trial[untried] < only_here[untried])  # the others would have counted too
+    only_elsewhere = make_world_model(name, 0).fit(records, changes)
+    only_elsewhere.update(list(records) + elsewhere, {**changes, **elsewhere_changes}, start=1)
+    assert np.allclose(only_elsewhere.predict_goal(query)[:, 0], p)
 
 
 def test_families_are_action_predicate_sign_roles_and_each_setting(query):

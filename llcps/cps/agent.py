@@ -510,7 +510,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
             _learn(agent, kb, spec, trial, failure, record, result)
             return
         if tried % config.refit_every == 0 and remaining:
-            model.update(agent.records, agent.changes)
+            model.update(agent.records, agent.changes, start=snapshot)
             order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     result.status = "budget_exhausted"
 

@@ -86,17 +86,28 @@ class WorldModel(ABC):
             self.goal = type(self.goal)(self._goal_learner())  # unfitted: what it learned before is gone
         return self
 
-    def update(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange] | None = None) -> WorldModel:
+    def update(
+        self,
+        records: Sequence[TrialRecord],
+        changes: Mapping[int, TrialChange] | None = None,
+        *,
+        start: int | None = None,
+    ) -> WorldModel:
         """Bring the model up to ``records``, a training set that grew since the last fit.
 
         What the agent calls during exploration, where the set grows by a few trials at a
         time. Omega is refitted (a model whose fit is costly may continue from its current
         state instead: the network does); the goal-aware head takes the new trials in as
         episode evidence (:mod:`llcps.models.goal`).
+
+        Args:
+            start: the snapshot id the candidates being ranked start from. Only new
+                trials that started there are episode evidence (None: every new trial);
+                the others are learned at the next fit.
         """
         self._update_outcome(records)
         if self.has_goal:
-            self.goal.update(records, changes or {})
+            self.goal.update(records, changes or {}, start=start)
         return self
 
     @abstractmethod

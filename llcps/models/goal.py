@@ -15,7 +15,10 @@ families by :func:`~llcps.models.relational.family_keys` (action, predicate, sig
 roles; and that with the same orientation, with the same movement magnitude, with the
 same rate). Physics is deterministic and every exploration trial
 starts from the same state, so the outcomes of one family's parameterizations are not
-independent draws: either the family can work in this scene or it cannot. Each family
+independent draws: either the family can work in this scene or it cannot. That holds
+from one start state only, so the agent names it (``start``: the failure snapshot) and
+only trials that started there are evidence; the plan steps K runs from the state a
+trial left behind wait for the next fit. Each family
 is therefore a two-way mixture: it works here with belief ``b``, and then a share
 :data:`FAMILY_SUCCESS` of its members changes the atom; or it does not, and none does.
 The learner's mean probability ``p`` over the family's tried members sets the prior
@@ -255,10 +258,25 @@ class GoalHead:
         self._evidence_ids = set()
         return self
 
-    def update(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalHead:
-        """Take in the trials after the fit as episode evidence (the learner is not refitted)."""
+    def update(
+        self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange], *, start: int | None = None
+    ) -> GoalHead:
+        """Take in the trials after the fit as episode evidence (the learner is not refitted).
+
+        Args:
+            start: the snapshot id the ranked candidates start from: only trials that
+                started there are evidence (None: every trial after the fit). A family's
+                outcomes are one mixture only from one start state; a plan step run from
+                the state a trial left behind says nothing certain about that family there.
+        """
         fresh = [
-            r for r in records if r.id is not None and r.id > self.watermark and r.id not in self._evidence_ids and r.id in changes
+            r
+            for r in records
+            if r.id is not None
+            and r.id > self.watermark
+            and r.id not in self._evidence_ids
+            and r.id in changes
+            and (start is None or r.snapshot_id == start)
         ]
         if not fresh:
             return self
