@@ -102,3 +102,28 @@ def test_inspect_shows_which_candidates_k_claims_and_their_lift(db):
     assert claimed == expected and len(expected) == 36 + 35  # the failed placement itself is no candidate
     assert all(c["claimed"] == ["+(in can bin)"] for c in ranked if c["claimed"])
     assert min(c["goal"]["+(in can bin)"] for c in ranked if c["claimed"]) >= NOVELTY_MIX - 1e-4
+
+
+def test_inspect_shows_scenario2_s_subgoal_and_ranks_by_resolving(db):
+    """With the bin out of reach, K's push(can, bin) would still put the can in it but
+    lacks (near can bin): that is scenario 2's subgoal, and goal-directed ranks by the
+    probability of resolving through either way, never below the missing atom's alone."""
+    result = run(db, "--scenario", "scenario2", "--limit", "1000", "--model", "nb", "--json")
+    assert result.exit_code == 0, result.output
+    point = json.loads(result.stdout)["scenario"]
+    assert point["subgoals"] == ["(push can bin) needs +(near can bin)"]
+    ranked = point["rankings"]["nb"]["goal-directed"]
+    assert all(set(c["subgoals"]) == set(point["subgoals"]) for c in ranked)
+    assert all(c["resolve"] >= c["joint"] - 1e-6 for c in ranked)
+    resolve = [c["resolve"] for c in ranked]
+    assert resolve == sorted(resolve, reverse=True)  # the order is by P(resolve), ties aside
+    assert any(c["resolve"] > c["joint"] + 1e-3 for c in ranked)  # the subgoal counts
+
+
+def test_a_failure_without_subgoals_ranks_by_its_missing_atoms(db):
+    result = run(db, "--scenario", "scenario1", "--limit", "50", "--model", "nb", "--json")
+    assert result.exit_code == 0, result.output
+    point = json.loads(result.stdout)["scenario"]
+    assert point["subgoals"] == []
+    ranked = point["rankings"]["nb"]["goal-directed"]
+    assert all(c["resolve"] == pytest.approx(c["joint"], abs=1e-6) for c in ranked)

@@ -119,12 +119,16 @@ def show(report: "ModelInspection") -> None:
         return
     failure = report.failure
     message(f"{failure.scenario}: {failure.missing_effects}; {len(failure.candidates)} candidates")
+    for k, subgoal in enumerate(failure.subgoals, start=1):
+        message(f"subgoal S{k}: {subgoal.label} (a trial that meets it lets K's step finish the job)")
     for model, by_measure in report.rankings.items():
         for measure, ranked in by_measure.items():
             atoms = list(ranked[0].goal) if ranked else []
+            subgoals = list(ranked[0].subgoals) if ranked else []
+            via = ([f"P(S{k})" for k in range(1, len(subgoals) + 1)] + ["P(resolve)"]) if subgoals else []
             print_table(
                 f"{model} / {measure}",
-                ("#", "trial", "K claims", "score", *(f"P{a}" for a in atoms), "P(all)", *(_SHORT[name] for name in OUTCOME_NAMES)),
+                ("#", "trial", "K claims", "score", *(f"P{a}" for a in atoms), "P(all)", *via, *(_SHORT[name] for name in OUTCOME_NAMES)),
                 [
                     (
                         c.position,
@@ -133,6 +137,7 @@ def show(report: "ModelInspection") -> None:
                         f"{c.score:.3f}",
                         *(f"{c.goal[a]:.3f}" for a in atoms),
                         f"{c.joint:.3f}",
+                        *((*(f"{c.subgoals[s]:.3f}" for s in subgoals), f"{c.resolve:.3f}") if subgoals else ()),
                         *(f"{c.outcome[n]:.2f}" for n in OUTCOME_NAMES),
                     )
                     for c in ranked

@@ -499,6 +499,7 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
     order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
     agent.report("explore", total=min(config.budget, len(candidates)))
     tried = 0
+    subgoal_failures = [0] * len(point.subgoals)  # trials that met a subgoal, and K's plan still failed
     while order and result.exploration_trials < config.budget:
         index = order.pop(0)
         remaining.remove(index)
@@ -509,9 +510,13 @@ def _explore(agent: Agent, kb: KnowledgeBase, model, failure: Failure, result: S
         if resolves(agent, kb, trial, failure):
             _learn(agent, kb, spec, trial, failure, record, result)
             return
+        for k, subgoal in enumerate(point.subgoals):
+            subgoal_failures[k] += subgoal.met(trial.after)
         if tried % config.refit_every == 0 and remaining:
             model.update(agent.records, agent.changes, start=snapshot)
-            order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
+            order = rank_candidates(
+                model, point, measure=config.measure, seed=config.seed, indices=remaining, subgoal_failures=subgoal_failures
+            ).order
     result.status = "budget_exhausted"
 
 

@@ -6,6 +6,21 @@ trials, used by the agent (:mod:`llcps.cps.agent`) and by ``llcps inspect model`
 each for the world model (Table-1 inputs for Omega, and the goal-aware query of the
 failure's missing atoms over the scene as it is at the failure), and rank them with a
 world model and a measure.
+
+**Subgoals: the other way to the missing atoms.** A trial resolves the novelty when the
+goal holds after it, or when K plans from the state it leaves and that plan works
+(:func:`llcps.cps.agent.resolves`). So a trial need not make a missing atom itself: it
+may meet what another step of K lacks. Every ground step of K (other than a_f) that
+would make a missing atom but is not applicable at the failure gives a
+:class:`Subgoal`: its unmet preconditions (at most :data:`MAX_SUBGOAL_ATOMS`; K's
+``push(can, bin)`` lacks ``(near can bin)`` when the bin is out of reach). The world
+model's goal head predicts a subgoal's atoms as it predicts the missing ones, and
+``goal-directed`` ranks by the probability that a candidate resolves the novelty either
+way (:func:`resolve_probability`):
+``1 - (1 - P(missing atoms)) * prod_k (1 - t_k P(subgoal k))``, where ``t_k``, the
+belief that K's step works once its preconditions hold, starts at
+:data:`SUBGOAL_TRUST` and halves each time a trial met the subgoal and K's plan from
+there still failed.
 """
 
 from __future__ import annotations
@@ -17,15 +32,80 @@ import numpy as np
 
 from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.outcomes import desired_outcome
-from llcps.domain import Body, Fluent, State, TrialSpec, WorldModelInput
+from llcps.domain import Body, Fluent, State, TrialSpec, WorldModelInput, format_fluent
 from llcps.models.base import WorldModel
+from llcps.models.goal import joint_probability
 from llcps.models.measures import get_measure, rank
 from llcps.models.relational import GoalQuery
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge import KnowledgeBase, Task
 from llcps.symbolic.monitor import StepFailure
+from llcps.symbolic.planner import ground
 
 if TYPE_CHECKING:
     from llcps.cps.agent import Agent
+
+#: Most unmet preconditions a step of K may lack to be a subgoal (see the module docstring).
+MAX_SUBGOAL_ATOMS = 2
+#: Belief, before any evidence, that a step of K works once a trial met its preconditions.
+SUBGOAL_TRUST = 0.5
+
+
+@dataclass(frozen=True)
+class Subgoal:
+    """A step of K that would make a missing atom, and the preconditions it lacks at the failure.
+
+    Attributes:
+        step: the step's label (``push(can, bin)``).
+        atoms: its unmet preconditions, each with its sign (True: must become true).
+        claimed: per candidate, the atoms the knowledge base claims its action makes.
+    """
+
+    step: str
+    atoms: tuple[tuple[Fluent, bool], ...]
+    claimed: tuple[frozenset[tuple[Fluent, bool]], ...] = ()
+
+    @property
+    def label(self) -> str:
+        needs = " ".join(("+" if add else "-") + format_fluent(atom) for atom, add in self.atoms)
+        return f"{self.step} needs {needs}"
+
+    def met(self, state: State) -> bool:
+        """Whether every atom holds as the step needs in ``state``."""
+        return all((atom in state) == add for atom, add in self.atoms)
+
+
+def subgoals(kb: KnowledgeBase, task: Task, failure: StepFailure, state: State) -> list[tuple[str, tuple[tuple[Fluent, bool], ...]]]:
+    """(step label, unmet preconditions) of each ground step of ``kb`` that would make one
+    of the failure's missing atoms and is not applicable in ``state`` (a_f left out), in
+    the planner's grounding order, without repeats."""
+    missing_add, missing_del = set(failure.missing_add), set(failure.missing_del)
+    found: list[tuple[str, tuple[tuple[Fluent, bool], ...]]] = []
+    for step in ground(kb, task):
+        if (step.name, step.args) == (failure.step.name, failure.step.args):
+            continue
+        if not (missing_add & step.add or missing_del & step.delete):
+            continue
+        unmet = tuple((atom, True) for atom in sorted(step.preconditions - state)) + tuple(
+            (atom, False) for atom in sorted(step.negative_preconditions & state)
+        )
+        if 0 < len(unmet) <= MAX_SUBGOAL_ATOMS and unmet not in (atoms for _, atoms in found):
+            found.append((step.label, unmet))
+    return found
+
+
+def resolve_probability(goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarray) -> np.ndarray:
+    """P(a candidate resolves the novelty) per candidate: it makes the missing atoms, or
+    it meets a subgoal and K's step works from there (see the module docstring).
+
+    Args:
+        goal: (n, k) probabilities of the missing atoms (their product is used).
+        subgoals: (n, s) probability that the candidate meets each subgoal.
+        trust: (s,) belief that each subgoal's step works once met.
+    """
+    miss = 1.0 - joint_probability(goal)
+    if subgoals.size:
+        miss = miss * np.prod(1.0 - np.clip(subgoals, 0.0, 1.0) * trust, axis=1)
+    return 1.0 - miss
 
 
 @dataclass(frozen=True)
@@ -52,6 +132,7 @@ class FailurePoint:
     inputs: tuple[WorldModelInput, ...]
     desired: np.ndarray
     claimed: tuple[frozenset[tuple[Fluent, bool]], ...] = ()
+    subgoals: tuple[Subgoal, ...] = ()
 
     @property
     def missing_effects(self) -> str:
@@ -72,6 +153,21 @@ class FailurePoint:
             claims=(lambda spec, atom, add: (atom, add) in claimed[spec]) if claimed else None,
         )
 
+    def subgoal_query(self, k: int, indices: Sequence[int] | None = None) -> GoalQuery:
+        """The goal-aware question for subgoal ``k``: will the candidates meet it?"""
+        chosen = range(len(self.candidates)) if indices is None else indices
+        subgoal = self.subgoals[k]
+        specs = tuple(self.candidates[i] for i in chosen)
+        claimed = {self.candidates[i]: subgoal.claimed[i] for i in chosen} if subgoal.claimed else {}
+        return GoalQuery.from_missing(
+            specs,
+            missing_add=[atom for atom, add in subgoal.atoms if add],
+            missing_del=[atom for atom, add in subgoal.atoms if not add],
+            bodies=self.bodies,
+            before=self.state,
+            claims=(lambda spec, atom, add: (atom, add) in claimed[spec]) if claimed else None,
+        )
+
 
 def failure_point(agent: Agent, failure: StepFailure, state: State, kb: KnowledgeBase) -> FailurePoint:
     """The failure point of ``agent``'s world as it is now (just after a_f failed);
@@ -87,6 +183,10 @@ def failure_point(agent: Agent, failure: StepFailure, state: State, kb: Knowledg
     objects = agent.task(state).objects
     missing = [(atom, True) for atom in failure.missing_add] + [(atom, False) for atom in failure.missing_del]
     claimed = tuple(frozenset(m for m in missing if kb.claims(c, m[0], add=m[1], objects=objects)) for c in specs)
+    routes = tuple(
+        Subgoal(step, atoms, tuple(frozenset(m for m in atoms if kb.claims(c, m[0], add=m[1], objects=objects)) for c in specs))
+        for step, atoms in subgoals(agent.knowledge(kb), agent.task(state), failure, state)
+    )
     return FailurePoint(
         scenario=agent.scenario.name,
         failure=failure,
@@ -96,6 +196,7 @@ def failure_point(agent: Agent, failure: StepFailure, state: State, kb: Knowledg
         inputs=inputs,
         desired=desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del),
         claimed=claimed,
+        subgoals=routes,
     )
 
 
@@ -110,6 +211,10 @@ class Ranking:
         outcome: predicted Omega of each (n, 6).
         goal: predicted probability of each missing atom (n, k), or None when the
             measure does not use it.
+        subgoals: predicted probability that each candidate meets each of the failure
+            point's subgoals (n, s), or None when the measure does not use the goal.
+        resolve: what ``goal-directed`` ranked by, :func:`resolve_probability` (n,),
+            or None when the measure does not use the goal.
     """
 
     order: list[int]
@@ -117,19 +222,43 @@ class Ranking:
     score: np.ndarray
     outcome: np.ndarray
     goal: np.ndarray | None
+    subgoals: np.ndarray | None = None
+    resolve: np.ndarray | None = None
 
 
 def rank_candidates(
-    model: WorldModel, point: FailurePoint, *, measure: str, seed: int, indices: Sequence[int] | None = None
+    model: WorldModel,
+    point: FailurePoint,
+    *,
+    measure: str,
+    seed: int,
+    indices: Sequence[int] | None = None,
+    subgoal_failures: Sequence[int] | None = None,
 ) -> Ranking:
     """Rank some of a failure point's candidates (all by default) under ``measure``.
+
+    Args:
+        subgoal_failures: per subgoal of ``point``, how many trials met it without K's
+            plan from there working (each halves its trust; none by default).
 
     Returns:
         The ranking; ``order`` holds candidate indices into ``point.candidates``.
     """
     chosen = list(range(len(point.candidates))) if indices is None else list(indices)
     outcome = model.predict_proba([point.inputs[i] for i in chosen])
-    goal = model.predict_goal(point.query(chosen)) if get_measure(measure).uses_goal else None
-    order = rank(outcome, measure, seed=seed, desired=point.desired, goal=goal)
-    score = get_measure(measure).score(outcome, point.desired, goal)
-    return Ranking(order=[chosen[i] for i in order], indices=chosen, score=score, outcome=outcome, goal=goal)
+    goal = subgoal = resolve = None
+    if get_measure(measure).uses_goal:
+        goal = model.predict_goal(point.query(chosen))
+        subgoal = np.zeros((len(chosen), len(point.subgoals)))
+        for k in range(len(point.subgoals)):
+            subgoal[:, k] = joint_probability(model.predict_goal(point.subgoal_query(k, chosen)))
+        failures = np.zeros(len(point.subgoals)) if subgoal_failures is None else np.asarray(subgoal_failures, dtype=np.float64)
+        resolve = resolve_probability(goal, subgoal, SUBGOAL_TRUST * 0.5**failures)
+    # Without subgoals, the missing atoms' probabilities themselves (the same order, and
+    # the score keeps one term per atom).
+    ranked_by = resolve[:, None] if resolve is not None and point.subgoals else goal
+    order = rank(outcome, measure, seed=seed, desired=point.desired, goal=ranked_by)
+    score = get_measure(measure).score(outcome, point.desired, ranked_by)
+    return Ranking(
+        order=[chosen[i] for i in order], indices=chosen, score=score, outcome=outcome, goal=goal, subgoals=subgoal, resolve=resolve
+    )

@@ -39,6 +39,10 @@ class RankedCandidate:
             true, ``-(in a b)`` must stop), and ``joint`` their product.
         claimed: the missing atoms the knowledge base claims the candidate's action has
             as an effect (the goal head's prior, docs/world_models.md).
+        subgoals: predicted probability that the candidate meets each subgoal (another
+            step of K and the preconditions it lacks, :mod:`llcps.cps.exploration`).
+        resolve: the probability ``goal-directed`` ranks by: the missing atoms, or a
+            subgoal and K's step after it.
     """
 
     position: int
@@ -48,6 +52,8 @@ class RankedCandidate:
     goal: dict[str, float]
     joint: float
     claimed: tuple[str, ...] = ()
+    subgoals: dict[str, float] = field(default_factory=dict)
+    resolve: float | None = None
 
 
 @dataclass(frozen=True)
@@ -83,6 +89,7 @@ class ModelInspection:
                 "failed_action": self.failure.failure.step.label,
                 "missing_effects": self.failure.missing_effects,
                 "missing_atoms": [atom.label for atom in self.failure.query([]).atoms],
+                "subgoals": [subgoal.label for subgoal in self.failure.subgoals],
                 "desired": dict(zip(OUTCOME_NAMES, self.failure.desired.round(4).tolist())),
                 "candidates": len(self.failure.candidates),
                 "rankings": {
@@ -102,6 +109,7 @@ def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top:
     goal = ranking.goal if ranking.goal is not None else model.predict_goal(point.query())
     atoms = [atom.label for atom in point.query([]).atoms]
     joint = joint_probability(goal)
+    subgoals = [s.label for s in point.subgoals]
     return [
         RankedCandidate(
             position=position + 1,
@@ -111,6 +119,8 @@ def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top:
             goal={atom: round(float(p), 4) for atom, p in zip(atoms, goal[i])},
             joint=round(float(joint[i]), 6),
             claimed=tuple(a.label for a in point.query([i]).atoms if (a.atom, a.add) in (point.claimed[i] if point.claimed else ())),
+            subgoals={} if ranking.subgoals is None else {s: round(float(p), 4) for s, p in zip(subgoals, ranking.subgoals[i])},
+            resolve=None if ranking.resolve is None else round(float(ranking.resolve[i]), 6),
         )
         for position, i in enumerate(ranking.order[:top])
     ]

@@ -11,7 +11,10 @@ seeded random key, so the order is a deterministic function of (predictions, see
 - ``goal-directed`` (ours): largest predicted probability that the failure's missing
   atoms all change as needed: the product over atoms of the goal-aware head's
   probabilities (``goal``, one column per missing atom; :mod:`llcps.models.goal`),
-  ranked by its logarithm. A caller without atom predictions may pass ``desired``
+  ranked by its logarithm. (A caller may pass one column instead: the probability that
+  a candidate resolves the failure by any way it knows of; the agent passes the missing
+  atoms and K's subgoals combined, docs/world_models.md.) A caller without atom
+  predictions may pass ``desired``
   instead, weights over Omega's bits for the kinds of change the failed action lacked
   (``llcps.cps.outcomes.desired_outcome``), ranked by ``sum_k desired[k] * P(bit k)``;
   with neither it falls back to ``most-positive-changes``.
