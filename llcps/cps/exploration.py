@@ -141,31 +141,30 @@ class FailurePoint:
     def query(self, indices: Sequence[int] | None = None) -> GoalQuery:
         """The goal-aware question for some candidates (all by default): will they make
         the missing atoms hold (and the atoms that should go, go)?"""
-        chosen = range(len(self.candidates)) if indices is None else indices
-        specs = tuple(self.candidates[i] for i in chosen)
-        claimed = {self.candidates[i]: self.claimed[i] for i in chosen} if self.claimed else {}
-        return GoalQuery.from_missing(
-            specs,
-            missing_add=self.failure.missing_add,
-            missing_del=self.failure.missing_del,
-            bodies=self.bodies,
-            before=self.state,
-            claims=(lambda spec, atom, add: (atom, add) in claimed[spec]) if claimed else None,
-        )
+        missing = [(atom, True) for atom in self.failure.missing_add] + [(atom, False) for atom in self.failure.missing_del]
+        return self._query(missing, self.claimed, indices)
 
     def subgoal_query(self, k: int, indices: Sequence[int] | None = None) -> GoalQuery:
         """The goal-aware question for subgoal ``k``: will the candidates meet it?"""
-        chosen = range(len(self.candidates)) if indices is None else indices
         subgoal = self.subgoals[k]
+        return self._query(subgoal.atoms, subgoal.claimed, indices)
+
+    def _query(
+        self,
+        atoms: Sequence[tuple[Fluent, bool]],
+        claimed: Sequence[frozenset[tuple[Fluent, bool]]],
+        indices: Sequence[int] | None,
+    ) -> GoalQuery:
+        chosen = range(len(self.candidates)) if indices is None else indices
         specs = tuple(self.candidates[i] for i in chosen)
-        claimed = {self.candidates[i]: subgoal.claimed[i] for i in chosen} if subgoal.claimed else {}
+        by_spec = {self.candidates[i]: claimed[i] for i in chosen} if claimed else {}
         return GoalQuery.from_missing(
             specs,
-            missing_add=[atom for atom, add in subgoal.atoms if add],
-            missing_del=[atom for atom, add in subgoal.atoms if not add],
+            missing_add=[atom for atom, add in atoms if add],
+            missing_del=[atom for atom, add in atoms if not add],
             bodies=self.bodies,
             before=self.state,
-            claims=(lambda spec, atom, add: (atom, add) in claimed[spec]) if claimed else None,
+            claims=(lambda spec, atom, add: (atom, add) in by_spec[spec]) if by_spec else None,
         )
 
 
