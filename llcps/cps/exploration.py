@@ -55,7 +55,7 @@ class Subgoal:
     """A step of K that would make a missing atom, and the preconditions it lacks at the failure.
 
     Attributes:
-        step: the step's label (``push(can, bin)``).
+        step: the step's label (``(push can bin)``).
         atoms: its unmet preconditions, each with its sign (True: must become true).
         claimed: per candidate, the atoms the knowledge base claims its action makes.
     """
