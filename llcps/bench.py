@@ -28,8 +28,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Self
 
-#: Exploration episode of the bench: scenario 1's novelty needs several trials to resolve.
+#: Exploration episode of the bench: scenario 1's novelty on an empty store, the naive Bayes
+#: model ranking by the paper's ``most-changes`` (the measure of the paper grid, whose cost
+#: the bench is for). The episode must use its whole budget, so that what is timed does not
+#: shrink when exploration gets better: the default ``goal-directed`` resolves this novelty
+#: in 2 trials (4,222 physics steps, mostly start-up), ``most-changes`` spends 40 trials
+#: without resolving it.
 EXPLORE_SCENARIO = "scenario1"
+EXPLORE_MEASURE = "most-changes"
 EXPLORE_BUDGET = 20
 EXPLORE_BUDGET_QUICK = 5
 #: Trials the deepest branch of the store bench sees.
@@ -168,7 +174,9 @@ class ExplorationRun:
     wall_seconds: float
 
 
-def run_exploration(budget: int, *, scenario: str = EXPLORE_SCENARIO, seed: int = 0) -> ExplorationRun:
+def run_exploration(
+    budget: int, *, scenario: str = EXPLORE_SCENARIO, measure: str = EXPLORE_MEASURE, seed: int = 0
+) -> ExplorationRun:
     """Solve ``scenario``'s novelty on a fresh temporary store; CPU and wall time of the whole episode.
 
     What a process pays once (importing the world model's library, compiling the
@@ -178,7 +186,7 @@ def run_exploration(budget: int, *, scenario: str = EXPLORE_SCENARIO, seed: int 
     from llcps.cps.episode import SolveConfig
     from llcps.store import Store
 
-    config = SolveConfig(scenario=scenario, budget=budget, seed=seed)
+    config = SolveConfig(scenario=scenario, budget=budget, seed=seed, measure=measure)
     warm_up(config.model)
     with (
         tempfile.TemporaryDirectory(prefix="llcps-bench-") as tmp,
@@ -264,7 +272,7 @@ def bench_exploration(quick: bool = False, progress: Progress | None = None) -> 
         world.close()
     startup = warm_up(SolveConfig(scenario=EXPLORE_SCENARIO).model)
     budget = EXPLORE_BUDGET_QUICK if quick else EXPLORE_BUDGET
-    _say(progress, f"exploration: solve {EXPLORE_SCENARIO} novelty, budget {budget}")
+    _say(progress, f"exploration: solve {EXPLORE_SCENARIO} novelty ({EXPLORE_MEASURE}), budget {budget}")
     run = run_exploration(budget)
     _say(progress, "exploration: the same episode, CPU time split by layer")
     with _cpu_in([(World, "step")]) as physics, _cpu_in([(Robot, "ik"), (Robot, "command_arm")]) as control:
