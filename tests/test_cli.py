@@ -263,6 +263,15 @@ def test_bad_input_is_one_error_line_and_changes_nothing(sqlite_db: Path, tmp_pa
     assert {p: _digest(p) for p in files} == digests  # nothing changed
 
 
+def test_loading_the_commands_leaves_the_heavy_libraries_alone() -> None:
+    """Every command module loads at start: the simulator, the runner, numpy and the scenario
+    files load inside the commands that need them, so light commands start fast."""
+    heavy = ("pybullet", "scipy", "numpy", "torch", "sklearn", "pydantic", "lark", "llcps.sim", "llcps.experiments.runner")
+    code = f"import sys, llcps.cli.main, llcps.scenarios as s; print(sorted(m for m in {heavy!r} if m in sys.modules), 'SCENARIOS' in vars(s))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env={**os.environ})
+    assert out.stdout.strip() == "[] False"
+
+
 def test_console_script_errors_without_traceback(tmp_path: Path) -> None:
     script = Path(sys.executable).with_name("llcps")
     env = {**os.environ, "LLCPS_DB": str(tmp_path / "missing" / "x.db")}

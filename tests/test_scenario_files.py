@@ -14,7 +14,7 @@ import tomli_w
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
-from llcps.scenarios import CONDITIONS, SCENARIOS, get_scenario
+from llcps.scenarios import CONDITIONS, SCENARIOS, get_scenario, shipped_names
 from llcps.scenarios.loader import read_text
 from llcps.sim.world import World
 
@@ -27,6 +27,11 @@ def show(*args: str) -> str:
     result = runner.invoke(app, ["scenario", "show", *args])
     assert result.exit_code == 0, result.stderr
     return result.stdout
+
+
+def test_shipped_names_are_the_registrys() -> None:
+    """The cheap read of the files' names (the CLI's help) agrees with the checked registry."""
+    assert shipped_names() == {s.name: s.alias for s in SCENARIOS.values()}
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -10,7 +10,6 @@ import typer
 from llcps.cli._common import JsonFlag, message, new_app, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.errors import LlcpsError
-from llcps.store import physics_cache
 
 app = new_app(
     "The physics cache: simulated trials kept in the store, answered again instead of simulated "
@@ -41,6 +40,8 @@ def _human(n: int) -> str:
 @app.command("status", epilog=examples("llcps cache status", "llcps cache status --json"))
 def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Entries, bytes and the size bound of the physics cache."""
+    from llcps.store import physics_cache
+
     with open_store(ctx) as store:
         status = physics_cache.status(store)
     if as_json:
@@ -78,6 +79,8 @@ def prune_cli(
     An experiment run does this when it ends; no branch loses anything, later runs
     simulate the removed trials again.
     """
+    from llcps.store import physics_cache
+
     limit = parse_size(to) if to is not None else None
     with open_store(ctx) as store:
         result = physics_cache.prune(store, limit=limit, dry_run=dry_run)
@@ -94,6 +97,8 @@ def limit_cli(
     as_json: JsonFlag = False,
 ) -> None:
     """Set the size bound the cache is pruned to (stored in the store; default 2 GiB)."""
+    from llcps.store import physics_cache
+
     limit = parse_size(size)
     with open_store(ctx) as store:
         physics_cache.set_max_bytes(store, limit)

@@ -24,7 +24,6 @@ from llcps.cli._progress import progress_display
 from llcps.domain import MAX_ID, TRIAL_SOURCES
 from llcps.errors import LlcpsError
 from llcps.outputs import check_output_file
-from llcps.scenarios import get_scenario
 from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
 from llcps.store.export import BINARY_FORMATS, EXPORT_FORMATS, export_trials
 from llcps.store.schema import MAX_BRANCH_NAME
@@ -347,6 +346,8 @@ def export_cli(
     if fmt_name in BINARY_FORMATS and out is None:
         raise LlcpsError(f"--format {fmt_name} writes a binary file", hint="pass --out FILE")
     if scenario is not None:
+        from llcps.scenarios import get_scenario
+
         scenario = get_scenario(scenario).name
     if out is not None:
         check_output_file(out, what="--out")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
 
@@ -15,19 +15,12 @@ from llcps.domain import MAX_SEED
 from llcps.errors import LlcpsError
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
+from llcps.experiments.engines import ENGINES
 from llcps.experiments.grid import PRESETS
-from llcps.experiments.reporting import select_scenes
-from llcps.experiments.runner import (
-    ENGINES,
-    RunSummary,
-    default_out_dir,
-    one_preset,
-    results_table,
-    run_experiment,
-    with_baseline,
-    write_report,
-)
 from llcps.scenarios.variants import parse_range
+
+if TYPE_CHECKING:
+    from llcps.experiments.runner import RunSummary
 
 app = new_app(
     "Run the experiment grid (Figure 2 over many seeds) and report on it.",
@@ -123,6 +116,8 @@ def run_cli(
     kill, run the same command again. Results are identical for any --workers and
     either engine. Exit code 1 when a task failed.
     """
+    from llcps.experiments.runner import default_out_dir, results_table, run_experiment, write_report
+
     name = str(preset.value)  # type: ignore[attr-defined]
     n_workers = workers if workers is not None else cpu_count()
     if variants is not None and (seeds is not None or first_seed):
@@ -226,7 +221,9 @@ def report_cli(
 
     From a results directory, the provenance and films it already holds are used; with
     --from-db they are read (and filmed) from the store."""
+    from llcps.experiments.reporting import select_scenes
     from llcps.experiments.results import ResultsTable, table_from_episodes
+    from llcps.experiments.runner import default_out_dir, one_preset, with_baseline, write_report
 
     if (source is None) == (not from_db):
         raise LlcpsError("give a results directory or --from-db (one of them)", hint="e.g. `llcps experiment report results/paper`")
@@ -294,7 +291,7 @@ def show_provenance(analysis: dict[str, Any]) -> None:
         message(f"provenance: {provenance_line(item)}")
 
 
-def show_run(summary: RunSummary, out_dir: Path) -> None:
+def show_run(summary: "RunSummary", out_dir: Path) -> None:
     """What the run did, for people (stderr)."""
     failed = f", {len(summary.failed)} failed" if summary.failed else ""
     rate = summary.cache_hit_rate

@@ -8,6 +8,10 @@ module and register it below with ONE line:
 * a single command (``llcps solve``): ``app.command("solve")(module.solve_cli)``
 * more subcommands of an existing group (``llcps inspect model``): decorate with
   ``@inspect.app.command("model")`` in your module and import it here.
+
+Every command module is imported at start, so each imports heavy library code (the
+simulator, the experiment runner, numpy, the scenario files) inside the commands that
+need it, not at module level: light commands (``db list``, ``--help``) then start fast.
 """
 
 from __future__ import annotations

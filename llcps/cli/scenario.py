@@ -11,7 +11,7 @@ from llcps.cli._common import JsonFlag, choice_enum, message, new_app, print_jso
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.outputs import check_output_dir
-from llcps.scenarios import CONDITIONS, SCENARIOS, get_scenario
+from llcps.scenarios import CONDITIONS, get_scenario
 from llcps.scenarios.variants import MAX_VARIANT, parse_range, range_text
 
 app = new_app(
@@ -36,6 +36,8 @@ VariantOption = Annotated[
 
 def _ref(name: str) -> str:
     """How the library finds the scenario again: its registered name, or the file given."""
+    from llcps.scenarios import SCENARIOS
+
     scenario = get_scenario(name)
     return scenario.name if SCENARIOS.get(scenario.name) is scenario else name
 
@@ -43,6 +45,7 @@ def _ref(name: str) -> str:
 @app.command("list", epilog=examples("llcps scenario list", "llcps scenario list --json"))
 def list_cli(as_json: JsonFlag = False) -> None:
     """List the shipped scenarios: name, alias, goal, whether variants differ, and the file."""
+    from llcps.scenarios import SCENARIOS
     from llcps.scenarios.goal import goal_text
 
     rows = [

@@ -6,7 +6,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
-from rich.syntax import Syntax
 
 from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
@@ -15,7 +14,7 @@ from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, MA
 from llcps.domain import MAX_SEED
 from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models import MEASURES, WORLD_MODELS
-from llcps.scenarios import CONDITIONS, SCENARIOS
+from llcps.scenarios import CONDITIONS, shipped_names
 from llcps.scenarios.variants import MAX_VARIANT
 
 if TYPE_CHECKING:
@@ -30,7 +29,7 @@ EXIT_SOLVED, EXIT_UNSOLVED, EXIT_INTERRUPTED = 0, 1, 130
 
 _SCENARIO_HELP = (
     "Scenario to solve: "
-    + ", ".join(f"{s.name} ({s.alias})" for s in SCENARIOS.values())
+    + ", ".join(f"{name} ({alias})" for name, alias in shipped_names().items())
     + "; or the path of a scenario file (.toml, see `llcps scenario`)."
 )
 
@@ -141,6 +140,8 @@ def _exit_code(result: "SolveResult") -> int:
 
 def show(result: "SolveResult") -> None:
     """The episode summary for people."""
+    from rich.syntax import Syntax
+
     variant = f", variant {result.variant}" if result.variant else ""
     print_table(
         f"{result.scenario} ({result.condition}{variant}) on {result.branch}: {result.status}",

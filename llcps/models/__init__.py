@@ -1,15 +1,33 @@
 """World models W : (a, r, nabla, X) -> Omega and the measures that rank exploration.
 
-Light to import: the registries name every model and measure without importing
-scikit-learn or torch (a model's module loads when the model is first made).
+Light to import: the registries name every model and measure without importing numpy,
+scikit-learn or torch (a model's module loads when the model is first made;
+``WorldModel`` and ``fit_or_load`` when first used).
 """
 
 from __future__ import annotations
 
-from llcps.models.base import WorldModel
+from typing import TYPE_CHECKING, Any
+
 from llcps.models.measures import MEASURES, PAPER_MEASURES, rank
-from llcps.models.persistence import fit_or_load
 from llcps.models.registry import PAPER_MODELS, WORLD_MODELS, load_world_model, make_world_model
+
+if TYPE_CHECKING:
+    from llcps.models.base import WorldModel
+    from llcps.models.persistence import fit_or_load
+
+
+def __getattr__(name: str) -> Any:
+    if name == "WorldModel":
+        from llcps.models.base import WorldModel
+
+        return WorldModel
+    if name == "fit_or_load":
+        from llcps.models.persistence import fit_or_load
+
+        return fit_or_load
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "MEASURES",

@@ -23,11 +23,16 @@ seeded random key, so the order is a deterministic function of (predictions, see
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from llcps.domain import OUTCOME_NAMES
 from llcps.errors import LlcpsError, UnknownNameError
+
+if TYPE_CHECKING:
+    import numpy as np
+
+# numpy is imported inside the functions that compute: MEASURES, the one list of measure
+# names, stays light for the CLI's option choices.
 
 _POSITIVE = tuple(name for name in OUTCOME_NAMES if name.startswith("positive_"))
 _NEGATIVE = tuple(name for name in OUTCOME_NAMES if name.startswith("negative_"))
@@ -116,6 +121,8 @@ def get_measure(name: str) -> Measure:
 
 def check_proba(proba: np.ndarray) -> np.ndarray:
     """Validate predicted probabilities: float (n, 6), finite, within [0, 1]."""
+    import numpy as np
+
     proba = np.asarray(proba, dtype=np.float64)
     if proba.ndim != 2 or proba.shape[1] != len(OUTCOME_NAMES):
         raise LlcpsError(f"predictions must have shape (n, {len(OUTCOME_NAMES)}), got {proba.shape}")
@@ -126,6 +133,8 @@ def check_proba(proba: np.ndarray) -> np.ndarray:
 
 def _desired_weights(desired: np.ndarray | None) -> np.ndarray | None:
     """Validated goal-directed weights, or None to fall back to the default bits."""
+    import numpy as np
+
     if desired is None:
         return None
     weights = np.asarray(desired, dtype=np.float64)
@@ -147,6 +156,8 @@ def goal_score(goal: np.ndarray, n: int) -> np.ndarray:
     Raises:
         LlcpsError: not an (n, k) array of finite probabilities.
     """
+    import numpy as np
+
     goal = np.asarray(goal, dtype=np.float64)
     if goal.ndim != 2 or goal.shape[0] != n:
         raise LlcpsError(f"goal predictions must have shape ({n}, k), got {goal.shape}")
@@ -157,6 +168,8 @@ def goal_score(goal: np.ndarray, n: int) -> np.ndarray:
 
 def tie_break_key(n: int, seed: int) -> np.ndarray:
     """A seeded random permutation of ``range(n)``: the order among exact ties."""
+    import numpy as np
+
     return np.random.default_rng(seed).permutation(n)
 
 
@@ -181,5 +194,7 @@ def rank(
     Returns:
         An int64 permutation of ``range(n)``.
     """
+    import numpy as np
+
     score = get_measure(measure).score(proba, desired, goal)
     return np.lexsort((tie_break_key(len(score), seed), -score))

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 from llcps.errors import UnknownNameError
-from llcps.models.base import WorldModel
+
+if TYPE_CHECKING:
+    from llcps.models.base import WorldModel
 
 
 @dataclass(frozen=True)

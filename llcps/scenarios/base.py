@@ -15,13 +15,13 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 from llcps.domain import Fluent, State
 from llcps.errors import UnknownNameError
-from llcps.scenarios.schema import CONDITION_NAMES
 
 if TYPE_CHECKING:
     from llcps.scenarios.loader import ScenarioSource
     from llcps.sim.specs import SceneSpec
 
-CONDITIONS: tuple[str, ...] = CONDITION_NAMES
+#: Names of the two conditions every scenario has (the file format's too: llcps.scenarios.schema).
+CONDITIONS: tuple[str, ...] = ("original", "novelty")
 
 
 @dataclass(frozen=True)

@@ -19,9 +19,8 @@ from pydantic import BaseModel, ConfigDict, Field, PlainValidator, ValidationErr
 
 from llcps.domain import COLORS, ORIENTATIONS
 from llcps.errors import LlcpsError
+from llcps.scenarios.base import CONDITIONS as CONDITION_NAMES
 
-#: Names of the two conditions every scenario has.
-CONDITION_NAMES: tuple[str, ...] = ("original", "novelty")
 #: What an entity, fixture, scenario or alias name may look like (a PDDL object name).
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 #: Names the simulator gives its own bodies.

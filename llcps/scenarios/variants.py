@@ -18,9 +18,10 @@ canonical scene that fails the checks is an error in the file.
 from __future__ import annotations
 
 import hashlib
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-from llcps.scenarios.schema import Scalar
+if TYPE_CHECKING:
+    from llcps.scenarios.schema import Scalar
 
 #: Decimals of every drawn value (0.1 mm, 0.1 g, 0.0001 rad).
 DIGITS = 4
