@@ -138,3 +138,44 @@ def test_trial_table_reuses_rows_of_a_growing_training_set(trials):
     # a different list (not an extension) is encoded afresh
     other = list(trials[150:200])
     assert np.array_equal(table.encode(other)[0], encode_inputs(other), equal_nan=True)
+
+
+def _sklearn_reference():
+    """The encoding as scikit-learn's OneHotEncoder and ColumnTransformer give it."""
+    from sklearn.compose import ColumnTransformer
+    from sklearn.preprocessing import OneHotEncoder, StandardScaler
+
+    from llcps.models.features import CATEGORICAL_COLUMNS, CATEGORIES
+
+    categories = [np.arange(len(values), dtype=np.float64) for values in CATEGORIES.values()]
+    return ColumnTransformer(
+        [
+            ("categorical", OneHotEncoder(categories=categories, sparse_output=False), [FEATURE_COLUMNS.index(c) for c in CATEGORICAL_COLUMNS]),
+            ("continuous", StandardScaler(), [FEATURE_COLUMNS.index(c) for c in CONTINUOUS_COLUMNS]),
+        ],
+        sparse_threshold=0.0,
+    )
+
+
+@pytest.mark.parametrize("n", [1, 4, 300])
+def test_encoding_is_scikit_learns_bit_for_bit(trials, n):
+    train, test = encode_inputs(trials[:n]), encode_inputs(trials[-50:])
+    reference = _sklearn_reference()
+    expected_fit = np.nan_to_num(reference.fit_transform(train), nan=0.0).astype(np.float32)
+    expected_test = np.nan_to_num(reference.transform(test), nan=0.0).astype(np.float32)
+    encoder = FeatureEncoder()
+    fitted = encoder.fit_transform(train)
+    assert fitted.tobytes() == expected_fit.tobytes()
+    assert encoder.transform(test).tobytes() == expected_test.tobytes()
+    assert FeatureEncoder.from_params(encoder.params()).transform(test).tobytes() == expected_test.tobytes()
+
+
+@pytest.mark.parametrize("code", [-1.0, 0.5, 99.0, float("nan")])
+def test_a_category_code_outside_its_tuple_is_a_project_error(trials, code):
+    table = encode_inputs(trials[:5])
+    encoder = FeatureEncoder().fit(table)
+    table[2, FEATURE_COLUMNS.index("orientation")] = code
+    with pytest.raises(LlcpsError, match="orientation"):
+        encoder.transform(table)
+    with pytest.raises(LlcpsError, match="orientation"):
+        FeatureEncoder().fit_transform(table)
