@@ -272,6 +272,14 @@ def test_loading_the_commands_leaves_the_heavy_libraries_alone() -> None:
     assert out.stdout.strip() == "[] False"
 
 
+def test_the_physics_cache_commands_leave_the_simulator_alone() -> None:
+    """`llcps cache status|prune|limit` read store tables only: the store's cache module
+    does not load the simulator (pybullet, scipy) it never runs."""
+    code = "import sys, llcps.store.physics_cache; print(sorted(m for m in ('pybullet', 'scipy', 'llcps.sim.robot') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env={**os.environ})
+    assert out.stdout.strip() == "[]"
+
+
 def test_console_script_errors_without_traceback(tmp_path: Path) -> None:
     script = Path(sys.executable).with_name("llcps")
     env = {**os.environ, "LLCPS_DB": str(tmp_path / "missing" / "x.db")}

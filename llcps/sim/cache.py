@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
 
 from llcps.domain import ACTIONS, ORIENTATIONS, Body, ControllerParams, EntityFeatures, Outcome, TrialSpec
-from llcps.sim.trial import TrialResult
+from llcps.sim.result import TrialResult
 
 if TYPE_CHECKING:
     from llcps.sim.world import PhysicsSettings

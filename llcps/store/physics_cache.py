@@ -52,7 +52,7 @@ from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 from llcps.errors import LlcpsError, StoreError
 from llcps.sim import snapshot as snapshots
 from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, StateCheck, StateTrust, decode_result, encode_result
-from llcps.sim.trial import TrialResult
+from llcps.sim.result import TrialResult
 from llcps.store import engine as engines
 from llcps.store.schema import PhysicsCacheEntry
 
