@@ -6,7 +6,7 @@ categorical values as integer codes into the fixed category tuples of
 :mod:`llcps.domain`, continuous values as floats, and NaN for the continuous values of
 a missing second argument. :class:`FeatureEncoder` then one-hot encodes the categories
 (categories fixed from the domain, so every encoding has the same columns whatever
-the training set holds: an indexing of an identity matrix, which needs no fitting) and
+the training set holds: blocks set by indexing, which need no fitting) and
 standardizes the continuous columns (scikit-learn's ``StandardScaler`` over the
 training set). A missing second argument becomes the category ``none`` and zeros in
 standardized space, i.e. the training mean: it carries no continuous signal. The
