@@ -108,6 +108,11 @@ def resolve_probability(goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarra
     return 1.0 - miss
 
 
+def _signed_missing(failure: StepFailure) -> list[tuple[Fluent, bool]]:
+    """The failure's missing atoms, each with its sign (True: must become true)."""
+    return [(atom, True) for atom in failure.missing_add] + [(atom, False) for atom in failure.missing_del]
+
+
 @dataclass(frozen=True)
 class FailurePoint:
     """What exploration starts from after a plan step failed.
@@ -141,8 +146,7 @@ class FailurePoint:
     def query(self, indices: Sequence[int] | None = None) -> GoalQuery:
         """The goal-aware question for some candidates (all by default): will they make
         the missing atoms hold (and the atoms that should go, go)?"""
-        missing = [(atom, True) for atom in self.failure.missing_add] + [(atom, False) for atom in self.failure.missing_del]
-        return self._query(missing, self.claimed, indices)
+        return self._query(_signed_missing(self.failure), self.claimed, indices)
 
     def subgoal_query(self, k: int, indices: Sequence[int] | None = None) -> GoalQuery:
         """The goal-aware question for subgoal ``k``: will the candidates meet it?"""
@@ -179,13 +183,13 @@ def failure_point(agent: Agent, failure: StepFailure, state: State, kb: Knowledg
     specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=agent.config.candidate_grid(agent.scenario))
     features = {name: entity_features(world, name) for name in agent.kinds}
     inputs = tuple(WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in specs)
-    objects = agent.task(state).objects
-    missing = [(atom, True) for atom in failure.missing_add] + [(atom, False) for atom in failure.missing_del]
-    claimed = tuple(frozenset(m for m in missing if kb.claims(c, m[0], add=m[1], objects=objects)) for c in specs)
-    routes = tuple(
-        Subgoal(step, atoms, tuple(frozenset(m for m in atoms if kb.claims(c, m[0], add=m[1], objects=objects)) for c in specs))
-        for step, atoms in subgoals(agent.knowledge(kb), agent.task(state), failure, state)
-    )
+    task = agent.task(state)
+
+    def claimed_by(atoms: Sequence[tuple[Fluent, bool]]) -> tuple[frozenset[tuple[Fluent, bool]], ...]:
+        return tuple(frozenset(m for m in atoms if kb.claims(c, m[0], add=m[1], objects=task.objects)) for c in specs)
+
+    claimed = claimed_by(_signed_missing(failure))
+    routes = tuple(Subgoal(step, atoms, claimed_by(atoms)) for step, atoms in subgoals(agent.knowledge(kb), task, failure, state))
     return FailurePoint(
         scenario=agent.scenario.name,
         failure=failure,
