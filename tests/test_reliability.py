@@ -21,9 +21,11 @@ import pytest
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
+from llcps.domain import EntityFeatures
 from llcps.pretrain import pretrain
 from llcps.sim import snapshot as snapshots
 from llcps.store import Store
+from llcps.store.trials import pack_features
 
 runner = CliRunner()
 
@@ -275,9 +277,16 @@ def test_a_scene_with_a_matching_hash_is_still_validated(db: Path) -> None:
 
 @pytest.mark.parametrize(
     "features",
-    ["[1,2,3]", "not json", '[{"shape": "box"}]', "{}", '[{"shape":"cube","volume":1,"color":"red","vector_magnitude":1,"unit_x":0,"unit_y":0,"unit_z":1}]'],
+    [
+        "[1,2,3]",
+        "not json",
+        '[{"shape": "box"}]',
+        "{}",
+        '[{"shape":"cube","volume":1,"color":"red","vector_magnitude":1,"unit_x":0,"unit_y":0,"unit_z":1}]',
+        pack_features([EntityFeatures("cube", 1.0, "red", 1.0, 0.0, 0.0, 1.0)]),  # the layout, but no shape of Table 1
+    ],
 )
-def test_malformed_features_name_the_trial(db: Path, features: str) -> None:
+def test_malformed_features_name_the_trial(db: Path, features: str | bytes) -> None:
     with closing(sqlite3.connect(db)) as conn, conn:
         conn.execute("UPDATE trials SET features = ? WHERE id = 2", (features,))
     assert_one_error(llcps(db, "inspect", "trials"), "stored trial 2 is malformed")

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import sqlite3
+from contextlib import closing
 from typing import Iterator
 
 import pytest
@@ -103,6 +105,25 @@ def test_fork_points(store: Store, new_trial) -> None:  # noqa: ANN001
     assert empty_root_child.fork_point == 0 and empty_root_child.visible_trials == 0
     assert store.branch_names() == [b.name for b in store.list_branches()]
     assert store.branch_names()[0] == MAIN_BRANCH and "grandchild" in store.branch_names()
+
+
+def test_interleaved_branch_ranges_still_come_back_in_id_order(tmp_path, new_trial) -> None:  # noqa: ANN001
+    """A branch's visible trials are read link by link; if a changed fork point makes the
+    links' id ranges interleave, the store falls back to one sorted query."""
+    path = tmp_path / "interleaved.db"
+    with Store.open(str(path), create=True) as store:
+        store.add_trials([new_trial(i) for i in range(2)])  # main: 1, 2
+        store.create_branch("b")  # forked at 2
+        store.add_trial(new_trial(3, branch="b", source="exploration"))  # b: 3
+        store.add_trial(new_trial(4, source="exploration"))  # main: 4, not seen by b
+        assert [t.id for t in store.visible_trials("b")] == [1, 2, 3]
+    with closing(sqlite3.connect(path)) as conn, conn:
+        conn.execute("UPDATE branches SET fork_point = 4 WHERE name = 'b'")  # b now sees 4, older than its own 3
+    with Store.open(str(path)) as store:
+        assert [t.id for t in store.visible_trials("b")] == [1, 2, 3, 4]
+        assert [t.id for t in store.visible_trials("b", newest_first=True)] == [4, 3, 2, 1]
+        assert [t.id for t in store.visible_trials("b", source="exploration")] == [3, 4]
+        assert [t.branch for t in store.visible_trials("b")] == ["main", "main", "b", "main"]
 
 
 def test_checkout_and_current_branch(store: Store) -> None:

@@ -162,6 +162,8 @@ class BranchMachine(RuleBasedStateMachine):
             expected = sorted(self.model.visible(branch, self.model.trials))
             records = self.store.visible_trials(branch)
             assert [t.id for t in records] == expected
+            assert [t.id for t in self.store.visible_trials(branch, newest_first=True)] == expected[::-1]
+            assert [t.id for t in self.store.visible_trials(branch, source="exploration")] == [i for i in expected if self.model.trials[i][1] == "exploration"]
             assert all(t.branch == self.model.trials[t.id][0] for t in records)
             assert self.store.count_visible_trials(branch) == len(expected)
             assert self.store.max_visible_trial_id(branch) == max(expected, default=0)

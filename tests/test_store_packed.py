@@ -52,3 +52,11 @@ def test_a_non_finite_number_is_refused(bad: float, where: int) -> None:
     numbers[where] = bad
     with pytest.raises(LlcpsError, match="not a finite number"):
         unpack_features(b"\x01\x01" + struct.pack("<5d", *numbers) + b"box\x1fred")
+
+
+@pytest.mark.parametrize(("shape", "color"), [("cube", "red"), ("box", "purple")])
+def test_table1_refuses_names_outside_its_categories(shape: str, color: str) -> None:
+    data = pack_features([EntityFeatures("box", 1.0, "red", 1.0, 0.0, 0.0, 1.0), EntityFeatures(shape, 1.0, color, 1.0, 0.0, 0.0, 1.0)])
+    assert unpack_features(data)[1].shape == shape  # the layout alone allows any name
+    with pytest.raises(LlcpsError, match="unknown shape or color"):
+        unpack_features(data, table1=True)

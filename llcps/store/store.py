@@ -958,17 +958,45 @@ class Store:
         for value, what in ((limit, "limit"), (after_id, "after_id")):
             if value is not None:
                 check_id(value, what)
+        filters = self._trial_filters(source, scenario, solved, after_id, episode)
+        order = Trial.id.desc() if newest_first else Trial.id
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
-            stmt = (
-                select(*TRIAL_COLUMNS)
-                .where(visibility.clause(chain, Trial.branch_id, Trial.id), *self._trial_filters(source, scenario, solved, after_id, episode))
-                .order_by(Trial.id.desc() if newest_first else Trial.id)
-                .limit(limit)
-            )
             decoder = TrialDecoder({link.branch_id: link.name for link in chain})
-            with gc_paused():
-                return decoder.decode(conn.execute(stmt).all())  # fetchall: far cheaper than row iteration
+            with gc_paused():  # the fetch builds as many containers as the decoding
+                records = None if limit is not None else self._trials_by_link(conn, chain, filters, order, newest_first, decoder)
+                if records is None:  # one query, sorted by the database
+                    stmt = select(*TRIAL_COLUMNS).where(visibility.clause(chain, Trial.branch_id, Trial.id), *filters)
+                    records = decoder.decode_result(conn.execute(stmt.order_by(order).limit(limit)))
+                return records
+
+    @staticmethod
+    def _trials_by_link(
+        conn: Connection,
+        chain: Sequence[Link],
+        filters: Sequence[ColumnElement[bool]],
+        order: Any,
+        newest_first: bool,
+        decoder: TrialDecoder,
+    ) -> list[TrialRecord] | None:
+        """Visible trials read one chain link at a time, each in id order from the
+        (branch, id) index, then joined; None if the links' id ranges overlap.
+
+        One query over the whole chain makes SQLite collect the rows of every link and
+        sort them again (a fifth of the query's time for 100,000 trials). The ranges do
+        not overlap while ids commit in increasing order (see
+        :mod:`llcps.store.visibility`): an ancestor's visible ids end at a fork point
+        and a descendant's own trials were written after the fork.
+        """
+        links = chain if newest_first else chain[::-1]
+        records: list[TrialRecord] = []
+        for link in links:
+            stmt = select(*TRIAL_COLUMNS).where(visibility.clause([link], Trial.branch_id, Trial.id), *filters).order_by(order)
+            part = decoder.decode_result(conn.execute(stmt))
+            if part and records and (part[0].id > records[-1].id) == newest_first:  # type: ignore[operator]
+                return None
+            records += part
+        return records
 
     def count_visible_trials(self, branch: str | None, source: str | None = None) -> int:
         """How many trials ``branch`` sees (optionally of one source)."""
