@@ -400,6 +400,7 @@ def _trials(n: int, branch: str, start: int = 0, *, unique: bool = True) -> Iter
 
 
 _POOL: list[Any] = []
+_POOL_CHANGES: dict[int, Any] = {}
 
 
 def _pool() -> list[Any]:
@@ -410,10 +411,34 @@ def _pool() -> list[Any]:
     return _POOL
 
 
-def _deep_branch(path: Path, visible: int, *, unique: bool, repeats: int) -> tuple[int, float, list[_Clock]]:
+def _changes(n: int, start: int = 0) -> list[Any]:
+    """The symbolic changes of :func:`_trials`'s trials, each in a scene of its own (as in
+    pretraining: the first body moved by a trial-specific amount), so none is shared."""
+    from dataclasses import replace
+
+    from llcps.domain import Body
+    from llcps.models.synthetic import synthetic_changes
+
+    pool = _pool()
+    if not _POOL_CHANGES:
+        _POOL_CHANGES.update(synthetic_changes(pool, seed=7))
+    out = []
+    for i in range(start, start + n):
+        change = _POOL_CHANGES[pool[i % len(pool)].id]
+        first = change.bodies[0]
+        moved = Body(first.name, first.kind, first.shape, (first.lo[0] + i * 1e-9, *first.lo[1:]), first.hi, first.centre)
+        out.append(replace(change, bodies=(moved, *change.bodies[1:]), trial_id=None))
+    return out
+
+
+def _deep_branch(path: Path, visible: int, *, unique: bool, repeats: int) -> tuple[int, float, list[_Clock], list[_Clock]]:
     """Fill main <- level1 <- level2 <- level3 (a quarter each) in batches, then load level3's visible set.
 
-    Returns (trials seen, batched inserts/s, one clock per load).
+    With ``unique`` every trial also gets a symbolic change of its own, and the changes
+    level3 sees are loaded too (what a fit reads beside the trials).
+
+    Returns (trials seen, batched inserts/s of the trials alone, one clock per load of
+    the trials, one per load of the changes).
     """
     from llcps.store import Store
 
@@ -427,9 +452,12 @@ def _deep_branch(path: Path, visible: int, *, unique: bool, repeats: int) -> tup
             share = visible // len(chain) if level < len(chain) - 1 else visible - inserted
             while share > 0:
                 rows = list(_trials(min(batch, share), name, start=inserted, unique=unique))
-                with _Clock() as clock:
-                    store.add_trials(rows)
-                wall += clock.wall
+                if unique:
+                    store.add_trials(rows, changes=_changes(len(rows), start=inserted))
+                else:
+                    with _Clock() as clock:
+                        store.add_trials(rows)
+                    wall += clock.wall
                 inserted += len(rows)
                 share -= len(rows)
         loads = []
@@ -439,7 +467,13 @@ def _deep_branch(path: Path, visible: int, *, unique: bool, repeats: int) -> tup
             seen = len(records)
             del records  # freeing 100,000 records (~0.1 s) is not part of loading them
             loads.append(load)
-    return seen, inserted / wall, loads
+        change_loads = []
+        for _ in range(repeats if unique else 0):
+            with _Clock() as load:
+                changes = store.visible_changes(chain[-1])
+            del changes
+            change_loads.append(load)
+    return seen, inserted / wall if wall else float("nan"), loads, change_loads
 
 
 def bench_store(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
@@ -447,7 +481,8 @@ def bench_store(quick: bool = False, progress: Progress | None = None) -> list[F
 
     The visible set is loaded twice: with every trial's features distinct (pretraining
     trials, each from its own random scene: the decoder's worst case) and with
-    features repeated as in exploration (one scene per episode).
+    features repeated as in exploration (one scene per episode). The first also holds
+    each trial's symbolic change, in a scene of its own, and loads those as well.
     """
     from llcps.store import Store
 
@@ -463,18 +498,20 @@ def bench_store(quick: bool = False, progress: Progress | None = None) -> list[F
                 for trial in one_by_one:
                     store.add_trial(trial)
         _say(progress, f"store: a branch 3 levels deep seeing {visible:,} trials with distinct features")
-        seen, batched, unique = _deep_branch(Path(tmp) / "unique.db", visible, unique=True, repeats=repeats)
+        seen, _, unique, changes = _deep_branch(Path(tmp) / "unique.db", visible, unique=True, repeats=repeats)
         _say(progress, f"store: a branch 3 levels deep seeing {visible:,} trials with repeated features")
-        _, _, shared = _deep_branch(Path(tmp) / "shared.db", visible, unique=False, repeats=repeats)
+        _, batched, shared, _ = _deep_branch(Path(tmp) / "shared.db", visible, unique=False, repeats=repeats)
     p = "store"
     return [
         figure(f"{p}.commits_per_s", commits / single.wall, "trials/s wall", at_least=1000, note="add_trial one at a time, each durable on return"),
-        figure(f"{p}.batched_inserts_per_s", batched, "trials/s wall", note="add_trials, 5,000 per transaction"),
+        figure(f"{p}.batched_inserts_per_s", batched, "trials/s wall", note="add_trials, 5,000 per transaction (trials without changes)"),
         figure(f"{p}.visible_trials", seen, "trials", note="seen by a branch 3 levels deep"),
         figure(f"{p}.visible_load", min(c.wall for c in unique), "s wall", at_most=target, note="every trial's features distinct (pretraining)"),
         figure(f"{p}.visible_load_cpu", min(c.cpu for c in unique), "s cpu"),
         figure(f"{p}.visible_load_shared", min(c.wall for c in shared), "s wall", note="features repeated (exploration in one scene)"),
         figure(f"{p}.visible_load_shared_cpu", min(c.cpu for c in shared), "s cpu"),
+        figure(f"{p}.visible_changes_load", min(c.wall for c in changes), "s wall", note="the same trials' symbolic changes, each in a scene of its own: what a fit reads beside them"),
+        figure(f"{p}.visible_changes_load_cpu", min(c.cpu for c in changes), "s cpu"),
     ]
 
 

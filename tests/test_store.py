@@ -12,7 +12,7 @@ from conftest import BACKENDS, new_store_url
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from llcps.domain import TRIAL_SOURCES, TrialRecord
+from llcps.domain import TRIAL_SOURCES, Body, TrialChange, TrialRecord, fluent
 from llcps.errors import LlcpsError, StoreError, UnknownNameError
 from llcps.store import MAIN_BRANCH, Store, validate_branch_name
 
@@ -112,11 +112,14 @@ def test_interleaved_branch_ranges_still_come_back_in_id_order(tmp_path, new_tri
     links' id ranges interleave, the store falls back to one sorted query."""
     path = tmp_path / "interleaved.db"
     with Store.open(str(path), create=True) as store:
-        store.add_trials([new_trial(i) for i in range(2)])  # main: 1, 2
+        body = Body("cube", "object", "box", (0.0, 0.0, 0.0), (0.1, 0.1, 0.1), (0.05, 0.05, 0.05))
+        change = TrialChange.between({fluent("visible", "cube")}, set(), (body,))
+        store.add_trials([new_trial(i) for i in range(2)], changes=[change, change])  # main: 1, 2
         store.create_branch("b")  # forked at 2
-        store.add_trial(new_trial(3, branch="b", source="exploration"))  # b: 3
-        store.add_trial(new_trial(4, source="exploration"))  # main: 4, not seen by b
+        store.add_trial(new_trial(3, branch="b", source="exploration"), change=change)  # b: 3
+        store.add_trial(new_trial(4, source="exploration"), change=change)  # main: 4, not seen by b
         assert [t.id for t in store.visible_trials("b")] == [1, 2, 3]
+        assert list(store.visible_changes("b")) == [1, 2, 3]
     with closing(sqlite3.connect(path)) as conn, conn:
         conn.execute("UPDATE branches SET fork_point = 4 WHERE name = 'b'")  # b now sees 4, older than its own 3
     with Store.open(str(path)) as store:
@@ -124,6 +127,7 @@ def test_interleaved_branch_ranges_still_come_back_in_id_order(tmp_path, new_tri
         assert [t.id for t in store.visible_trials("b", newest_first=True)] == [4, 3, 2, 1]
         assert [t.id for t in store.visible_trials("b", source="exploration")] == [3, 4]
         assert [t.branch for t in store.visible_trials("b")] == ["main", "main", "b", "main"]
+        assert list(store.visible_changes("b")) == [1, 2, 3, 4]
 
 
 def test_checkout_and_current_branch(store: Store) -> None:

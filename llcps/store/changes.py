@@ -74,11 +74,27 @@ def _atom(value: Any) -> Fluent:
     return fluent(*value)
 
 
-def _atom_set(value: Any) -> frozenset[Fluent]:
+def _atom_set(value: Any, known: dict[Any, Fluent] | None = None) -> frozenset[Fluent]:
+    """The atoms of a stored state; ``known`` maps atoms already checked (as tuples of
+    their parts) to their fluents: the same few atoms recur across a training set."""
     decoded = _json(value)
     if not isinstance(decoded, list) or len(decoded) > MAX_ATOMS:
         raise LlcpsError("a stored trial change's atoms are not a list of atoms", hint=_HINT)
-    return frozenset(_atom(a) for a in decoded)
+    if known is None:
+        return frozenset(_atom(a) for a in decoded)
+    atoms = []
+    for a in decoded:
+        try:
+            key = tuple(a) if type(a) is list else None
+            found = known.get(key) if key is not None else None
+        except TypeError:  # a part that cannot be hashed: _atom names the problem
+            found = None
+        if found is None:
+            found = _atom(a)
+            if len(known) < MAX_ATOMS:
+                known[tuple(a)] = found
+        atoms.append(found)
+    return frozenset(atoms)
 
 
 def _bodies(value: Any) -> tuple[Body, ...]:
@@ -100,13 +116,14 @@ class ChangeDecoder:
     def __init__(self) -> None:
         self._states: dict[str, frozenset[Fluent]] = {}
         self._bodies: dict[str, tuple[Body, ...]] = {}
+        self._atoms: dict[Any, Fluent] = {}
 
     def _state(self, text: Any) -> frozenset[Fluent]:
         if not isinstance(text, str):
-            return _atom_set(text)
+            return _atom_set(text, self._atoms)
         found = self._states.get(text)
         if found is None:
-            found = self._states[text] = _atom_set(text)
+            found = self._states[text] = _atom_set(text, self._atoms)
         return found
 
     def _body_list(self, text: Any) -> tuple[Body, ...]:
@@ -116,6 +133,18 @@ class ChangeDecoder:
         if found is None:
             found = self._bodies[text] = _bodies(text)
         return found
+
+    def decode_result(self, result: Any, batch: int = 1000) -> list[TrialChange]:
+        """The known changes of every row of a query result (anything with ``fetchmany``),
+        read a batch at a time (see :meth:`llcps.store.trials.TrialDecoder.decode_result`).
+
+        Raises:
+            LlcpsError: a row is malformed (untrusted input).
+        """
+        out: list[TrialChange] = []
+        while rows := result.fetchmany(batch):
+            out += [change for change in map(self.decode, rows) if change is not None]
+        return out
 
     def decode(self, row: Sequence[Any]) -> TrialChange | None:
         """One row's change; None when it is recorded as unknown.

@@ -196,6 +196,14 @@ def _context_atoms(row_id: int, context: Any) -> tuple[tuple[str, ...], ...]:
     return tuple(sorted(tuple(atom) for atom in context))
 
 
+def _trial_id(record: TrialRecord) -> int:
+    return record.id  # type: ignore[return-value]
+
+
+def _change_id(change: TrialChange) -> int:
+    return change.trial_id  # type: ignore[return-value]
+
+
 class Store:
     """A handle on one experience database. Create it with :meth:`Store.open`.
 
@@ -964,39 +972,49 @@ class Store:
             chain = self._chain(conn, self._name(conn, branch))
             decoder = TrialDecoder({link.branch_id: link.name for link in chain})
             with gc_paused():  # the fetch builds as many containers as the decoding
-                records = None if limit is not None else self._trials_by_link(conn, chain, filters, order, newest_first, decoder)
+                def select_trials(links: Sequence[Link]) -> Any:
+                    return select(*TRIAL_COLUMNS).where(visibility.clause(links, Trial.branch_id, Trial.id), *filters).order_by(order)
+
+                records = None
+                if limit is None:
+                    records = self._read_by_link(
+                        conn, chain, lambda link: select_trials([link]), decoder.decode_result, _trial_id, newest_first
+                    )
                 if records is None:  # one query, sorted by the database
-                    stmt = select(*TRIAL_COLUMNS).where(visibility.clause(chain, Trial.branch_id, Trial.id), *filters)
-                    records = decoder.decode_result(conn.execute(stmt.order_by(order).limit(limit)))
+                    records = decoder.decode_result(conn.execute(select_trials(chain).limit(limit)))
                 return records
 
     @staticmethod
-    def _trials_by_link(
+    def _read_by_link(
         conn: Connection,
         chain: Sequence[Link],
-        filters: Sequence[ColumnElement[bool]],
-        order: Any,
-        newest_first: bool,
-        decoder: TrialDecoder,
-    ) -> list[TrialRecord] | None:
-        """Visible trials read one chain link at a time, each in id order from the
-        (branch, id) index, then joined; None if the links' id ranges overlap.
+        select_link: Callable[[Link], Any],
+        decode: Callable[[Any], list[Any]],
+        position: Callable[[Any], int],
+        newest_first: bool = False,
+    ) -> list[Any] | None:
+        """Visible rows read one chain link at a time, each in id order from the
+        (branch, id) index, decoded and joined; None if the links' id ranges overlap.
 
         One query over the whole chain makes SQLite collect the rows of every link and
         sort them again (a fifth of the query's time for 100,000 trials). The ranges do
         not overlap while ids commit in increasing order (see
         :mod:`llcps.store.visibility`): an ancestor's visible ids end at a fork point
         and a descendant's own trials were written after the fork.
+
+        Args:
+            select_link: the ordered query of one link's rows.
+            decode: the decoded items of a query's result.
+            position: an item's trial id.
         """
         links = chain if newest_first else chain[::-1]
-        records: list[TrialRecord] = []
+        items: list[Any] = []
         for link in links:
-            stmt = select(*TRIAL_COLUMNS).where(visibility.clause([link], Trial.branch_id, Trial.id), *filters).order_by(order)
-            part = decoder.decode_result(conn.execute(stmt))
-            if part and records and (part[0].id > records[-1].id) == newest_first:  # type: ignore[operator]
+            part = decode(conn.execute(select_link(link)))
+            if part and items and (position(part[0]) > position(items[-1])) == newest_first:
                 return None
-            records += part
-        return records
+            items += part
+        return items
 
     def count_visible_trials(self, branch: str | None, source: str | None = None) -> int:
         """How many trials ``branch`` sees (optionally of one source)."""
@@ -1020,21 +1038,24 @@ class Store:
         Raises:
             LlcpsError: a stored change is malformed.
         """
-        with self._read() as conn:
-            chain = self._chain(conn, self._name(conn, branch))
-            stmt = (
+        filters = [TrialChangeRow.source != UNKNOWN] + ([] if after_id is None else [Trial.id > after_id])
+
+        def select_changes(links: Sequence[Link]) -> Any:
+            return (
                 select(*CHANGE_COLUMNS)
                 .join(Trial, Trial.id == TrialChangeRow.trial_id)
-                .where(visibility.clause(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
-                .order_by(TrialChangeRow.trial_id)
+                .where(visibility.clause(links, Trial.branch_id, Trial.id), *filters)
+                .order_by(Trial.id)
             )
-            if after_id is not None:
-                stmt = stmt.where(Trial.id > after_id)
+
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
             decoder = ChangeDecoder()
             with gc_paused():
-                rows = conn.execute(stmt).all()
-                changes = (decoder.decode(row) for row in rows)
-                return {c.trial_id: c for c in changes if c is not None}  # type: ignore[misc]
+                changes = self._read_by_link(conn, chain, lambda link: select_changes([link]), decoder.decode_result, _change_id)
+                if changes is None:  # one query, sorted by the database
+                    changes = decoder.decode_result(conn.execute(select_changes(chain)))
+                return {c.trial_id: c for c in changes}  # type: ignore[misc]
 
     def get_change(self, trial_id: int) -> TrialChange | None:
         """One trial's symbolic change; None when it is unknown or not recorded."""
