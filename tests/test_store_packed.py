@@ -1,4 +1,5 @@
-"""Packed features: every entity round-trips bit for bit, and bytes without the layout are refused."""
+"""Packed features and bodies: every entity and body round-trips bit for bit, and bytes without
+the layout are refused (the refusals of stored bodies: tests/test_trial_changes.py)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from llcps.domain import EntityFeatures
+from llcps.domain import BODY_KINDS, SHAPES, Body, EntityFeatures
 from llcps.errors import LlcpsError
+from llcps.store.changes import pack_bodies, unpack_bodies
 from llcps.store.trials import pack_features, unpack_features
 
 names = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x1f"), min_size=1, max_size=12)
@@ -60,3 +62,28 @@ def test_table1_refuses_names_outside_its_categories(shape: str, color: str) -> 
     assert unpack_features(data)[1].shape == shape  # the layout alone allows any name
     with pytest.raises(LlcpsError, match="unknown shape or color"):
         unpack_features(data, table1=True)
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False)
+vectors = st.tuples(finite, finite, finite)
+bodies = st.builds(
+    Body,
+    name=names,
+    kind=st.sampled_from(BODY_KINDS),
+    shape=st.one_of(st.none(), st.sampled_from(SHAPES)),
+    lo=vectors,
+    hi=vectors,
+    centre=vectors,
+)
+
+
+@given(st.lists(bodies, max_size=12))
+def test_bodies_round_trip(scene: list[Body]) -> None:
+    unpacked = unpack_bodies(pack_bodies(scene))
+    assert unpacked == tuple(scene)
+    assert all(type(v) is tuple for b in unpacked for v in (b.lo, b.hi, b.centre))
+
+
+def test_a_body_name_with_the_separator_cannot_be_packed() -> None:
+    with pytest.raises(LlcpsError):
+        pack_bodies([Body("cu\x1fbe", "object", "box", (0, 0, 0), (1, 1, 1), (0.5, 0.5, 0.5))])

@@ -4,6 +4,7 @@ their trial is, carried by payloads, and recovered for older stores by replay.""
 from __future__ import annotations
 
 import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,11 @@ BODIES = (
     Body("bucket", "container", "cylinder", (0.27, -0.72, -0.45), (0.53, -0.46, -0.21), (0.4, -0.59, -0.33)),
     Body("table", "table", None, (-0.3, -0.45, -0.45), (1.05, 0.45, 0.0), (0.375, 0.0, -0.225)),
 )
+
+
+def _packed_body(name: str, kind: str, shape: str, *, lo: float = 0.0) -> bytes:
+    """One body in the layout of ``pack_bodies``, whatever its fields (to damage a row with)."""
+    return b"\x01\x01\x00" + struct.pack("<9d", lo, 0, 0, 1, 1, 1, 0.5, 0.5, 0.5) + "\x1f".join((name, kind, shape)).encode()
 
 
 def change(k: int = 0) -> TrialChange:
@@ -76,10 +82,15 @@ def test_a_change_count_mismatch_writes_nothing(store: Store, new_trial) -> None
     [
         ("added", "not json", "not valid JSON"),
         ("added", [["in", 3, "x"]], "malformed atom"),
-        ("bodies", [{"name": "cube", "kind": "spaceship", "shape": None, "lo": [0, 0, 0], "hi": [1, 1, 1], "centre": [0, 0, 0]}], "malformed body"),
-        ("bodies", [{"name": "cube"}], "malformed body"),
-        ("bodies", [{"name": "cube", "kind": "object", "shape": "box", "lo": [10**400, 0, 0], "hi": [1, 1, 1], "centre": [0, 0, 0]}], "malformed body"),
-        ("bodies", [{"name": "cube", "kind": "object", "shape": "cube", "lo": [0, 0, 0], "hi": [1, 1, 1], "centre": [0, 0, 0]}], "malformed body"),
+        ("bodies", _packed_body("cube", "spaceship", ""), "malformed body"),
+        ("bodies", _packed_body("cube", "object", "cube"), "malformed body"),
+        ("bodies", _packed_body("", "object", "box"), "malformed body"),
+        ("bodies", _packed_body("cube", "object", "box", lo=float("nan")), "malformed body"),
+        ("bodies", _packed_body("cube", "object", "box")[:-4], "bodies are malformed"),  # the shape cut off
+        ("bodies", _packed_body("cube", "object", "box")[:40], "bodies are malformed"),  # numbers cut short
+        ("bodies", b"\x02" + _packed_body("cube", "object", "box")[1:], "bodies are malformed"),  # an unknown layout
+        ("bodies", b"\x00[{\"name\": 1}]", "bodies are malformed"),  # JSON kept by the upgrade, never a list of bodies
+        ("bodies", b"", "bodies are malformed"),
         ("added", [["in", ["cube"], "bucket"]], "malformed atom"),
         ("source", "guessed", "unknown source"),
         ("deleted", [["visible", "ghost"]], "inconsistent"),

@@ -10,11 +10,15 @@ start state and scene, so decoded states and body lists are shared too.
 from __future__ import annotations
 
 import json
+import math
+import struct
+from dataclasses import fields
+from functools import lru_cache
 from typing import Any, Iterable, Sequence
 
 from sqlalchemy import Text, type_coerce
 
-from llcps.domain import CHANGE_SOURCES, Body, Fluent, TrialChange, fluent
+from llcps.domain import BODY_KINDS, CHANGE_SOURCES, SHAPES, Body, Fluent, TrialChange, fluent
 from llcps.errors import LlcpsError
 from llcps.store.schema import TrialChangeRow
 
@@ -28,13 +32,90 @@ CHANGE_COLUMNS = (
     type_coerce(TrialChangeRow.before, Text),
     type_coerce(TrialChangeRow.added, Text),
     type_coerce(TrialChangeRow.deleted, Text),
-    type_coerce(TrialChangeRow.bodies, Text),
+    TrialChangeRow.bodies,
 )
 
 _HINT = "the stored trial change is damaged; `llcps db upgrade --replay-changes` recovers it from the trial's start state"
 #: Bounds that keep a crafted row from costing much (a real scene has a few dozen atoms).
 MAX_ATOMS = 10_000
 MAX_BODIES = 1_000
+
+
+#: Packed bodies: a layout byte, the body count (two bytes, little-endian), per body nine
+#: little-endian doubles (lo, hi and centre), then each body's "name<US>kind<US>shape" as
+#: UTF-8 text (an empty shape for a fixture), joined by US (0x1f).
+BODIES_LAYOUT = 1
+_SEPARATOR = "\x1f"
+_BODY_KINDS = frozenset(BODY_KINDS)
+_SHAPES = frozenset(SHAPES)
+
+
+@lru_cache(maxsize=64)
+def _doubles(n: int) -> struct.Struct:
+    return struct.Struct(f"<{9 * n}d")
+
+
+def pack_bodies(bodies: Sequence[Body]) -> bytes:
+    """The stored form of a scene's bodies (see :data:`BODIES_LAYOUT`)."""
+    if len(bodies) > MAX_BODIES:
+        raise LlcpsError(f"a scene has at most {MAX_BODIES} bodies, not {len(bodies)}")
+    names = []
+    for b in bodies:
+        parts = (b.name, b.kind, b.shape or "")
+        if any(_SEPARATOR in part for part in parts):
+            raise LlcpsError(f"a body's name, kind or shape cannot hold control characters: {parts!r}")
+        names += parts
+    numbers = [v for b in bodies for v in (*b.lo, *b.hi, *b.centre)]
+    return bytes((BODIES_LAYOUT,)) + len(bodies).to_bytes(2, "little") + _doubles(len(bodies)).pack(*numbers) + _SEPARATOR.join(names).encode()
+
+
+def unpack_bodies(data: bytes) -> tuple[Body, ...]:
+    """Read :func:`pack_bodies`'s bytes back, checking every field (they come from a database).
+
+    Raises:
+        LlcpsError: the bytes do not have the layout, or describe no valid body.
+    """
+    try:
+        if data[0] != BODIES_LAYOUT:
+            raise ValueError
+        n = int.from_bytes(data[1:3], "little")
+        if n > MAX_BODIES:
+            raise ValueError
+        numbers = _doubles(n).unpack_from(data, 3)
+        text = bytes(data[3 + 72 * n :]).decode()
+    except (IndexError, TypeError, ValueError, struct.error):  # UnicodeDecodeError is a ValueError
+        raise LlcpsError("a stored trial change's bodies are malformed", hint=_HINT) from None
+    parts = text.split(_SEPARATOR) if n else []
+    if len(parts) != 3 * n or (not n and text):
+        raise LlcpsError("a stored trial change's bodies are malformed", hint=_HINT)
+    if not math.isfinite(sum(numbers)) and not all(map(math.isfinite, numbers)):
+        raise LlcpsError("a stored trial change holds a malformed body: a coordinate is not a finite number", hint=_HINT)
+    new, set_dict = object.__new__, object.__setattr__
+    bodies = []
+    for i in range(n):
+        name, kind, shape = parts[3 * i : 3 * i + 3]
+        if not name or kind not in _BODY_KINDS or (shape and shape not in _SHAPES):
+            raise LlcpsError(f"a stored trial change holds a malformed body ({name[:20]!r}, {kind[:20]!r}, {shape[:20]!r})", hint=_HINT)
+        at = 9 * i
+        body = new(Body)  # every field checked above, as Body.__post_init__ would
+        set_dict(
+            body,
+            "__dict__",
+            {
+                "name": name,
+                "kind": kind,
+                "shape": shape or None,
+                "lo": numbers[at : at + 3],
+                "hi": numbers[at + 3 : at + 6],
+                "centre": numbers[at + 6 : at + 9],
+            },
+        )
+        bodies.append(body)
+    return tuple(bodies)
+
+
+if {f.name for f in fields(Body)} != {"name", "kind", "shape", "lo", "hi", "centre"}:  # pragma: no cover
+    raise ImportError("llcps.store.changes packs fields that Body does not have")
 
 
 def _atoms(atoms: Iterable[Fluent]) -> list[list[str]]:
@@ -44,14 +125,14 @@ def _atoms(atoms: Iterable[Fluent]) -> list[list[str]]:
 def change_row(trial_id: int, change: TrialChange | None) -> dict[str, Any]:
     """The column values of a trial's change; ``None`` records it as unknown."""
     if change is None:
-        return {"trial_id": trial_id, "source": UNKNOWN, "before": [], "added": [], "deleted": [], "bodies": []}
+        return {"trial_id": trial_id, "source": UNKNOWN, "before": [], "added": [], "deleted": [], "bodies": pack_bodies(())}
     return {
         "trial_id": trial_id,
         "source": change.source,
         "before": _atoms(change.before),
         "added": _atoms(change.added),
         "deleted": _atoms(change.deleted),
-        "bodies": [b.as_dict() for b in change.bodies],
+        "bodies": pack_bodies(change.bodies),
     }
 
 
@@ -97,25 +178,12 @@ def _atom_set(value: Any, known: dict[Any, Fluent] | None = None) -> frozenset[F
     return frozenset(atoms)
 
 
-def _bodies(value: Any) -> tuple[Body, ...]:
-    decoded = _json(value)
-    if not isinstance(decoded, list) or len(decoded) > MAX_BODIES:
-        raise LlcpsError("a stored trial change's bodies are not a list", hint=_HINT)
-    bodies = []
-    for item in decoded:
-        try:
-            bodies.append(Body.from_dict(item))
-        except (ValueError, TypeError) as exc:
-            raise LlcpsError(f"a stored trial change holds a malformed body: {exc}", hint=_HINT) from None
-    return tuple(bodies)
-
-
 class ChangeDecoder:
     """Builds TrialChanges from rows of :data:`CHANGE_COLUMNS`, sharing repeated parts."""
 
     def __init__(self) -> None:
         self._states: dict[str, frozenset[Fluent]] = {}
-        self._bodies: dict[str, tuple[Body, ...]] = {}
+        self._bodies: dict[bytes, tuple[Body, ...]] = {}
         self._atoms: dict[Any, Fluent] = {}
 
     def _state(self, text: Any) -> frozenset[Fluent]:
@@ -126,12 +194,12 @@ class ChangeDecoder:
             found = self._states[text] = _atom_set(text, self._atoms)
         return found
 
-    def _body_list(self, text: Any) -> tuple[Body, ...]:
-        if not isinstance(text, str):
-            return _bodies(text)
-        found = self._bodies.get(text)
+    def _body_list(self, data: Any) -> tuple[Body, ...]:
+        if type(data) is not bytes:  # a driver's memoryview, or a value of the wrong type
+            data = bytes(data) if isinstance(data, (bytearray, memoryview)) else b""
+        found = self._bodies.get(data)
         if found is None:
-            found = self._bodies[text] = _bodies(text)
+            found = self._bodies[data] = unpack_bodies(data)
         return found
 
     def decode_result(self, result: Any, batch: int = 1000) -> list[TrialChange]:

@@ -198,7 +198,8 @@ class TrialChangeRow(Base):
     before: Mapped[list[Any]]
     added: Mapped[list[Any]]
     deleted: Mapped[list[Any]]
-    bodies: Mapped[list[Any]]
+    # The scene's bodies, packed (llcps.store.changes.pack_bodies).
+    bodies: Mapped[bytes] = mapped_column(LargeBinary)
 
 
 class Operator(Base):
