@@ -14,7 +14,7 @@ from sqlalchemy import update
 
 from llcps.cps.agent import solve
 from llcps.cps.episode import SolveConfig
-from llcps.domain import ControllerParams, EntityFeatures, Outcome, TrialSpec
+from llcps.domain import Body, ControllerParams, EntityFeatures, Outcome, TrialSpec
 from llcps.pretrain import pretrain
 from llcps.sim.cache import decode_result, encode_result, trial_key
 from llcps.sim.trial import TrialResult
@@ -72,7 +72,12 @@ def test_the_key_changes_with_every_input_of_the_physics() -> None:
 def test_a_result_round_trips_and_malformed_ones_are_refused() -> None:
     assert decode_result(encode_result(RESULT)) == RESULT
     good = encode_result(RESULT)
+    cup = Body("cup", "container", "box", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (0.5, 0.5, 0.5))
+    with_body = encode_result(replace(RESULT, bodies=(cup,)))
+    assert decode_result(with_body).bodies == (cup,) and b'"lo":[0.0,0.0,0.0]' in with_body
     for bad in (
+        with_body.replace(b'"lo":[0.0,0.0,0.0]', b'"lo":[1' + b"0" * 400 + b',0.0,0.0]'),  # too large for a float
+        with_body.replace(b'"shape":"box"', b'"shape":"cube"'),
         b"not json",
         b"[]",
         good.replace(b'"push"', b'"fly"'),

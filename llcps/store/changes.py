@@ -155,14 +155,12 @@ def _atom(value: Any) -> Fluent:
     return fluent(*value)
 
 
-def _atom_set(value: Any, known: dict[Any, Fluent] | None = None) -> frozenset[Fluent]:
+def _atom_set(value: Any, known: dict[Any, Fluent]) -> frozenset[Fluent]:
     """The atoms of a stored state; ``known`` maps atoms already checked (as tuples of
     their parts) to their fluents: the same few atoms recur across a training set."""
     decoded = _json(value)
     if not isinstance(decoded, list) or len(decoded) > MAX_ATOMS:
         raise LlcpsError("a stored trial change's atoms are not a list of atoms", hint=_HINT)
-    if known is None:
-        return frozenset(_atom(a) for a in decoded)
     atoms = []
     for a in decoded:
         try:

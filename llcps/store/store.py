@@ -968,13 +968,14 @@ class Store:
                 check_id(value, what)
         filters = self._trial_filters(source, scenario, solved, after_id, episode)
         order = Trial.id.desc() if newest_first else Trial.id
+
+        def select_trials(links: Sequence[Link]) -> Any:
+            return select(*TRIAL_COLUMNS).where(visibility.clause(links, Trial.branch_id, Trial.id), *filters).order_by(order)
+
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
             decoder = TrialDecoder({link.branch_id: link.name for link in chain})
             with gc_paused():  # the fetch builds as many containers as the decoding
-                def select_trials(links: Sequence[Link]) -> Any:
-                    return select(*TRIAL_COLUMNS).where(visibility.clause(links, Trial.branch_id, Trial.id), *filters).order_by(order)
-
                 records = None
                 if limit is None:
                     records = self._read_by_link(
