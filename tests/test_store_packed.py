@@ -1,5 +1,5 @@
-"""Packed features and bodies: every entity and body round-trips bit for bit, and bytes without
-the layout are refused (the refusals of stored bodies: tests/test_trial_changes.py)."""
+"""Packed features, atoms and bodies: every entity, state and body round-trips bit for bit, and
+bytes without the layout are refused (the refusals of stored changes: tests/test_trial_changes.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from llcps.domain import BODY_KINDS, SHAPES, Body, EntityFeatures
 from llcps.errors import LlcpsError
-from llcps.store.changes import pack_bodies, unpack_bodies
+from llcps.store.changes import pack_atoms, pack_bodies, unpack_atoms, unpack_bodies
 from llcps.store.trials import pack_features, unpack_features
 
 names = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x1f"), min_size=1, max_size=12)
@@ -87,3 +87,21 @@ def test_bodies_round_trip(scene: list[Body]) -> None:
 def test_a_body_name_with_the_separator_cannot_be_packed() -> None:
     with pytest.raises(LlcpsError):
         pack_bodies([Body("cu\x1fbe", "object", "box", (0, 0, 0), (1, 1, 1), (0.5, 0.5, 0.5))])
+
+
+atom_names = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x1e\x1f"), min_size=1, max_size=12)
+atoms = st.lists(atom_names, min_size=1, max_size=3).map(tuple)
+
+
+@given(st.frozensets(atoms, max_size=30))
+def test_states_round_trip(state: frozenset[tuple[str, ...]]) -> None:
+    known: dict[str, tuple[str, ...]] = {}
+    assert unpack_atoms(pack_atoms(state), known) == state
+    assert unpack_atoms(pack_atoms(state), known) == state  # again, from what it remembered
+    assert pack_atoms(state) == pack_atoms(set(state))  # one spelling whatever the order
+
+
+@pytest.mark.parametrize("atom", [(), ("a", "b", "c", "d"), ("in", ""), ("in", "a\x1eb")])
+def test_an_atom_that_cannot_be_stored_is_refused(atom: tuple[str, ...]) -> None:
+    with pytest.raises(LlcpsError):
+        pack_atoms([atom])

@@ -1,22 +1,21 @@
 """Trial changes between :class:`~llcps.domain.TrialChange` and ``trial_changes`` rows.
 
 A change is kept in its own table keyed by trial id (the trials table and its hot
-decoder stay as they are). What is read back is untrusted: every atom and body is
-checked before it becomes a domain object, and anything malformed is one
+decoder stay as they are), its states and its scene each packed into one binary
+value (:func:`pack_atoms`, :func:`pack_bodies`): a fit reads every visible trial's
+change. What is read back is untrusted: every atom and body is checked before it
+becomes a domain object, and anything malformed is one
 :class:`~llcps.errors.LlcpsError`. Exploration trials of one episode share their
 start state and scene, so decoded states and body lists are shared too.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import struct
 from dataclasses import fields
 from functools import lru_cache
 from typing import Any, Iterable, Sequence
-
-from sqlalchemy import Text, type_coerce
 
 from llcps.domain import BODY_KINDS, CHANGE_SOURCES, SHAPES, Body, Fluent, TrialChange, fluent
 from llcps.errors import LlcpsError
@@ -29,9 +28,9 @@ UNKNOWN = "unknown"
 CHANGE_COLUMNS = (
     TrialChangeRow.trial_id,
     TrialChangeRow.source,
-    type_coerce(TrialChangeRow.before, Text),
-    type_coerce(TrialChangeRow.added, Text),
-    type_coerce(TrialChangeRow.deleted, Text),
+    TrialChangeRow.before,
+    TrialChangeRow.added,
+    TrialChangeRow.deleted,
     TrialChangeRow.bodies,
 )
 
@@ -41,11 +40,66 @@ MAX_ATOMS = 10_000
 MAX_BODIES = 1_000
 
 
+#: Packed states (``before``, ``added``, ``deleted``): a layout byte, then the atoms as
+#: UTF-8 text, sorted, each atom's predicate and arguments joined by US (0x1f), the atoms
+#: joined by RS (0x1e).
+ATOMS_LAYOUT = 1
+_SEPARATOR = "\x1f"
+_ATOM_SEPARATOR = "\x1e"
+
+
+def pack_atoms(atoms: Iterable[Fluent]) -> bytes:
+    """The stored form of a set of atoms (see :data:`ATOMS_LAYOUT`)."""
+    texts = []
+    for atom in sorted(atoms):
+        if not 1 <= len(atom) <= 3 or any(not part or _SEPARATOR in part or _ATOM_SEPARATOR in part for part in atom):
+            raise LlcpsError(f"an atom needs one to three names without control characters: {atom!r}")
+        texts.append(_SEPARATOR.join(atom))
+    if len(texts) > MAX_ATOMS:
+        raise LlcpsError(f"a state has at most {MAX_ATOMS} atoms, not {len(texts)}")
+    return bytes((ATOMS_LAYOUT,)) + _ATOM_SEPARATOR.join(texts).encode()
+
+
+def unpack_atoms(data: bytes, known: dict[str, Fluent] | None = None) -> frozenset[Fluent]:
+    """Read :func:`pack_atoms`'s bytes back, checking every atom (they come from a database).
+
+    Args:
+        known: atoms already checked, by their text (a training set holds few distinct
+            atoms); filled with the new ones.
+
+    Raises:
+        LlcpsError: the bytes do not have the layout, or hold a malformed atom.
+    """
+    try:
+        if data[0] != ATOMS_LAYOUT:
+            raise ValueError
+        text = bytes(data[1:]).decode()
+    except (IndexError, TypeError, ValueError):  # UnicodeDecodeError is a ValueError
+        raise LlcpsError("a stored trial change's atoms are malformed", hint=_HINT) from None
+    if not text:
+        return frozenset()
+    texts = text.split(_ATOM_SEPARATOR)
+    if len(texts) > MAX_ATOMS:
+        raise LlcpsError("a stored trial change's atoms are malformed", hint=_HINT)
+    known = {} if known is None else known
+    atoms = []
+    for atom_text in texts:
+        found = known.get(atom_text)
+        if found is None:
+            parts = atom_text.split(_SEPARATOR)
+            if not 1 <= len(parts) <= 3 or not all(parts):
+                raise LlcpsError(f"a stored trial change holds a malformed atom {atom_text[:60]!r}", hint=_HINT)
+            found = fluent(*parts)
+            if len(known) < MAX_ATOMS:
+                known[atom_text] = found
+        atoms.append(found)
+    return frozenset(atoms)
+
+
 #: Packed bodies: a layout byte, the body count (two bytes, little-endian), per body nine
 #: little-endian doubles (lo, hi and centre), then each body's "name<US>kind<US>shape" as
 #: UTF-8 text (an empty shape for a fixture), joined by US (0x1f).
 BODIES_LAYOUT = 1
-_SEPARATOR = "\x1f"
 _BODY_KINDS = frozenset(BODY_KINDS)
 _SHAPES = frozenset(SHAPES)
 
@@ -118,83 +172,46 @@ if {f.name for f in fields(Body)} != {"name", "kind", "shape", "lo", "hi", "cent
     raise ImportError("llcps.store.changes packs fields that Body does not have")
 
 
-def _atoms(atoms: Iterable[Fluent]) -> list[list[str]]:
-    return [list(a) for a in sorted(atoms)]
-
-
 def change_row(trial_id: int, change: TrialChange | None) -> dict[str, Any]:
     """The column values of a trial's change; ``None`` records it as unknown."""
     if change is None:
-        return {"trial_id": trial_id, "source": UNKNOWN, "before": [], "added": [], "deleted": [], "bodies": pack_bodies(())}
+        nothing = pack_atoms(())
+        return {"trial_id": trial_id, "source": UNKNOWN, "before": nothing, "added": nothing, "deleted": nothing, "bodies": pack_bodies(())}
     return {
         "trial_id": trial_id,
         "source": change.source,
-        "before": _atoms(change.before),
-        "added": _atoms(change.added),
-        "deleted": _atoms(change.deleted),
+        "before": pack_atoms(change.before),
+        "added": pack_atoms(change.added),
+        "deleted": pack_atoms(change.deleted),
         "bodies": pack_bodies(change.bodies),
     }
 
 
-def _json(value: Any) -> Any:
-    if not isinstance(value, str):
+def _as_bytes(value: Any) -> bytes:
+    """A binary column's value as bytes: a driver's memoryview copied, any other type
+    (a row changed outside llcps) as no bytes, which no layout accepts."""
+    if type(value) is bytes:
         return value
-    try:
-        return json.loads(value)
-    except ValueError:
-        raise LlcpsError("a stored trial change is not valid JSON", hint=_HINT) from None
-
-
-def _atom(value: Any) -> Fluent:
-    if (
-        not isinstance(value, list)
-        or not 1 <= len(value) <= 3
-        or not all(isinstance(part, str) and part for part in value)
-    ):
-        raise LlcpsError(f"a stored trial change holds a malformed atom {str(value)[:60]}", hint=_HINT)
-    return fluent(*value)
-
-
-def _atom_set(value: Any, known: dict[Any, Fluent]) -> frozenset[Fluent]:
-    """The atoms of a stored state; ``known`` maps atoms already checked (as tuples of
-    their parts) to their fluents: the same few atoms recur across a training set."""
-    decoded = _json(value)
-    if not isinstance(decoded, list) or len(decoded) > MAX_ATOMS:
-        raise LlcpsError("a stored trial change's atoms are not a list of atoms", hint=_HINT)
-    atoms = []
-    for a in decoded:
-        try:
-            key = tuple(a) if type(a) is list else None
-            found = known.get(key) if key is not None else None
-        except TypeError:  # a part that cannot be hashed: _atom names the problem
-            found = None
-        if found is None:
-            found = _atom(a)
-            if len(known) < MAX_ATOMS:
-                known[tuple(a)] = found
-        atoms.append(found)
-    return frozenset(atoms)
+    return bytes(value) if isinstance(value, (bytearray, memoryview)) else b""
 
 
 class ChangeDecoder:
     """Builds TrialChanges from rows of :data:`CHANGE_COLUMNS`, sharing repeated parts."""
 
     def __init__(self) -> None:
-        self._states: dict[str, frozenset[Fluent]] = {}
+        self._states: dict[bytes, frozenset[Fluent]] = {}
         self._bodies: dict[bytes, tuple[Body, ...]] = {}
-        self._atoms: dict[Any, Fluent] = {}
+        self._atoms: dict[str, Fluent] = {}
 
-    def _state(self, text: Any) -> frozenset[Fluent]:
-        if not isinstance(text, str):
-            return _atom_set(text, self._atoms)
-        found = self._states.get(text)
+    def _state(self, data: Any) -> frozenset[Fluent]:
+        data = _as_bytes(data)
+        found = self._states.get(data)
         if found is None:
-            found = self._states[text] = _atom_set(text, self._atoms)
+            found = self._states[data] = unpack_atoms(data, self._atoms)
         return found
 
     def _body_list(self, data: Any) -> tuple[Body, ...]:
-        if type(data) is not bytes:  # a driver's memoryview, or a value of the wrong type
-            data = bytes(data) if isinstance(data, (bytearray, memoryview)) else b""
+        data = _as_bytes(data)
         found = self._bodies.get(data)
         if found is None:
             found = self._bodies[data] = unpack_bodies(data)

@@ -1,12 +1,12 @@
-"""Packed bodies in trial changes.
+"""Packed trial changes.
 
-A change's scene (``trial_changes.bodies``) moves from a JSON list of objects into
-one binary value of fixed layout (``llcps.store.changes.pack_bodies``: per body nine
+A change's states (``before``, ``added``, ``deleted``) and its scene (``bodies``) move
+from JSON lists into binary values of fixed layout (``llcps.store.changes.pack_atoms``:
+the atoms as text with control-character separators; ``pack_bodies``: per body nine
 doubles, then the names, kinds and shapes as text), so a fit, which reads every
-visible trial's change, decodes no JSON for the bodies. A stored value that is not
-a list of bodies (a row changed outside llcps) is kept as its text behind layout
-byte 0, which the library refuses as malformed, as it refused the JSON before; the
-downgrade gives the text back.
+visible trial's change, parses no JSON. A stored value that does not convert (a row
+changed outside llcps) is kept as its text behind layout byte 0, which the library
+refuses as malformed, as it refused the JSON before; the downgrade gives the text back.
 
 Revision ID: 0008
 Revises: 0007
@@ -31,6 +31,8 @@ depends_on = None
 LAYOUT = 1
 UNREADABLE = 0
 SEPARATOR = "\x1f"
+ATOM_SEPARATOR = "\x1e"
+STATES = ("before", "added", "deleted")
 BATCH = 5_000
 FIELDS = {"name", "kind", "shape", "lo", "hi", "centre"}
 
@@ -62,19 +64,53 @@ def _pack(bodies: Any) -> bytes:
     return bytes((LAYOUT,)) + len(bodies).to_bytes(2, "little") + struct.pack(f"<{len(numbers)}d", *numbers) + SEPARATOR.join(names).encode()
 
 
-def _packed(value: Any) -> bytes:
-    """A stored JSON value packed; text that is not a list of bodies kept behind layout 0."""
-    text = value if isinstance(value, str) else json.dumps(value)
-    try:
-        return _pack(json.loads(text))
-    except (ValueError, TypeError, OverflowError):
-        return bytes((UNREADABLE,)) + text.encode()
+def _pack_atoms(atoms: Any) -> bytes:
+    """The layout of ``llcps.store.changes.pack_atoms`` at this revision."""
+    if not isinstance(atoms, list):
+        raise ValueError("not a list of atoms")
+    texts = []
+    for atom in atoms:
+        if not isinstance(atom, list) or not 1 <= len(atom) <= 3:
+            raise ValueError("not an atom")
+        if not all(isinstance(p, str) and p and SEPARATOR not in p and ATOM_SEPARATOR not in p for p in atom):
+            raise ValueError("not an atom")
+        texts.append(SEPARATOR.join(atom))
+    return bytes((LAYOUT,)) + ATOM_SEPARATOR.join(sorted(texts)).encode()
+
+
+def _packer(pack: Any) -> Any:
+    def packed(value: Any) -> bytes:
+        """A stored JSON value packed; a value that does not convert kept as its text behind layout 0."""
+        text = value if isinstance(value, str) else json.dumps(value)
+        try:
+            return pack(json.loads(text))
+        except (ValueError, TypeError, OverflowError):
+            return bytes((UNREADABLE,)) + text.encode()
+
+    return packed
+
+
+def _kept(data: bytes) -> str | None:
+    """The text a value that did not convert was kept as (None for a packed value)."""
+    if not data or data[0] != LAYOUT:
+        return data[1:].decode(errors="replace") or "null"
+    return None
+
+
+def _unpacked_atoms(value: Any) -> str:
+    data = bytes(value)
+    kept = _kept(data)
+    if kept is not None:
+        return kept
+    text = data[1:].decode()
+    return json.dumps([atom.split(SEPARATOR) for atom in text.split(ATOM_SEPARATOR)] if text else [])
 
 
 def _unpacked(value: Any) -> str:
     data = bytes(value)
-    if not data or data[0] != LAYOUT:
-        return data[1:].decode(errors="replace") or "null"
+    kept = _kept(data)
+    if kept is not None:
+        return kept
     n = int.from_bytes(data[1:3], "little")
     numbers = struct.unpack_from(f"<{9 * n}d", data, 3)
     parts = data[3 + 72 * n :].decode().split(SEPARATOR) if n else []
@@ -116,19 +152,29 @@ def _convert(conn: sa.Connection, source: sa.Column[Any], target: str, convert: 
 
 def upgrade() -> None:
     conn = op.get_bind()
+    columns = (*STATES, "bodies")
     with op.batch_alter_table("trial_changes") as batch:
-        batch.add_column(sa.Column("packed_bodies", sa.LargeBinary(), nullable=True))
-    _convert(conn, sa.column("bodies", sa.Text()), "packed_bodies", _packed)
+        for column in columns:
+            batch.add_column(sa.Column(f"packed_{column}", sa.LargeBinary(), nullable=True))
+    for column in STATES:
+        _convert(conn, sa.column(column, sa.Text()), f"packed_{column}", _packer(_pack_atoms))
+    _convert(conn, sa.column("bodies", sa.Text()), "packed_bodies", _packer(_pack))
     with op.batch_alter_table("trial_changes") as batch:
-        batch.drop_column("bodies")
-        batch.alter_column("packed_bodies", new_column_name="bodies", existing_type=sa.LargeBinary(), nullable=False)
+        for column in columns:
+            batch.drop_column(column)
+            batch.alter_column(f"packed_{column}", new_column_name=column, existing_type=sa.LargeBinary(), nullable=False)
 
 
 def downgrade() -> None:
     conn = op.get_bind()
+    columns = (*STATES, "bodies")
     with op.batch_alter_table("trial_changes") as batch:
-        batch.add_column(sa.Column("json_bodies", sa.Text(), nullable=True))
+        for column in columns:
+            batch.add_column(sa.Column(f"json_{column}", sa.Text(), nullable=True))
+    for column in STATES:
+        _convert(conn, sa.column(column, sa.LargeBinary()), f"json_{column}", _unpacked_atoms)
     _convert(conn, sa.column("bodies", sa.LargeBinary()), "json_bodies", _unpacked)
     with op.batch_alter_table("trial_changes") as batch:
-        batch.drop_column("bodies")
-        batch.alter_column("json_bodies", new_column_name="bodies", type_=sa.JSON(), existing_type=sa.Text(), nullable=False)
+        for column in columns:
+            batch.drop_column(column)
+            batch.alter_column(f"json_{column}", new_column_name=column, type_=sa.JSON(), existing_type=sa.Text(), nullable=False)
