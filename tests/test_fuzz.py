@@ -66,7 +66,9 @@ COLUMNS: dict[str, list[str]] = {
     "trial_changes": ["before", "added", "deleted", "bodies", "source"],
     "operator_executions": ["operator", "success", "context", "watermark"],
 }
-JSON_COLUMNS = {"scene", "features", "arguments", "extra", "definition", "meta", "summary", "before", "added", "deleted", "bodies", "context"}
+JSON_COLUMNS = {"scene", "arguments", "extra", "definition", "meta", "summary", "context"}
+#: Packed binary values: their bytes are flipped as bytes.
+BINARY_COLUMNS = {"features", "before", "added", "deleted", "bodies"}
 
 
 @pytest.fixture(scope="module")
@@ -136,6 +138,8 @@ def _damage(db: Path, table: str, column: str, data: st.DataObject) -> tuple[Any
         if column in ("state", "artifact") and how == "bytes":
             inner = data.draw(st.booleans()) and column == "state"
             new: Any = zlib.compress(_flip(zlib.decompress(old), rng)) if inner else _flip(bytes(old), rng)
+        elif how == "bytes" and column in BINARY_COLUMNS:
+            new = _flip(bytes(old), rng)
         elif how == "bytes":
             text = old if isinstance(old, (bytes, str)) else str(old)
             raw = text.encode() if isinstance(text, str) else text
