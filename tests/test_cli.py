@@ -121,6 +121,16 @@ def test_branch_visibility_through_the_cli(db: str) -> None:
     assert (listed["fresh"]["fork_point"], listed["fresh"]["own_trials"], listed["fresh"]["visible_trials"]) == (4, 1, 5)
 
 
+def test_db_compact_reports_the_sizes(sqlite_db: Path) -> None:
+    done = llcps(sqlite_db, "db", "compact", "--json")
+    assert done.exit_code == 0, done.output
+    sizes = json.loads(done.stdout)
+    assert sizes["before"] >= sizes["after"] > 0 and sizes["freed"] == sizes["before"] - sizes["after"]
+    said = llcps(sqlite_db, "db", "compact")
+    assert said.exit_code == 0 and "compacted" in said.output and " MB -> " in said.output
+    assert [t.id for t in Store.open(str(sqlite_db)).visible_trials("main")] == list(range(1, 8))
+
+
 def test_reset_and_delete_need_yes(db: str) -> None:
     assert llcps(db, "db", "branch", "exp").exit_code == 0
     with Store.open(str(db)) as store:

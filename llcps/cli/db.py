@@ -313,6 +313,37 @@ def upgrade_cli(
 
 
 @app.command(
+    "compact",
+    epilog=examples(
+        "llcps db compact",
+        "llcps db delete old-exp --yes && llcps db compact",
+        "llcps --db runs.db db compact --json",
+    ),
+)
+def compact_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
+    """Give the space of removed rows back to the disk: SQLite rewrites the file (VACUUM),
+    PostgreSQL marks the space for reuse. Nothing stored changes.
+
+    Deleting or resetting branches, pruning the physics cache and schema upgrades that
+    rebuild a table leave free pages that a SQLite file keeps until it is compacted.
+    SQLite needs as much free disk again as the file takes while it runs.
+    """
+    with open_store(ctx) as store, progress_display("db compact", "compacting the store"):
+        result = store.compact()
+    if as_json:
+        print_json(result.as_json())
+        return
+    if result.before is None or result.after is None:
+        message(f"compacted {result.url}")
+    else:
+        message(f"compacted {result.url}: {_megabytes(result.before)} -> {_megabytes(result.after)}")
+
+
+def _megabytes(size: int) -> str:
+    return f"{size / 1e6:,.1f} MB"
+
+
+@app.command(
     "export",
     epilog=examples(
         "llcps db export --out trials.csv",

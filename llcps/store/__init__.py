@@ -9,6 +9,7 @@ from __future__ import annotations
 from llcps.store.records import (
     BranchChange,
     BranchInfo,
+    CompactResult,
     EpisodeRecord,
     ExecutionCounts,
     ModelArtifact,
@@ -25,6 +26,7 @@ __all__ = [
     "RESET_TARGETS",
     "BranchChange",
     "BranchInfo",
+    "CompactResult",
     "EpisodeRecord",
     "ExecutionCounts",
     "ModelArtifact",

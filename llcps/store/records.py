@@ -169,6 +169,23 @@ class ModelArtifact:
 
 
 @dataclass(frozen=True)
+class CompactResult:
+    """What ``llcps db compact`` did: the store's size on disk before and after (bytes;
+    None for an in-memory store)."""
+
+    url: str
+    before: int | None
+    after: int | None
+
+    @property
+    def freed(self) -> int | None:
+        return None if self.before is None or self.after is None else self.before - self.after
+
+    def as_json(self) -> dict[str, Any]:
+        return {**asdict(self), "freed": self.freed}
+
+
+@dataclass(frozen=True)
 class StoreStatus:
     """What ``llcps db status`` reports."""
 

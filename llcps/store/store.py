@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
 from contextlib import contextmanager
 from datetime import datetime, timezone
@@ -30,6 +31,7 @@ from sqlalchemy import (
     inspect,
     or_,
     select,
+    text,
     update,
 )
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
@@ -43,6 +45,7 @@ from llcps.store import migrations, visibility
 from llcps.store.records import (
     BranchChange,
     BranchInfo,
+    CompactResult,
     EpisodeRecord,
     ExecutionCounts,
     ModelArtifact,
@@ -53,6 +56,7 @@ from llcps.store.records import (
 )
 from llcps.store.schema import (
     MAX_BRANCH_NAME,
+    Base,
     Branch,
     Episode,
     Operator,
@@ -1300,6 +1304,61 @@ class Store:
                 visible_by_source=by_source,
                 changes=self.change_counts() if inspect(conn).has_table(TrialChangeRow.__tablename__) else None,
             )
+
+
+    # ------------------------------------------------------------------ upkeep
+
+    def _size(self) -> int | None:
+        """Bytes the store takes on disk: a SQLite file with its write-ahead log, or a
+        PostgreSQL database; None in memory."""
+        path = engines.sqlite_path(self._url)
+        if path is not None:
+            return sum(os.path.getsize(p) for p in (str(path), f"{path}-wal") if os.path.exists(p))
+        if self._engine.dialect.name == "postgresql":
+            with self._read() as conn:
+                return int(conn.scalar(text("SELECT pg_database_size(current_database())")) or 0)
+        return None
+
+    def compact(self) -> CompactResult:
+        """Give the space of removed rows back: SQLite's ``VACUUM`` rewrites the file
+        (it needs as much free disk again while it runs) and the write-ahead log is
+        emptied; PostgreSQL's ``VACUUM`` marks the space for reuse.
+
+        A table rebuilt by a schema revision, a deleted branch or a pruned physics
+        cache leaves free pages that SQLite keeps in the file until then. Nothing
+        stored changes.
+
+        Raises:
+            StoreError: the database refused (another process holding it, for one).
+        """
+        before = self._size()
+        raw = self._engine.raw_connection()
+        driver = raw.driver_connection
+        postgres = self._engine.dialect.name == "postgresql"
+        try:
+            if postgres:
+                driver.autocommit = True  # VACUUM runs outside a transaction
+            cursor = driver.cursor()
+            try:
+                if postgres:  # the store's own tables, not every table of the database
+                    quote = self._engine.dialect.identifier_preparer.quote
+                    cursor.execute("VACUUM " + ", ".join(quote(name) for name in sorted(Base.metadata.tables)))
+                else:
+                    cursor.execute("VACUUM")
+                if engines.sqlite_path(self._url) is not None:
+                    cursor.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            finally:
+                cursor.close()
+        except self._engine.dialect.loaded_dbapi.Error as exc:
+            raise StoreError(
+                f"cannot compact {self.url}: {exc}",
+                hint="another process may be using the store; try again when it is done",
+            ) from None
+        finally:
+            if postgres:
+                driver.autocommit = False
+            raw.close()
+        return CompactResult(url=self.url, before=before, after=self._size())
 
 
 def _mapping(value: Any, row: str, column: str) -> Mapping[str, Any]:
