@@ -210,6 +210,14 @@ def message(text: str) -> None:
     err_console.print(text, markup=False)
 
 
+def human_bytes(n: int) -> str:
+    """A size for people: ``1.5 GB``, ``161.0 MB``, ``12 B``."""
+    for unit, size in (("GB", 10**9), ("MB", 10**6), ("kB", 10**3)):
+        if n >= size:
+            return f"{n / size:.1f} {unit}"
+    return f"{n} B"
+
+
 def print_table(title: str | None, columns: Iterable[str], rows: Iterable[Iterable[Any]], *, show_header: bool = True) -> None:
     """A rich table on stdout."""
     table = Table(title=None if title is None else escape(title), show_header=show_header)

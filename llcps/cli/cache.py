@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, message, new_app, open_store, print_json, print_table
+from llcps.cli._common import JsonFlag, human_bytes, message, new_app, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.errors import LlcpsError
 
@@ -30,13 +30,6 @@ def parse_size(text: str) -> int:
     return int(float(match.group(1)) * _UNITS[unit])
 
 
-def _human(n: int) -> str:
-    for unit, size in (("GB", 10**9), ("MB", 10**6), ("kB", 10**3)):
-        if n >= size:
-            return f"{n / size:.1f} {unit}"
-    return f"{n} B"
-
-
 @app.command("status", epilog=examples("llcps cache status", "llcps cache status --json"))
 def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Entries, bytes and the size bound of the physics cache."""
@@ -53,7 +46,7 @@ def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
         [
             ("entries", status.entries),
             ("sealed", f"{status.sealed} (restored without the state checks by the user who sealed them)"),
-            ("size", f"{_human(status.bytes)} of {_human(status.max_bytes)} allowed"),
+            ("size", f"{human_bytes(status.bytes)} of {human_bytes(status.max_bytes)} allowed"),
             ("hits recorded", status.hits),
             ("last used", f"{status.oldest_use or '-'} .. {status.newest_use or '-'}"),
         ],
@@ -87,7 +80,7 @@ def prune_cli(
     if as_json:
         print_json(result.as_json())
     verb = "would remove" if dry_run else "removed"
-    message(f"{verb} {result.removed} entries ({_human(result.removed_bytes)}); {result.kept} kept ({_human(result.kept_bytes)})")
+    message(f"{verb} {result.removed} entries ({human_bytes(result.removed_bytes)}); {result.kept} kept ({human_bytes(result.kept_bytes)})")
 
 
 @app.command("limit", epilog=examples("llcps cache limit 4GB && llcps cache prune"))
@@ -105,4 +98,4 @@ def limit_cli(
         status = physics_cache.status(store)
     if as_json:
         print_json(status.as_json())
-    message(f"physics cache bound: {_human(limit)} (holds {_human(status.bytes)}; `llcps cache prune` trims it now)")
+    message(f"physics cache bound: {human_bytes(limit)} (holds {human_bytes(status.bytes)}; `llcps cache prune` trims it now)")

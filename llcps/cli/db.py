@@ -12,6 +12,7 @@ from llcps.cli._common import (
     JsonFlag,
     YesFlag,
     choice_enum,
+    human_bytes,
     message,
     new_app,
     open_store,
@@ -336,11 +337,7 @@ def compact_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     if result.before is None or result.after is None:
         message(f"compacted {result.url}")
     else:
-        message(f"compacted {result.url}: {_megabytes(result.before)} -> {_megabytes(result.after)}")
-
-
-def _megabytes(size: int) -> str:
-    return f"{size / 1e6:,.1f} MB"
+        message(f"compacted {result.url}: {human_bytes(result.before)} -> {human_bytes(result.after)}")
 
 
 @app.command(
