@@ -440,12 +440,16 @@ class _RecordingEngine:
 
     name, workers = "recording", 2
 
-    def __init__(self) -> None:
+    def __init__(self, past_first_scenario: set[str] = frozenset()) -> None:  # type: ignore[assignment]
         self.submitted: list[str] = []
+        self.past = set(past_first_scenario)
 
     def submit(self, task: Any) -> str:
         self.submitted.append(task.label)
         return task.label
+
+    def past_first_scenario(self) -> set[str]:
+        return set(self.past)
 
     def wait(self, handles: Any, timeout: float) -> list[str]:
         return list(handles)[:1]
@@ -469,6 +473,41 @@ def test_the_scheduler_keeps_twins_apart(store: Store) -> None:
     # the two sequences of seed 0 would simulate scenario 1 side by side: seed 1's goes second
     assert engine.submitted[:2] == [tasks[0].label, tasks[2].label]
     assert sorted(engine.submitted) == sorted(t.label for t in tasks) and len(summary.failed) == 4
+
+
+def test_a_twin_past_its_first_scenario_no_longer_holds_back_the_other(store: Store) -> None:
+    """Seed 0's update has finished scenario 1 (its trials are in the physics cache): its
+    reset may start beside it, ahead of seed 1's update."""
+    from llcps.experiments.scheduler import RunSummary, schedule
+
+    tasks = [t for t in plan_tasks(SMOKE, 2) if isinstance(t, SequenceTask)]  # s0 update, s0 reset, s1 update, s1 reset
+    for name in {t.pretrain_branch for t in tasks}:
+        store.create_branch(name, from_branch="main", at=0)
+    engine = _RecordingEngine(past_first_scenario={tasks[0].label})
+    summary = RunSummary(preset="smoke", seeds=(0, 1), engine="recording", workers=2)
+    schedule(store, engine, tasks, {b.name for b in store.list_branches()}, summary, {}, None)
+    assert engine.submitted[:2] == [tasks[0].label, tasks[1].label]
+
+
+def test_a_local_worker_reports_the_end_of_a_sequences_first_scenario(reference: tuple[Store, Any]) -> None:
+    """What the scheduler reads to let a twin start: reported by a real pool worker."""
+    from dataclasses import replace
+
+    from llcps.experiments.engines import LocalEngine
+
+    ref_store, _ = reference
+    task = next(t for t in plan_tasks(SMOKE, 1) if isinstance(t, SequenceTask))
+    task = replace(task, base=export_branches(ref_store, [task.pretrain_branch], snapshots=False, provenance=False))
+    engine = LocalEngine(1)
+    try:
+        assert engine.past_first_scenario() == set()
+        handle = engine.submit(task)
+        assert engine.wait([handle], timeout=300) == [handle]
+        assert engine.result(handle).label == task.label
+        assert engine.past_first_scenario() == {task.label}
+        assert len(engine.worker_pids()) == 1
+    finally:
+        engine.close(abort=False)
 
 
 class _ImportingEngine(_RecordingEngine):

@@ -1,8 +1,9 @@
 """Engines that run experiment tasks: a local process pool, or Ray.
 
-Both offer the same four operations to the scheduler: submit a task, wait for
-some to finish, collect one's result, and close (stopping the tasks in flight
-when aborting). The task function is :func:`llcps.experiments.worker.execute_task`.
+Both offer the same operations to the scheduler: submit a task, wait for some to
+finish, collect one's result, tell which running sequences have finished their
+first scenario (the local pool only), and close (stopping the tasks in flight when
+aborting). The task function is :func:`llcps.experiments.worker.execute_task`.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import Any, Iterable, Protocol
 
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.experiments.tasks import Task, TaskOutput
-from llcps.experiments.worker import THREAD_VARIABLES, execute_task, init_local_worker
+from llcps.experiments.worker import FIRST_SCENARIO, PID, THREAD_VARIABLES, execute_task, init_local_worker
 
 #: ``--engine`` choices: a local process pool, or Ray (``pip install 'llcps[ray]'``).
 ENGINES: tuple[str, ...] = ("local", "ray")
@@ -38,6 +39,10 @@ class Engine(Protocol):
 
     def result(self, handle: Any) -> TaskOutput: ...
 
+    def past_first_scenario(self) -> set[str]:
+        """Labels of sequence tasks known to have finished their first scenario."""
+        ...
+
     def close(self, *, abort: bool, pending: Iterable[Any] = ()) -> None: ...
 
 
@@ -45,7 +50,8 @@ class LocalEngine:
     """A spawn-context process pool; each worker owns its own PyBullet client.
 
     Every worker reports its process id when it starts (through a queue), so an
-    abort can stop the workers in flight without reaching into the pool.
+    abort can stop the workers in flight without reaching into the pool, and each
+    sequence task the end of its first scenario.
     """
 
     name = "local"
@@ -55,10 +61,11 @@ class LocalEngine:
 
         context = multiprocessing.get_context("spawn")
         self.workers = workers
-        self._pids = context.SimpleQueue()
+        self._events = context.SimpleQueue()
         self._known: set[int] = set()
+        self._first_done: set[str] = set()
         self._pool = ProcessPoolExecutor(
-            max_workers=workers, mp_context=context, initializer=init_local_worker, initargs=(self._pids,)
+            max_workers=workers, mp_context=context, initializer=init_local_worker, initargs=(self._events,)
         )
 
     def submit(self, task: Task) -> Future:
@@ -77,11 +84,22 @@ class LocalEngine:
                 hint="every task imported so far is kept; run the same command again to resume",
             ) from None
 
+    def _drain(self) -> None:
+        while not self._events.empty():
+            kind, value = self._events.get()
+            if kind == PID:
+                self._known.add(value)
+            elif kind == FIRST_SCENARIO:
+                self._first_done.add(value)
+
     def worker_pids(self) -> list[int]:
         """Process ids of the workers started so far."""
-        while not self._pids.empty():
-            self._known.add(self._pids.get())
+        self._drain()
         return sorted(self._known)
+
+    def past_first_scenario(self) -> set[str]:
+        self._drain()
+        return set(self._first_done)
 
     def close(self, *, abort: bool, pending: Iterable[Future] = ()) -> None:
         if abort:  # drop the tasks in flight: their workers are stopped, nothing was written
@@ -91,7 +109,7 @@ class LocalEngine:
                 except ProcessLookupError:
                     pass
         self._pool.shutdown(wait=True, cancel_futures=True)
-        self._pids.close()
+        self._events.close()
 
 
 class RayEngine:
@@ -140,6 +158,9 @@ class RayEngine:
         except self._ray.exceptions.RayTaskError as exc:
             cause = exc.as_instanceof_cause()
             raise cause from None
+
+    def past_first_scenario(self) -> set[str]:
+        return set()  # Ray tasks do not report it: a twin waits for the whole task
 
     def close(self, *, abort: bool, pending: Iterable[Any] = ()) -> None:
         if abort:

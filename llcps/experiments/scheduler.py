@@ -119,7 +119,9 @@ def schedule(
 ) -> None:
     """Keep every worker busy with the first ready task; import results as they arrive.
 
-    Of the ready tasks, one whose twin is not in flight goes first (see :func:`twin_key`).
+    Of the ready tasks, one whose twin is not in flight goes first (see :func:`twin_key`);
+    a twin that has finished its first scenario counts as not in flight, since what
+    the two share is then in the physics cache.
     """
     pending = list(todo)
     bases: dict[str, Payload] = {}
@@ -139,10 +141,11 @@ def schedule(
             pending.remove(task)
         while len(in_flight) < runner.workers:
             candidates = [t for t in pending if ready(t)]
-            busy = {twin_key(t) for t in in_flight.values()} - {None}
-            # A sequence whose twin (same seed and cell, other condition) is running would
-            # simulate the same first scenario at the same time; run something else first,
-            # and the twin's trials come from the physics cache when it starts.
+            past = runner.past_first_scenario()
+            busy = {twin_key(t) for t in in_flight.values() if t.label not in past} - {None}
+            # A sequence whose twin (same seed and cell, other condition) is in its first
+            # scenario would simulate that scenario at the same time; run something else
+            # first, and the twin's trials come from the physics cache when it starts.
             task = next((t for t in candidates if twin_key(t) not in busy), None)
             if task is None and twins:
                 task = next(iter(candidates), None)

@@ -44,6 +44,11 @@ COMMAND = "experiment run"
 _limited = False
 _scratch: str | None = None  # the private store's directory of the task in progress
 _caches: dict[str, Any] = {}  # this worker's physics caches by store URL, kept across its tasks
+_events: Any = None  # the parent's queue of (kind, value) messages; None outside a local pool
+
+#: Messages a local pool worker puts on its parent's queue: its process id when it starts,
+#: and the label of a sequence task whose first scenario is done.
+PID, FIRST_SCENARIO = "pid", "first-scenario"
 
 
 def limit_threads() -> None:
@@ -79,8 +84,9 @@ def _exit_with_parent(parent: int) -> None:
             _stop_worker()
 
 
-def init_local_worker(pids: Any = None) -> None:
-    """Initializer of local pool workers; ``pids`` is a queue that learns this process's id."""
+def init_local_worker(events: Any = None) -> None:
+    """Initializer of local pool workers; ``events`` is the parent's queue (see :data:`PID`)."""
+    global _events
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
     signal.signal(signal.SIGTERM, _stop_worker)
     try:
@@ -90,9 +96,15 @@ def init_local_worker(pids: Any = None) -> None:
         pass
     threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
     limit_threads()
-    if pids is not None:
-        pids.put(os.getpid())
+    _events = events
+    report(PID, os.getpid())
     warm_up()
+
+
+def report(kind: str, value: object) -> None:
+    """Tell the parent of a local pool worker (nothing elsewhere)."""
+    if _events is not None:
+        _events.put((kind, value))
 
 
 def warm_up() -> None:
@@ -192,6 +204,8 @@ def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str,
         if result.status == "interrupted":
             raise RuntimeError(f"{task.label}: {scenario} was interrupted")
         statuses.append(result.status)
+        if scenario == SCENARIO_SEQUENCE[0]:
+            report(FIRST_SCENARIO, task.label)  # its twin's first scenario is in the physics cache now
     counts = None
     if cache is not None and before is not None:
         after = cache.counts.as_json()
@@ -200,4 +214,15 @@ def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str,
     return payload, tuple(statuses), counts
 
 
-__all__ = ["COMMAND", "POOL_BRANCH", "THREAD_VARIABLES", "execute_task", "init_local_worker", "limit_threads", "worker_cache"]
+__all__ = [
+    "COMMAND",
+    "FIRST_SCENARIO",
+    "PID",
+    "POOL_BRANCH",
+    "THREAD_VARIABLES",
+    "execute_task",
+    "init_local_worker",
+    "limit_threads",
+    "report",
+    "worker_cache",
+]
