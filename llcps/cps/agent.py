@@ -19,7 +19,9 @@ snapshot stored before it), and a learned operator records that state as its con
 
 from __future__ import annotations
 
+import hashlib
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -57,6 +59,11 @@ PUSH_DIRECTIONS = {k: v for k, v in PUSH_DIRECTION.items() if k != "top"}
 SETTLE_STEPS = 480
 #: Re-plans after the first failed plan step before exploration starts.
 MAX_PLAN_REPAIRS = 3
+
+#: Per process: what perceiving a world restored from a serialized end state gives, and
+#: the serialized state of the world afterwards, by (scene key, digest of the end state).
+_PERCEIVED: OrderedDict[tuple[str, str], tuple[State, bytes]] = OrderedDict()
+_PERCEIVED_CAPACITY = 1024
 
 
 ProgressCallback = Callable[[str, int, int], None]
@@ -126,6 +133,9 @@ class Agent:
         # The serialized end state of the last stored trial: the world continues from
         # exactly these bytes, loaded when it is next used (unless a restore comes first).
         self._pending: bytes | None = None
+        # Set when the world, still to be loaded from _pending, has also been perceived
+        # (see perceive): the serialized state it then has.
+        self._perceived: bytes | None = None
         # Operator executions as plan steps the branch sees, this episode's included.
         self.experience: Experience = load_experience(store, branch)
 
@@ -161,12 +171,12 @@ class Agent:
 
     def controller_call(self, step: GroundAction) -> TrialSpec:
         """Map a plan step to its controller call: learned settings, or K's nominal ones."""
-        self.sync()  # a push's direction is read from the world
         call = step.controller
         if call is None:
             raise LlcpsError(f"plan step {step.label} has no controller")
         orientation = "top"
         if call.action == "push" and call.toward is not None:
+            self.sync()  # a push's direction is read from the world
             orientation = self.orientation_toward(call.arguments[0], call.toward)
         return call.spec(ControllerParams(NOMINAL_RATE, NOMINAL_MAGNITUDE, orientation))
 
@@ -203,7 +213,8 @@ class Agent:
             if cached is None and start is None:
                 start = snapshot_id  # a check may have rebuilt the world: start from the stored bytes
         if cached is not None:
-            trial, self._pending = cached.result, cached.end_state
+            trial = cached.result
+            self._continue_from(cached.end_state)
         else:
             if start is not None:
                 self.restore(start)
@@ -214,7 +225,7 @@ class Agent:
                 return trial, None
             # Continue from exactly the stored bytes; the restore waits until the world is
             # used again, and is skipped when a restore of another state comes first.
-            self._pending = self.world.save_state()
+            self._continue_from(self.world.save_state())
             if key is not None:
                 self.cache.put(key, trial, self._pending)
         new = TrialRecord(
@@ -250,11 +261,53 @@ class Agent:
 
     def snapshot(self) -> int:
         """Save the world's physics state in the store; returns the snapshot id."""
-        self.sync()
-        state = self.world.serialize_state()
+        state = self.checkpoint()
         stored = self.store.put_snapshot(scene=self.scene_record(), state=state)
         self._states[stored] = state
         return stored
+
+    def checkpoint(self) -> bytes:
+        """The world's state serialized (:meth:`World.serialize_state`'s bytes); the world
+        continues from exactly these bytes, loaded when it is next used (see :meth:`sync`).
+
+        With an end state still to be loaded, the bytes its restore would give are
+        taken from :meth:`World.serialize_restored`, which rebuilds only the first time:
+        when the next trial is answered by the physics cache, nothing is rebuilt at all.
+        """
+        if self._perceived is not None:
+            state = self._perceived
+        elif self._pending is not None:
+            state = self.world.serialize_restored(self._pending)
+        else:
+            state = self.world.save_state()
+        self._continue_from(state)
+        return state
+
+    def perceive(self) -> State:
+        """The symbolic state of the world (:func:`~llcps.sim.perception.perceive`).
+
+        Perception probes the arm (IK), which changes what the world saves next. With
+        an end state still to be loaded, the state perceived from it and the bytes the
+        world then saves are a function of those bytes and the scene, so this process
+        remembers them (bounded) and loads nothing: :meth:`checkpoint` gives the
+        remembered bytes, and :meth:`sync` loads the end state and perceives again.
+        """
+        if self._pending is not None and self._perceived is None:
+            key = (self.world.scene_key, hashlib.sha256(self._pending).hexdigest())
+            found = _PERCEIVED.get(key)
+            if found is not None:
+                _PERCEIVED.move_to_end(key)
+                state, self._perceived = found
+                self.world.trust_serialized(self._perceived)  # this process saved it
+                return state
+            self.sync()
+            state = perceive(self.world)
+            _PERCEIVED[key] = (state, self.world.save_state())
+            while len(_PERCEIVED) > _PERCEIVED_CAPACITY:
+                _PERCEIVED.popitem(last=False)
+            return state
+        self.sync()
+        return perceive(self.world)
 
     def scene_record(self) -> dict[str, object]:
         """The scene as a snapshot stores it: what the world is built from, and the task's goal,
@@ -263,14 +316,21 @@ class Agent:
 
     def restore(self, snapshot_id: int) -> None:
         """Return the world to a snapshot taken by :meth:`snapshot`."""
-        self._pending = None
+        self._pending = self._perceived = None
         self.world.restore_serialized(self._states[snapshot_id])
 
     def sync(self) -> None:
-        """Bring the world to the serialized end state of the last stored trial, if not done yet."""
+        """Bring the world to the serialized end state of the last stored trial (and
+        perceived, if :meth:`perceive` was answered without it), if not done yet."""
         if self._pending is not None:
-            state, self._pending = self._pending, None
+            state, perceived, self._pending, self._perceived = self._pending, self._perceived, None, None
             self.world.restore_serialized(state)
+            if perceived is not None:
+                perceive(self.world)  # what it did to the world, again
+
+    def _continue_from(self, state: bytes) -> None:
+        """The world goes on from exactly ``state``, loaded when it is next used."""
+        self._pending, self._perceived = state, None
 
     def run_plan(
         self, steps: Sequence[GroundAction], *, store: bool = True, record: KnowledgeBase | None = None
@@ -290,15 +350,14 @@ class Agent:
                 execution of its operator in its context (success or failure), which sets
                 the operator's cost by experience. None: count nothing.
         """
-        self.sync()
-        state = perceive(self.world)
+        state = self.perceive()
         for index, step in enumerate(steps):
             spec = self.controller_call(step)
             if store:
                 stored = self.snapshot()
                 physics = self._states[stored]
             else:
-                stored, physics = None, self.world.serialize_state()
+                stored, physics = None, self.checkpoint()
             trial, record_ = self.execute(spec, source="plan", snapshot_id=stored)
             reached = self.scenario.goal_reached(trial.after)
             failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], self.scenario), trial.after)
@@ -425,7 +484,7 @@ def solve(
 
 def _episode(agent: Agent, kb: KnowledgeBase, model, result: SolveResult) -> None:
     """Plan with K and repair the plan; only if no plan reaches the goal, explore."""
-    state = perceive(agent.world)
+    state = agent.perceive()
     if agent.scenario.goal_reached(state):
         result.status = "solved"
         return
