@@ -130,29 +130,27 @@ def test_interrupt_keeps_completed_trials_and_marks_the_episode(tmp_path: Path) 
 def test_remembered_rebuilds_and_perceptions_change_no_trial(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The agent skips rebuilding the world where this process already knows what the
     rebuild would give (a checkpoint of an end state, perceiving it): every trial and every
-    snapshot must be what the rebuilds give, simulated and answered by the physics cache."""
+    snapshot must be what the rebuilds give, simulated and answered by the physics cache
+    (the third episode reads what the second remembered)."""
     import sqlite3
     from contextlib import closing
 
     import llcps.cps.agent as agent_module
-    import llcps.sim.world as world_module
     from llcps.store.physics_cache import StorePhysicsCache
 
     def run(name: str, capacity: int) -> tuple[list[tuple], list[bytes]]:
-        monkeypatch.setattr(agent_module, "_PERCEIVED", type(agent_module._PERCEIVED)())
-        monkeypatch.setattr(agent_module, "_PERCEIVED_CAPACITY", capacity)
-        monkeypatch.setattr(world_module, "_RESAVED", type(world_module._RESAVED)())
-        monkeypatch.setattr(world_module, "_RESAVED_CAPACITY", capacity)
+        monkeypatch.setattr(agent_module, "_REMEMBERED", type(agent_module._REMEMBERED)())
+        monkeypatch.setattr(agent_module, "_REMEMBERED_CAPACITY", capacity)
         path = tmp_path / f"{name}.db"
         with Store.open(str(path), create=True) as store:
             cache = StorePhysicsCache(store.engine)
-            for branch in ("first", "again"):  # the second episode is answered from the cache
+            for branch in ("first", "again", "third"):  # answered from the cache after the first
                 store.create_branch(branch, from_branch="main", at=0)
                 config = SolveConfig(scenario="scenario2", model="random", budget=6, seed=3)
                 solve(store, branch=branch, config=config, cache=cache)
             trials = [
                 (t.branch, t.source, t.spec, t.outcome.bits(), t.sim_steps, t.cache_hit)
-                for b in ("first", "again")
+                for b in ("first", "again", "third")
                 for t in store.visible_trials(b)
             ]
         with closing(sqlite3.connect(path)) as con:
@@ -160,6 +158,6 @@ def test_remembered_rebuilds_and_perceptions_change_no_trial(tmp_path: Path, mon
         return trials, states
 
     rebuilt = run("rebuilt", 0)  # nothing remembered: every rebuild happens
-    remembered = run("remembered", 1024)
+    remembered = run("remembered", 4096)
     assert remembered == rebuilt
     assert any(t[-1] for t in rebuilt[0]) and any(t[1] == "plan" for t in rebuilt[0])

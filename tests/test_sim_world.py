@@ -182,22 +182,3 @@ def test_frames_render_headless(world, tmp_path) -> None:
     gif = Image.open(rec.save(tmp_path / "clip.gif"))
     assert gif.size == (80, 60)  # identical frames of a scene at rest may be merged
 
-
-def test_the_bytes_a_restore_would_save_are_known_without_it(world, monkeypatch) -> None:
-    """serialize_restored(state) is serialize_state() right after restore_serialized(state),
-    computed once and then remembered; a restore does not give back the bytes it was made from."""
-    import llcps.sim.world as world_module
-
-    monkeypatch.setattr(world_module, "_RESAVED", type(world_module._RESAVED)())
-    snap = world.snapshot()
-    run_trial(world, SPECS[0])
-    end = world.save_state()
-    world.restore_serialized(end)
-    expected = world.serialize_state()
-    assert expected != end
-    first = world.serialize_restored(end)  # rebuilds the world
-    positions = {n: world.center(n) for n in world.entities}
-    again = world.serialize_restored(end)  # remembered: the world is left as it was
-    assert first == again == expected
-    assert {n: world.center(n) for n in world.entities} == positions
-    world.restore(snap)

@@ -24,7 +24,7 @@ import time
 from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence, TypeVar
 
 import numpy as np
 
@@ -60,11 +60,14 @@ SETTLE_STEPS = 480
 #: Re-plans after the first failed plan step before exploration starts.
 MAX_PLAN_REPAIRS = 3
 
-#: Per process: what perceiving a world restored from a serialized end state gives, and
-#: the serialized state of the world afterwards, by (scene key, digest of the end state).
-_PERCEIVED: OrderedDict[tuple[str, str], tuple[State, bytes]] = OrderedDict()
-_PERCEIVED_CAPACITY = 1024
+#: Per process: what was read from a world loaded from a serialized end state (and
+#: perceived, where it was), by scene key, digest of the end state and query (see
+#: Agent.remembered). Those reads are functions of the bytes and the scene alone.
+_REMEMBERED: OrderedDict[tuple[object, ...], Any] = OrderedDict()
+_REMEMBERED_CAPACITY = 4096
 
+
+T = TypeVar("T")
 
 ProgressCallback = Callable[[str, int, int], None]
 """Called as ``progress(phase, done, total)``: phase is "fit world model NAME", "plan",
@@ -176,8 +179,8 @@ class Agent:
             raise LlcpsError(f"plan step {step.label} has no controller")
         orientation = "top"
         if call.action == "push" and call.toward is not None:
-            self.sync()  # a push's direction is read from the world
-            orientation = self.orientation_toward(call.arguments[0], call.toward)
+            obj, target = call.arguments[0], call.toward
+            orientation = self.remembered(("toward", obj, target), lambda: self.orientation_toward(obj, target))
         return call.spec(ControllerParams(NOMINAL_RATE, NOMINAL_MAGNITUDE, orientation))
 
     def orientation_toward(self, obj: str, target: str) -> str:
@@ -270,16 +273,16 @@ class Agent:
         """The world's state serialized (:meth:`World.serialize_state`'s bytes); the world
         continues from exactly these bytes, loaded when it is next used (see :meth:`sync`).
 
-        With an end state still to be loaded, the bytes its restore would give are
-        taken from :meth:`World.serialize_restored`, which rebuilds only the first time:
-        when the next trial is answered by the physics cache, nothing is rebuilt at all.
+        With an end state still to be loaded, the bytes its restore would save are
+        :meth:`remembered`: when the next trial is answered by the physics cache, the
+        world is not rebuilt at all.
         """
         if self._perceived is not None:
             state = self._perceived
-        elif self._pending is not None:
-            state = self.world.serialize_restored(self._pending)
         else:
-            state = self.world.save_state()
+            state = self.remembered(("save",), self.world.save_state)
+            if self._pending is not None:
+                self.world.trust_serialized(state)  # this process saved it
         self._continue_from(state)
         return state
 
@@ -287,27 +290,39 @@ class Agent:
         """The symbolic state of the world (:func:`~llcps.sim.perception.perceive`).
 
         Perception probes the arm (IK), which changes what the world saves next. With
-        an end state still to be loaded, the state perceived from it and the bytes the
-        world then saves are a function of those bytes and the scene, so this process
-        remembers them (bounded) and loads nothing: :meth:`checkpoint` gives the
-        remembered bytes, and :meth:`sync` loads the end state and perceives again.
+        an end state still to be loaded, what it perceives and what the world then
+        saves are :meth:`remembered`; nothing is loaded, :meth:`checkpoint` gives the
+        saved bytes, and :meth:`sync` loads the end state and perceives it again.
         """
-        if self._pending is not None and self._perceived is None:
-            key = (self.world.scene_key, hashlib.sha256(self._pending).hexdigest())
-            found = _PERCEIVED.get(key)
-            if found is not None:
-                _PERCEIVED.move_to_end(key)
-                state, self._perceived = found
-                self.world.trust_serialized(self._perceived)  # this process saved it
-                return state
+        if self._perceived is not None:
             self.sync()
-            state = perceive(self.world)
-            _PERCEIVED[key] = (state, self.world.save_state())
-            while len(_PERCEIVED) > _PERCEIVED_CAPACITY:
-                _PERCEIVED.popitem(last=False)
-            return state
+        state, saved = self.remembered(("perceive",), lambda: (perceive(self.world), self.world.save_state()))
+        if self._pending is not None:  # remembered: the world was not loaded
+            self._perceived = saved
+            self.world.trust_serialized(saved)  # this process saved it
+        return state
+
+    def remembered(self, query: tuple[object, ...], read: Callable[[], T]) -> T:
+        """``read()`` of the world, which is first brought up to date (:meth:`sync`).
+
+        While the world is still to be loaded from an end state, the result is a
+        function of those bytes and the scene, so this process remembers it (bounded)
+        under ``query`` and loads the world only the first time. ``read`` must not
+        change what the world saves next, unless its caller accounts for it (see
+        :meth:`perceive`).
+        """
+        if self._pending is None:
+            return read()
+        key = (self.world.scene_key, hashlib.sha256(self._pending).hexdigest(), self._perceived is not None, *query)
+        if key in _REMEMBERED:
+            _REMEMBERED.move_to_end(key)
+            return _REMEMBERED[key]  # type: ignore[no-any-return]
         self.sync()
-        return perceive(self.world)
+        value = read()
+        _REMEMBERED[key] = value
+        while len(_REMEMBERED) > _REMEMBERED_CAPACITY:
+            _REMEMBERED.popitem(last=False)
+        return value
 
     def scene_record(self) -> dict[str, object]:
         """The scene as a snapshot stores it: what the world is built from, and the task's goal,

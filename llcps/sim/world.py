@@ -11,12 +11,10 @@ and stepping from it gives bit-identical results.
 from __future__ import annotations
 
 import functools
-import hashlib
 import os
 import sys
 import tempfile
 import zlib
-from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as package_version
@@ -38,11 +36,6 @@ STATE_COMPRESSION = 3
 #: Reference states (a freshly built scene, raw) by scene key, for checking stored states.
 _REFERENCES: dict[str, bytes] = {}
 _REFERENCE_CAPACITY = 32
-
-#: What :meth:`World.serialize_state` gives right after a state is restored, by (scene
-#: key, digest of the restored state's bytes): the serialized state and its raw digest.
-_RESAVED: OrderedDict[tuple[str, str], tuple[bytes, str]] = OrderedDict()
-_RESAVED_CAPACITY = 1024  # states of ~20-40 kB each
 
 #: Rest thresholds used by :meth:`World.settle` and the controllers.
 REST_LINEAR = 0.005  # m/s
@@ -344,33 +337,6 @@ class World:
     def scene_key(self) -> str:
         """A digest of the scene this world is built from (what its states belong to)."""
         return self._scene_key
-
-    def serialize_restored(self, state: bytes) -> bytes:
-        """What :meth:`serialize_state` gives right after ``restore_serialized(state)``.
-
-        A restore does not give back the bytes it was made from (the engine rebuilds
-        what a saved state does not hold), but the result is a function of the scene
-        and ``state`` alone, so this process remembers it (bounded) and pays a rebuild
-        only the first time. Like :meth:`save_state`, it does not bring the world to
-        the returned state: restore it (or another) before using the world.
-
-        Raises:
-            StateError: ``state`` may not be restored into this scene (see :meth:`restore_serialized`).
-        """
-        key = (self._scene_key, hashlib.sha256(state).hexdigest())
-        found = _RESAVED.get(key)
-        if found is None:
-            self.restore_serialized(state)
-            raw = self._save_raw()
-            found = (zlib.compress(raw, STATE_COMPRESSION), snapshots.state_digest(raw))
-            _RESAVED[key] = found
-            while len(_RESAVED) > _RESAVED_CAPACITY:
-                _RESAVED.popitem(last=False)
-        else:
-            _RESAVED.move_to_end(key)
-        resaved, digest = found
-        snapshots.TRUSTED.add((self._scene_key, digest))  # this process made it
-        return resaved
 
     def save_state(self) -> bytes:
         """The current physics state as :meth:`serialize_state` gives it, without continuing from it.
