@@ -158,6 +158,6 @@ def test_remembered_rebuilds_and_perceptions_change_no_trial(tmp_path: Path, mon
         return trials, states
 
     rebuilt = run("rebuilt", 0)  # nothing remembered: every rebuild happens
-    remembered = run("remembered", 4096)
+    remembered = run("remembered", 2048)
     assert remembered == rebuilt
     assert any(t[-1] for t in rebuilt[0]) and any(t[1] == "plan" for t in rebuilt[0])

@@ -64,7 +64,7 @@ MAX_PLAN_REPAIRS = 3
 #: perceived, where it was), by scene key, digest of the end state and query (see
 #: Agent.remembered). Those reads are functions of the bytes and the scene alone.
 _REMEMBERED: OrderedDict[tuple[object, ...], Any] = OrderedDict()
-_REMEMBERED_CAPACITY = 4096
+_REMEMBERED_CAPACITY = 2048  # up to ~40 kB a serialized state: at most ~80 MB
 
 
 T = TypeVar("T")
