@@ -266,3 +266,42 @@ def test_status_counts(store: Store, new_trial) -> None:  # noqa: ANN001
     status = store.status("exp")
     assert (status.revision, status.up_to_date, status.current_branch, status.branch) == (store.head, True, "main", "exp")
     assert (status.trials_total, status.visible_trials, dict(status.visible_by_source)) == (5, 4, {"pretrain": 3, "exploration": 1})
+
+
+def test_what_a_paused_collection_made_is_old_afterwards_and_others_freezes_stay() -> None:
+    """gc_paused leaves no young backlog for the next collection to traverse (the objects
+    made in the pause go to the oldest generation), and never thaws what another part of
+    the process froze."""
+    import gc
+
+    from llcps.store.trials import gc_paused
+
+    class Made:  # a tracked container, to be found in the collector's lists
+        pass
+
+    collections: list[int] = []
+
+    def seen(phase: str, info: dict) -> None:
+        if phase == "start":
+            collections.append(info["generation"])
+
+    assert gc.get_freeze_count() == 0
+    gc.callbacks.append(seen)
+    try:
+        with gc_paused():
+            made = [Made() for _ in range(10_000)]
+            assert not gc.isenabled()
+        enabled, backlog = gc.isenabled(), gc.get_count()[0]
+        in_oldest = any(o is made[-1] for o in gc.get_objects(generation=2))
+    finally:
+        gc.callbacks.remove(seen)
+    assert enabled and backlog < 700 and in_oldest
+    assert collections == []  # nothing traversed the 10,000 objects on the way there
+    gc.freeze()
+    try:
+        frozen = gc.get_freeze_count()
+        with gc_paused():
+            more = [Made() for _ in range(1_000)]
+        assert gc.get_freeze_count() == frozen and len(more) == 1_000
+    finally:
+        gc.unfreeze()
