@@ -181,4 +181,3 @@ def test_frames_render_headless(world, tmp_path) -> None:
     assert len(rec.frames) == 2 + 3
     gif = Image.open(rec.save(tmp_path / "clip.gif"))
     assert gif.size == (80, 60)  # identical frames of a scene at rest may be merged
-

@@ -303,11 +303,11 @@ class Agent:
         return state
 
     def remembered(self, query: tuple[object, ...], read: Callable[[], T]) -> T:
-        """``read()`` of the world, which is first brought up to date (:meth:`sync`).
+        """``read()`` of the world as it stands.
 
         While the world is still to be loaded from an end state, the result is a
         function of those bytes and the scene, so this process remembers it (bounded)
-        under ``query`` and loads the world only the first time. ``read`` must not
+        under ``query`` and loads the world (:meth:`sync`) only the first time. ``read`` must not
         change what the world saves next, unless its caller accounts for it (see
         :meth:`perceive`).
         """
