@@ -57,6 +57,11 @@ RAY_MASK = ~ROBOT_GROUP & 0xFFFF
 #: Grasp constraint strength (N): enough for every catalog object, not for a table.
 GRASP_FORCE = 60.0
 
+#: The IK solutions of :meth:`Robot.reach_error` by target (position, yaw), per process:
+#: a solve from HOME depends on the target alone.
+_REACH_IK: dict[tuple[float, float, float, float], tuple[float, ...]] = {}
+REACH_IK_CAPACITY = 8192
+
 
 @functools.lru_cache(maxsize=1)
 def panda_urdf() -> str:
@@ -110,6 +115,8 @@ class Robot:
         self._ik = functools.partial(p.calculateInverseKinematics, physicsClientId=cid)
         self._motors = functools.partial(p.setJointMotorControlArray, physicsClientId=cid)
         self._link_state = functools.partial(p.getLinkState, physicsClientId=cid)
+        self._joint_states = functools.partial(p.getJointStates, physicsClientId=cid)
+        self._reset_joint = functools.partial(p.resetJointState, physicsClientId=cid)
         flags = 0 if visuals else p.URDF_IGNORE_VISUAL_SHAPES
         try:
             self.body_id: int = client.loadURDF(panda_urdf(), (0.0, 0.0, 0.0), useFixedBase=True, flags=flags)
@@ -252,34 +259,41 @@ class Robot:
         """How closely the arm can put its tool at a top-down pose, by IK then FK.
 
         The IK starts from HOME whatever the arm is doing, so the answer depends on
-        the target alone. The joints are restored afterwards: no time passes and no
-        body moves.
+        the target alone, and each target's solve is remembered per process. The
+        joints still go to HOME, to the solution and back on every call (what the
+        world saves next depends on those moves); no time passes and no body moves.
 
         Returns:
             (position error in m, angle between the tool axis and straight down in rad).
         """
-        c = self.client
+        c, body, reset = self.client, self.body_id, self._reset_joint
         joints = ARM_JOINTS + FINGER_JOINTS
-        saved = c.getJointStates(self.body_id, joints)
+        saved = self._joint_states(body, joints)
         for j, q in zip(joints, self.rest):
-            c.resetJointState(self.body_id, j, q, 0.0)
-        q = c.calculateInverseKinematics(
-            self.body_id,
-            TOOL_LINK,
-            position,
-            top_down(yaw),
-            lowerLimits=self.lower,
-            upperLimits=self.upper,
-            jointRanges=self.ranges,
-            restPoses=self.rest,
-            maxNumIterations=100,
-            residualThreshold=1e-5,
-        )
-        for j, qj in zip(ARM_JOINTS, q[:7]):
-            c.resetJointState(self.body_id, j, min(max(qj, self.lower[j]), self.upper[j]), 0.0)
-        state = c.getLinkState(self.body_id, TOOL_LINK, computeForwardKinematics=1)
+            reset(body, j, q, 0.0)
+        key = (float(position[0]), float(position[1]), float(position[2]), float(yaw))
+        q = _REACH_IK.get(key)
+        if q is None:
+            q = c.calculateInverseKinematics(
+                body,
+                TOOL_LINK,
+                position,
+                top_down(yaw),
+                lowerLimits=self.lower,
+                upperLimits=self.upper,
+                jointRanges=self.ranges,
+                restPoses=self.rest,
+                maxNumIterations=100,
+                residualThreshold=1e-5,
+            )[:7]
+            if len(_REACH_IK) >= REACH_IK_CAPACITY:
+                _REACH_IK.pop(next(iter(_REACH_IK)))
+            _REACH_IK[key] = q
+        for j, qj in zip(ARM_JOINTS, q):
+            reset(body, j, min(max(qj, self.lower[j]), self.upper[j]), 0.0)
+        state = self._link_state(body, TOOL_LINK, computeForwardKinematics=1)
         for j, s in zip(joints, saved):
-            c.resetJointState(self.body_id, j, s[0], s[1])
+            reset(body, j, s[0], s[1])
         pos, orn = state[4], state[5]
         err = math.dist(pos, position)
         # tool z axis in world: third column of the rotation matrix
