@@ -181,3 +181,82 @@ def test_frames_render_headless(world, tmp_path) -> None:
     assert len(rec.frames) == 2 + 3
     gif = Image.open(rec.save(tmp_path / "clip.gif"))
     assert gif.size == (80, 60)  # identical frames of a scene at rest may be merged
+
+
+def _settled(scene: SceneSpec = SCENE) -> World:
+    w = World.from_scene(scene)
+    w.settle(max_steps=120)
+    return w
+
+
+def test_a_reach_probe_solves_its_ik_once_per_target_and_leaves_the_same_state(monkeypatch) -> None:
+    """`reach_error` remembers its IK solve by target; the probe still moves the joints
+    (which changes what the world saves next), so a remembered probe saves the same bytes."""
+    from llcps.sim import robot as robot_module
+
+    monkeypatch.setattr(robot_module, "_REACH_IK", {})
+    with _settled() as w:
+        start = w.serialize_state()
+        solve = w.client.calculateInverseKinematics
+        solves: list[object] = []
+        spy = lambda *a, **k: solves.append(a) or solve(*a, **k)  # noqa: E731
+        monkeypatch.setattr(w.client, "calculateInverseKinematics", spy, raising=False)
+        target, yaw = (0.5, 0.1, 0.12), 0.3
+        first = w.robot.reach_error(target, yaw)
+        after_first = w.save_state()
+        assert len(solves) == 1
+        w.restore_serialized(start)
+        again = w.robot.reach_error(target, yaw)
+        assert len(solves) == 1  # answered from the memo
+        assert again == first
+        assert w.save_state() == after_first
+        w.robot.reach_error((0.5, 0.1, 0.13), yaw)
+        assert len(solves) == 2  # another target is solved
+
+
+def test_a_saved_state_restores_as_its_serialized_bytes() -> None:
+    with _settled() as w:
+        run_trial(w, SPECS[0])
+        saved = w.save()
+        serialized = saved.serialized
+        assert serialized == w.save_state()  # the same bytes, compressed on demand
+        w.restore_saved(saved)
+        from_saved = w.save_state()
+        w.restore_serialized(serialized)
+        assert w.save_state() == from_saved
+
+
+def test_a_state_checked_once_is_not_inflated_again(monkeypatch) -> None:
+    from llcps.sim import world as world_module
+
+    with _settled() as w:
+        state = w.serialize_state()
+        inflate = world_module.snapshots.decompress_state
+        inflated: list[int] = []
+        monkeypatch.setattr(world_module.snapshots, "decompress_state", lambda s: inflated.append(len(s)) or inflate(s))
+        w.restore_serialized(state)
+        w.restore_serialized(state)
+        assert len(inflated) == 1  # the same bytes object as the last check
+        w.restore_serialized(bytes(bytearray(state)))  # equal bytes, another object: checked again
+        assert len(inflated) == 2
+
+
+def test_a_closed_world_leaves_its_engine_to_the_next_world_which_behaves_as_fresh(monkeypatch) -> None:
+    from llcps.sim import world as world_module
+
+    used = _settled()
+    client = used.client
+    for spec in SPECS:  # history in the engine: contacts, a grasp constraint that came and went
+        run_trial(used, spec)
+    used.close()
+    with _settled() as reused:
+        assert reused.client is client
+        trial = run_trial(reused, SPECS[1])
+        reused_state = reused.save_state()
+    monkeypatch.setattr(world_module, "_IDLE_CLIENTS", [])
+    monkeypatch.setattr(world_module, "_IDLE_CLIENT_CAPACITY", 0)
+    with _settled() as fresh:
+        assert fresh.client is not client
+        again = run_trial(fresh, SPECS[1])
+        assert (again.outcome, again.sim_steps, again.after) == (trial.outcome, trial.sim_steps, trial.after)
+        assert fresh.save_state() == reused_state

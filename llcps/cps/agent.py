@@ -42,7 +42,7 @@ from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
 from llcps.sim.controllers import DEFAULT_MAX_STEPS
 from llcps.sim.perception import perceive
 from llcps.sim.trial import TrialResult, run_trial
-from llcps.sim.world import World
+from llcps.sim.world import SavedState, World
 from llcps.store import Store
 from llcps.symbolic.experience import Context, Experience
 from llcps.symbolic.knowledge import KnowledgeBase, Task
@@ -133,9 +133,10 @@ class Agent:
         self.max_steps = max_steps
         # Physics state of each stored snapshot this episode took, by snapshot id.
         self._states: dict[int, bytes] = {}
-        # The serialized end state of the last stored trial: the world continues from
-        # exactly these bytes, loaded when it is next used (unless a restore comes first).
-        self._pending: bytes | None = None
+        # The serialized end state of the last stored trial (a SavedState when this
+        # process simulated it): the world continues from exactly these bytes, loaded
+        # when it is next used (unless a restore comes first).
+        self._pending: bytes | SavedState | None = None
         # Set when the world, still to be loaded from _pending, has also been perceived
         # (see perceive): the serialized state it then has.
         self._perceived: bytes | None = None
@@ -228,9 +229,9 @@ class Agent:
                 return trial, None
             # Continue from exactly the stored bytes; the restore waits until the world is
             # used again, and is skipped when a restore of another state comes first.
-            self._continue_from(self.world.save_state())
+            self._continue_from(self.world.save())  # compressed only if stored or remembered
             if key is not None:
-                self.cache.put(key, trial, self._pending)
+                self.cache.put(key, trial, self._serialized_pending())
         new = TrialRecord(
             branch=self.branch,
             source=source,
@@ -313,7 +314,8 @@ class Agent:
         """
         if self._pending is None:
             return read()
-        key = (self.world.scene_key, hashlib.sha256(self._pending).hexdigest(), self._perceived is not None, *query)
+        digest = hashlib.sha256(self._serialized_pending()).hexdigest()
+        key = (self.world.scene_key, digest, self._perceived is not None, *query)
         if key in _REMEMBERED:
             _REMEMBERED.move_to_end(key)
             return _REMEMBERED[key]  # type: ignore[no-any-return]
@@ -339,13 +341,22 @@ class Agent:
         perceived, if :meth:`perceive` was answered without it), if not done yet."""
         if self._pending is not None:
             state, perceived, self._pending, self._perceived = self._pending, self._perceived, None, None
-            self.world.restore_serialized(state)
+            if isinstance(state, SavedState):
+                self.world.restore_saved(state)
+            else:
+                self.world.restore_serialized(state)
             if perceived is not None:
                 perceive(self.world)  # what it did to the world, again
 
-    def _continue_from(self, state: bytes) -> None:
+    def _continue_from(self, state: bytes | SavedState) -> None:
         """The world goes on from exactly ``state``, loaded when it is next used."""
         self._pending, self._perceived = state, None
+
+    def _serialized_pending(self) -> bytes:
+        """The end state still to be loaded, as serialized bytes."""
+        state = self._pending
+        assert state is not None
+        return state.serialized if isinstance(state, SavedState) else state
 
     def run_plan(
         self, steps: Sequence[GroundAction], *, store: bool = True, record: KnowledgeBase | None = None

@@ -37,6 +37,11 @@ STATE_COMPRESSION = 3
 _REFERENCES: dict[str, bytes] = {}
 _REFERENCE_CAPACITY = 32
 
+#: Headless engines of closed worlds, for the next world of this process: connecting
+#: one costs more than rebuilding a scene, and an episode builds a world.
+_IDLE_CLIENTS: list[Any] = []
+_IDLE_CLIENT_CAPACITY = 1
+
 #: Rest thresholds used by :meth:`World.settle` and the controllers.
 REST_LINEAR = 0.005  # m/s
 REST_ANGULAR = 0.05  # rad/s
@@ -51,6 +56,24 @@ def _engine_version() -> str:
     except PackageNotFoundError:  # pragma: no cover - a source build
         release = "unknown"
     return f"pybullet {release} api {p.getAPIVersion()}"
+
+
+class SavedState:
+    """A physics state this process saved (:meth:`World.save`): its raw ``.bullet``
+    bytes, and :attr:`serialized`, what :meth:`World.serialize_state` would give,
+    compressed only when first asked for (most saved states are only restored)."""
+
+    __slots__ = ("raw", "_serialized")
+
+    def __init__(self, raw: bytes) -> None:
+        self.raw = raw
+        self._serialized: bytes | None = None
+
+    @property
+    def serialized(self) -> bytes:
+        if self._serialized is None:
+            self._serialized = zlib.compress(self.raw, STATE_COMPRESSION)
+        return self._serialized
 
 
 @dataclass(frozen=True)
@@ -112,8 +135,11 @@ class World:
             raise LlcpsError(
                 "cannot open a GUI window: no display", hint="unset --gui, or run under a desktop / xvfb-run"
             )
-        with native_output_silenced():  # the engine prints a line on connect
-            self.client = bullet_client.BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
+        if not gui and _IDLE_CLIENTS:
+            self.client = _IDLE_CLIENTS.pop()
+        else:
+            with native_output_silenced():  # the engine prints a line on connect
+                self.client = bullet_client.BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
         cid = self.client._client
         self._step = functools.partial(p.stepSimulation, physicsClientId=cid)
         self._velocity = functools.partial(p.getBaseVelocity, physicsClientId=cid)
@@ -126,6 +152,8 @@ class World:
         self._observers: list[Callable[["World"], None]] = []
         self._snapshots: dict[int, bytes] = {}
         self._snapshot_count = 0
+        # (serialized state, scene key, raw bytes) of the last state check_serialized passed
+        self._last_checked: tuple[bytes, str, bytes] | None = None
         self._closed = False
         self.load(scene if scene is not None else SceneSpec())
 
@@ -168,8 +196,9 @@ class World:
         c.setGravity(*settings.gravity)
         if self.gui:
             c.configureDebugVisualizer(p.COV_ENABLE_GUI, 0)
+        if scene is not getattr(self, "scene", None):  # a restore rebuilds the same scene: keep its digest
+            self._scene_key = snapshots.scene_key(scene.to_dict())
         self.scene = scene
-        self._scene_key = snapshots.scene_key(scene.to_dict())
         self.entities = {}
         self.fixtures = {}
         table = scene.table
@@ -347,9 +376,18 @@ class World:
         either restores another state or continues from exactly these bytes. The
         state is remembered as trusted, so restoring it skips the checks.
         """
+        return self.save().serialized
+
+    def save(self) -> SavedState:
+        """:meth:`save_state` for a caller that may only restore it (:meth:`restore_saved`):
+        the bytes are compressed only if asked for."""
         raw = self._save_raw()
         self._trust(raw)
-        return zlib.compress(raw, STATE_COMPRESSION)
+        return SavedState(raw)
+
+    def restore_saved(self, state: SavedState) -> None:
+        """:meth:`restore_serialized` of a state :meth:`save` gave (in this process: no checks)."""
+        self._restore_raw(state.raw)
 
     def restore_serialized(self, state: bytes, *, probe: bool = True) -> None:
         """Rebuild the scene and load a state made by :meth:`serialize_state` in a world
@@ -380,6 +418,9 @@ class World:
         Raises:
             StateError: the state is too large, malformed, or not one of this scene.
         """
+        last = self._last_checked
+        if last is not None and last[0] is state and last[1] == self._scene_key:
+            return last[2]  # the same bytes object as the last check: an episode restores its snapshot per trial
         raw = snapshots.decompress_state(state)
         key = (self._scene_key, snapshots.state_digest(raw))
         if key not in snapshots.TRUSTED:
@@ -387,6 +428,7 @@ class World:
             if probe:
                 snapshots.probe_states(self.scene.to_dict(), [raw])
             snapshots.TRUSTED.add(key)
+        self._last_checked = (state, self._scene_key, raw)
         return raw
 
     def trust_serialized(self, state: bytes) -> None:
@@ -458,8 +500,13 @@ class World:
     # ------------------------------------------------------------------ lifetime
 
     def close(self) -> None:
+        """Let go of the engine. A headless engine is kept for the next world of this
+        process, which rebuilds it from its own scene (:meth:`load` resets it)."""
         if not self._closed:
             self._closed = True
+            if not self.gui and len(_IDLE_CLIENTS) < _IDLE_CLIENT_CAPACITY:
+                _IDLE_CLIENTS.append(self.client)
+                return
             try:
                 self.client.disconnect()
             except p.error:
