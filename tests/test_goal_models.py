@@ -139,7 +139,9 @@ def test_goal_directed_ranks_a_likelier_candidate_first(goal, seed):
     position = {c: i for i, c in enumerate(order)}
     for a in range(len(goal)):
         for b in range(len(goal)):
-            if joint[a] > joint[b] and joint[a] > 1e-12 * 10:
+            # Equal products up to rounding (the same factors in another order) are ties:
+            # the measure sums logarithms, so either may come first.
+            if joint[a] > joint[b] * (1 + 1e-9) and joint[a] > 1e-12 * 10:
                 assert position[a] < position[b]
     assert np.array_equal(order, rank(proba, "goal-directed", seed=seed, goal=goal.copy()))
 
