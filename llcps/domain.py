@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Iterable, Mapping
+from typing import Any, Iterable, Mapping
 
 from llcps.errors import LlcpsError
 
@@ -169,6 +169,58 @@ class EntityFeatures:
         return asdict(self)
 
 
+#: EntityFeatures' numbers, in the order :class:`StoredFeatures` holds them.
+ENTITY_NUMBERS: tuple[str, ...] = ("volume", "vector_magnitude", "unit_x", "unit_y", "unit_z")
+
+
+class StoredFeatures:
+    """A trial's Table-1 features as a store holds them: names and numbers, checked.
+
+    ``names`` are each entity's shape and colour in turn, ``numbers`` its
+    :data:`ENTITY_NUMBERS` in turn. A record read from a store carries these and builds
+    its :class:`EntityFeatures` on first use (:meth:`entities`), once for all the records
+    that share them: a load of 100,000 trials would otherwise build 200,000 objects
+    that a fit, which reads names and numbers, never looks at.
+    """
+
+    __slots__ = ("names", "numbers", "_entities")
+
+    def __init__(self, names: tuple[str, ...], numbers: tuple[float, ...]) -> None:
+        self.names = names
+        self.numbers = numbers
+        self._entities: tuple[EntityFeatures, ...] | None = None
+
+    @classmethod
+    def of(cls, features: Iterable[EntityFeatures]) -> "StoredFeatures":
+        """The names and numbers of built features."""
+        entities = tuple(features)
+        stored = cls(
+            tuple(name for f in entities for name in (f.shape, f.color)),
+            tuple(float(getattr(f, n)) for f in entities for n in ENTITY_NUMBERS),
+        )
+        stored._entities = entities
+        return stored
+
+    def __len__(self) -> int:
+        return len(self.names) // 2
+
+    def entities(self) -> tuple[EntityFeatures, ...]:
+        """One EntityFeatures per argument, built once."""
+        if self._entities is None:
+            new, set_dict, names, numbers = object.__new__, object.__setattr__, self.names, self.numbers
+            out = []
+            for i in range(len(names) // 2):
+                entity = new(EntityFeatures)  # checked values only: the store checks them before holding them
+                v, m, x, y, z = numbers[5 * i : 5 * i + 5]
+                set_dict(entity, "__dict__", {"shape": names[2 * i], "volume": v, "color": names[2 * i + 1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
+                out.append(entity)
+            self._entities = tuple(out)
+        return self._entities
+
+    def __repr__(self) -> str:
+        return f"StoredFeatures({self.names!r}, {self.numbers!r})"
+
+
 @dataclass(frozen=True)
 class TrialSpec:
     """What to execute: an action a_i, its arguments and controller settings r_i."""
@@ -279,6 +331,22 @@ class TrialRecord:
     @property
     def model_input(self) -> WorldModelInput:
         return WorldModelInput(spec=self.spec, features=self.features)
+
+    @property
+    def stored_features(self) -> StoredFeatures | None:
+        """The features' names and numbers as read from a store (None for a record made in memory)."""
+        return self.__dict__.get("_stored_features")
+
+    def __getattr__(self, name: str) -> Any:
+        # Called only for attributes not found: a record read from a store holds
+        # StoredFeatures and builds ``features`` on first use, once.
+        if name == "features":
+            stored = self.__dict__.get("_stored_features")
+            if stored is not None:
+                features = stored.entities()
+                object.__setattr__(self, "features", features)
+                return features
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def as_json(self) -> dict[str, object]:
         """The JSON shape used by ``--json`` outputs and ``db export``."""

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import sqlite3
 from contextlib import closing
+from dataclasses import replace
 from pathlib import Path
 
 from make_store_fixtures import make as make_store
@@ -38,7 +39,7 @@ def test_upgrade_packs_features_and_keeps_ids_growing(tmp_path: Path) -> None:
         old = store.visible_trials("main")
         assert [len(t.features) for t in old] == [1, 2] and old[1].features[1].shape == "sphere"
         assert old[1].features[0].vector_magnitude == 0.5 and not any(t.cache_hit for t in old)
-        assert store.add_trial(old[1].__class__(**{**old[1].__dict__, "id": None, "created_at": None})) == 8
+        assert store.add_trial(replace(old[1], id=None, created_at=None)) == 8
         assert pc.status(store).entries == 0
 
 

@@ -3,7 +3,10 @@ bytes without the layout are refused (the refusals of stored changes: tests/test
 
 from __future__ import annotations
 
+import copy
+import pickle
 import struct
+from dataclasses import replace
 
 import pytest
 from hypothesis import given
@@ -105,3 +108,50 @@ def test_states_round_trip(state: frozenset[tuple[str, ...]]) -> None:
 def test_an_atom_that_cannot_be_stored_is_refused(atom: tuple[str, ...]) -> None:
     with pytest.raises(LlcpsError):
         pack_atoms([atom])
+
+
+# -- records read from a store hold their features packed until first use ------------------------
+
+
+def _read_back(tmp_path, new_trial, n: int = 6) -> tuple[list, list]:  # noqa: ANN001
+    from llcps.store import Store
+
+    made = [new_trial(seed) for seed in range(n)]
+    with Store.open(str(tmp_path / "llcps.db"), create=True) as store:
+        store.add_trials(made)
+        read = store.visible_trials("main")
+    return made, read
+
+
+def test_a_read_record_builds_its_features_once_on_first_use(tmp_path, new_trial) -> None:  # noqa: ANN001
+    made, read = _read_back(tmp_path, new_trial)
+    assert all(m.stored_features is None for m in made)
+    for m, r in zip(made, read):
+        assert "features" not in r.__dict__ and r.stored_features is not None
+        assert r.features == m.features and r.features is r.features  # built once, then an attribute
+        assert r == replace(m, id=r.id, created_at=r.created_at)
+
+
+def test_a_read_record_pickles_copies_and_replaces_like_a_made_one(tmp_path, new_trial) -> None:  # noqa: ANN001
+    made, read = _read_back(tmp_path, new_trial, 2)
+    for r in read:
+        assert pickle.loads(pickle.dumps(r)) == r and copy.deepcopy(r) == r
+        assert replace(r, seed=99).features == r.features
+        with pytest.raises(AttributeError, match="no attribute 'neither'"):
+            r.neither  # noqa: B018
+
+
+def test_the_models_read_the_same_rows_and_digest_from_read_and_made_records(tmp_path, new_trial) -> None:  # noqa: ANN001
+    import numpy as np
+
+    from llcps.models.features import encode_inputs
+    from llcps.models.persistence import training_digest
+
+    made, read = _read_back(tmp_path, new_trial)
+    made = [replace(m, id=r.id) for m, r in zip(made, read)]
+    assert np.array_equal(encode_inputs(read), encode_inputs(made), equal_nan=True)
+    assert training_digest(read, {}) == training_digest(made, {})
+    assert not any("features" in r.__dict__ for r in read)  # neither built a record's EntityFeatures
+    first = made[0].features[0]
+    nudged = [replace(made[0], features=(replace(first, volume=first.volume * (1 + 1e-12)),) + made[0].features[1:]), *made[1:]]
+    assert training_digest(nudged, {}) != training_digest(made, {})

@@ -25,7 +25,7 @@ import numpy as np
 from sklearn import config_context
 from sklearn.preprocessing import StandardScaler
 
-from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, EntityFeatures, TrialSpec
+from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, EntityFeatures, StoredFeatures, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
 
 #: The category a missing argument slot takes (second slot of a one-argument action).
@@ -102,21 +102,34 @@ def _slot(entity: EntityFeatures) -> tuple[float, ...]:
     return (_SHAPE_CODE[entity.shape], _COLOR_CODE[entity.color], *_entity_continuous(entity))
 
 
+def _stored_slots(stored: StoredFeatures) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    names, numbers = stored.names, stored.numbers
+    first = (_SHAPE_CODE[names[0]], _COLOR_CODE[names[1]], *numbers[:5])
+    return first, ((_SHAPE_CODE[names[2]], _COLOR_CODE[names[3]], *numbers[5:10]) if len(names) == 2 * ARGUMENT_SLOTS else _MISSING_SLOT)
+
+
 def _row(item: ModelInput) -> tuple[float, ...]:
-    spec, entities = item.spec, item.features
-    params = spec.params
-    if len(entities) != len(spec.arguments):
+    spec = item.spec
+    # A trial read from a store: its names and numbers, without building EntityFeatures.
+    stored = item.stored_features if isinstance(item, TrialRecord) else None
+    count = len(stored) if stored is not None else len(item.features)
+    if count != len(spec.arguments) or count == 0:
         raise LlcpsError(
-            f"{spec.label} has {len(spec.arguments)} argument(s) but {len(entities)} feature mapping(s)",
+            f"{spec.label} has {len(spec.arguments)} argument(s) but {count} feature mapping(s)",
             hint="give one EntityFeatures per argument, in argument order",
         )
-    second = _slot(entities[1]) if len(entities) == ARGUMENT_SLOTS else _MISSING_SLOT
+    if stored is not None:
+        first, second = _stored_slots(stored)
+    else:
+        entities = item.features
+        first, second = _slot(entities[0]), (_slot(entities[1]) if count == ARGUMENT_SLOTS else _MISSING_SLOT)
+    params = spec.params
     return (
         _ACTION_CODE[spec.action],
         _ORIENTATION_CODE[params.orientation],
         params.rate,
         params.movement_magnitude,
-        *_slot(entities[0]),
+        *first,
         *second,
     )
 

@@ -20,12 +20,13 @@ from __future__ import annotations
 import copy
 import hashlib
 import logging
+import struct
 import time
 from collections import OrderedDict
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
-from llcps.domain import TrialChange, TrialRecord, check_seed
+from llcps.domain import StoredFeatures, TrialChange, TrialRecord, check_seed
 from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import WorldModelEntry, world_model_entry
@@ -39,6 +40,8 @@ logger = logging.getLogger(__name__)
 _FITS: OrderedDict[tuple[str, int, str, bool], WorldModel] = OrderedDict()
 #: How many fitted models :data:`_FITS` keeps.
 FIT_MEMO_SIZE = 8
+#: Between a trial's entity names in its digest (a control character, in no name).
+_SEPARATOR = "\x1f"
 
 
 def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> str:
@@ -49,8 +52,20 @@ def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialC
     (branch, run, timestamps, wall seconds) is left out, since no model reads it.
     """
     digest = hashlib.blake2b(digest_size=20)
+    texts: dict[int, str] = {}  # by id() of a spec or outcome: the records share them, and keep them alive
     for r in records:
-        digest.update(f"{r.id}|{r.seed}|{r.spec!r}|{r.features!r}|{r.outcome!r}".encode())
+        spec, outcome = r.spec, r.outcome
+        spec_text = texts.get(id(spec))
+        if spec_text is None:
+            p = spec.params
+            spec_text = texts[id(spec)] = f"{spec.action}|{spec.arguments}|{p.rate!r}|{p.movement_magnitude!r}|{p.orientation}"
+        outcome_text = texts.get(id(outcome))
+        if outcome_text is None:
+            outcome_text = texts[id(outcome)] = str(outcome.bits())
+        stored = r.stored_features or StoredFeatures.of(r.features)  # the same bytes for a trial read or made
+        digest.update(f"{r.id}|{r.seed}|{spec_text}|{outcome_text}|{len(stored)}|".encode())
+        digest.update(struct.pack(f"<{len(stored.numbers)}d", *stored.numbers))
+        digest.update(_SEPARATOR.join(stored.names).encode())
         change = changes.get(r.id) if r.id is not None else None
         if change is None:
             digest.update(b"|-\n")

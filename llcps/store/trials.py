@@ -3,7 +3,10 @@
 Reading the lifelong training set is the hot path (every model refit loads it),
 so rows are read with Core selects that skip SQLAlchemy's JSON and datetime
 processing, and the immutable parts of a record that repeat across trials
-(controller settings, entity features, outcomes) are built once per load.
+(controller settings, entity features, outcomes) are built once per load. A record's
+entity features are held as checked names and numbers
+(:class:`~llcps.domain.StoredFeatures`), which is what the models read; its
+:class:`~llcps.domain.EntityFeatures` are built when ``features`` is first used.
 
 Rows are untrusted input. Each distinct spec, feature set and outcome is checked
 when it is first built (names from the vocabulary, finite numbers, exact fields),
@@ -29,12 +32,14 @@ from sqlalchemy import Integer, String, Text, and_, case, cast, type_coerce
 from llcps.domain import (
     ACTIONS,
     COLORS,
+    ENTITY_NUMBERS,
     OUTCOME_NAMES,
     SHAPES,
     TRIAL_SOURCES,
     ControllerParams,
     EntityFeatures,
     Outcome,
+    StoredFeatures,
     TrialRecord,
     TrialSpec,
 )
@@ -46,7 +51,6 @@ from llcps.store.schema import Trial
 #: (volume, vector_magnitude, unit_x, unit_y, unit_z), then the shapes and colours as UTF-8
 #: text, each entity's "shape<US>colour", joined by US (0x1f).
 FEATURES_LAYOUT = 1
-_NUMBERS = ("volume", "vector_magnitude", "unit_x", "unit_y", "unit_z")
 _SEPARATOR = "\x1f"
 #: Most arguments a trial has.
 MAX_ARGUMENTS = 2
@@ -62,18 +66,18 @@ def pack_features(features: Sequence[EntityFeatures]) -> bytes:
         if _SEPARATOR in f.shape or _SEPARATOR in f.color:
             raise LlcpsError(f"an entity's shape or colour cannot hold control characters: {f.shape!r}, {f.color!r}")
         names += [f.shape, f.color]
-    numbers = [float(getattr(f, name)) for f in features for name in _NUMBERS]
+    numbers = [float(getattr(f, name)) for f in features for name in ENTITY_NUMBERS]
     return bytes((FEATURES_LAYOUT, len(features))) + _DOUBLES[len(features)].pack(*numbers) + _SEPARATOR.join(names).encode()
 
 
 #: The text part of packed features, decoded once per process: its names (None if they
 #: are not non-empty UTF-8 text) and whether they are all Table 1's shapes and colours.
-_names: dict[bytes, tuple[list[str] | None, bool]] = {}
+_names: dict[bytes, tuple[tuple[str, ...] | None, bool]] = {}
 
 
-def _decode_names(data: bytes) -> tuple[list[str] | None, bool]:
+def _decode_names(data: bytes) -> tuple[tuple[str, ...] | None, bool]:
     try:
-        names: list[str] | None = data.decode().split(_SEPARATOR) if data else []
+        names: tuple[str, ...] | None = tuple(data.decode().split(_SEPARATOR)) if data else ()
     except UnicodeDecodeError:
         names = None
     if names is not None and not all(names):
@@ -84,8 +88,9 @@ def _decode_names(data: bytes) -> tuple[list[str] | None, bool]:
     return names, in_table1
 
 
-def unpack_features(data: bytes, *, table1: bool = False) -> tuple[EntityFeatures, ...]:
-    """Read :func:`pack_features`'s bytes back, checking their layout (they come from a database).
+def read_features(data: bytes, *, table1: bool = False) -> StoredFeatures:
+    """Check :func:`pack_features`'s bytes (they come from a database) and hold their
+    names and numbers; the EntityFeatures are built on first use.
 
     Args:
         table1: also refuse shapes and colours outside Table 1's categories.
@@ -105,27 +110,12 @@ def unpack_features(data: bytes, *, table1: bool = False) -> tuple[EntityFeature
     # A finite sum has finite terms (inf and nan propagate); only a non-finite sum needs a closer look.
     if not math.isfinite(sum(numbers)) and not all(map(math.isfinite, numbers)):
         raise LlcpsError("stored trial features hold a value that is not a finite number", hint="the store may be damaged; `llcps db status`")
-    new, set_dict = object.__new__, object.__setattr__
-    # The one- and two-argument cases (every action of Table 1) unrolled; see _frozen: complete, valid values only.
-    if n == 1:
-        entity = new(EntityFeatures)
-        v, m, x, y, z = numbers
-        set_dict(entity, "__dict__", {"shape": names[0], "volume": v, "color": names[1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
-        return (entity,)
-    if n == 2:
-        first, second = new(EntityFeatures), new(EntityFeatures)
-        v, m, x, y, z, v2, m2, x2, y2, z2 = numbers
-        shape, color, shape2, color2 = names
-        set_dict(first, "__dict__", {"shape": shape, "volume": v, "color": color, "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
-        set_dict(second, "__dict__", {"shape": shape2, "volume": v2, "color": color2, "vector_magnitude": m2, "unit_x": x2, "unit_y": y2, "unit_z": z2})
-        return (first, second)
-    out = []
-    for i in range(n):
-        entity = new(EntityFeatures)
-        v, m, x, y, z = numbers[5 * i : 5 * i + 5]
-        set_dict(entity, "__dict__", {"shape": names[2 * i], "volume": v, "color": names[2 * i + 1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
-        out.append(entity)
-    return tuple(out)
+    return StoredFeatures(names, numbers)
+
+
+def unpack_features(data: bytes, *, table1: bool = False) -> tuple[EntityFeatures, ...]:
+    """Read :func:`pack_features`'s bytes back as EntityFeatures, checking them as :func:`read_features` does."""
+    return read_features(data, table1=table1).entities()
 
 
 def trial_row(trial: TrialRecord, *, branch_id: int, created_at: datetime) -> dict[str, Any]:
@@ -291,7 +281,7 @@ class TrialDecoder:
     def __init__(self, branch_names: Mapping[int, str]) -> None:
         self._names = branch_names
         self._specs: dict[tuple[Any, ...], TrialSpec] = {}
-        self._features: dict[bytes, tuple[EntityFeatures, ...]] = {}
+        self._features: dict[bytes, StoredFeatures] = {}
         self._outcomes: dict[int, Outcome] = {}  # by the flags' low six bits
 
     def _spec(self, action: str, arguments: Any, rate: float, magnitude: float, orientation: str) -> TrialSpec:
@@ -309,11 +299,11 @@ class TrialDecoder:
             self._specs[key] = spec
         return spec
 
-    def _feature_tuple(self, data: bytes) -> tuple[EntityFeatures, ...]:
+    def _stored_features(self, data: bytes) -> StoredFeatures:
         found = self._features.get(data)
         if found is None:
             try:
-                found = unpack_features(data, table1=True)
+                found = read_features(data, table1=True)
             except LlcpsError as exc:
                 raise _Malformed(exc.message) from None
             self._features[bytes(data)] = found
@@ -368,7 +358,7 @@ class TrialDecoder:
         """The hot loop: locals, caches, and only type checks per row."""
         names = self._names
         specs, spec_of = self._specs, self._spec
-        features_cache, features_of = self._features, self._feature_tuple
+        features_cache, features_of = self._features, self._stored_features
         outcomes, outcome_of = self._outcomes, self._outcome
         new, record_cls, set_dict = object.__new__, TrialRecord, object.__setattr__
         sources = _SOURCES
@@ -382,9 +372,9 @@ class TrialDecoder:
             spec = specs.get((action, arguments, rate, magnitude, orientation)) if isinstance(arguments, str) else None
             if spec is None:
                 spec = spec_of(action, arguments, rate, magnitude, orientation)
-            entity_features = features_cache.get(features)
-            if entity_features is None:
-                entity_features = features_of(features)
+            stored_features = features_cache.get(features)
+            if stored_features is None:
+                stored_features = features_of(features)
             bits = flags & ~192  # Omega's bits; a stored value other than 0 or 1 sets bit 8 (see _flags)
             outcome = outcomes.get(bits) or outcome_of(bits)
             if (type(sim_steps), type(seed), type(wall_seconds), type(branch_id)) != _SCALAR_TYPES or source not in sources:
@@ -400,7 +390,7 @@ class TrialDecoder:
                     "branch": names[branch_id],
                     "source": source,
                     "spec": spec,
-                    "features": entity_features,
+                    "_stored_features": stored_features,  # TrialRecord builds ``features`` from it on first use
                     "outcome": outcome,
                     "solved": flags & 64 != 0,
                     "sim_steps": sim_steps,
@@ -422,10 +412,10 @@ class TrialDecoder:
 
 # The fast constructor must fill every field of the records it builds.
 _DECODED_FIELDS = frozenset(
-    {"id", "branch", "source", "spec", "features", "outcome", "solved", "sim_steps", "wall_seconds", "seed",
+    {"id", "branch", "source", "spec", "_stored_features", "outcome", "solved", "sim_steps", "wall_seconds", "seed",
      "run_id", "episode_id", "snapshot_id", "scenario", "created_at", "extra", "cache_hit", "simulation_wall_seconds"}
 )
-if _DECODED_FIELDS != _TRIAL_RECORD_FIELDS:  # pragma: no cover - guards a change in llcps.domain
+if _DECODED_FIELDS != _TRIAL_RECORD_FIELDS - {"features"} | {"_stored_features"}:  # pragma: no cover - guards a change in llcps.domain
     raise ImportError(f"llcps.store.trials decodes {sorted(_DECODED_FIELDS)} but TrialRecord has {sorted(_TRIAL_RECORD_FIELDS)}")
-if frozenset(f.name for f in fields(EntityFeatures)) != {"shape", "color", *_NUMBERS}:  # pragma: no cover
+if frozenset(f.name for f in fields(EntityFeatures)) != {"shape", "color", *ENTITY_NUMBERS}:  # pragma: no cover
     raise ImportError("llcps.store.trials packs fields that EntityFeatures does not have")
