@@ -260,3 +260,73 @@ def test_a_closed_world_leaves_its_engine_to_the_next_world_which_behaves_as_fre
         again = run_trial(fresh, SPECS[1])
         assert (again.outcome, again.sim_steps, again.after) == (trial.outcome, trial.sim_steps, trial.after)
         assert fresh.save_state() == reused_state
+
+
+def _state_after(world: World, raw: bytes) -> tuple[bytes, tuple[float, float, float]]:
+    """Restore ``raw``, step a little, and return what the world then holds."""
+    world._restore_raw(raw)  # noqa: SLF001 - the engine's restore path is what is tested
+    world.step(30)
+    return world._save_raw(), world.center("ball")  # noqa: SLF001
+
+
+def test_many_distinct_states_restore_as_themselves_in_any_order() -> None:
+    """More distinct states than the engine's file cache holds, restored twice in
+    different orders: each gives what it gave the first time (no state is restored
+    from a file name that held another)."""
+    from llcps.sim import state_files
+
+    with _settled() as w:
+        states = []
+        for _ in range(state_files.CAPACITY + 8):
+            w.step(3)
+            states.append(w._save_raw())  # noqa: SLF001
+        assert len(set(states)) == len(states)
+        first = [_state_after(w, raw) for raw in states]
+        again = [_state_after(w, raw) for raw in reversed(states)][::-1]
+        assert again == first
+        assert len({after for after, _ in first}) == len(states)
+        assert _state_after(w, states[0]) == first[0]  # held by the engine, restored without a write
+
+
+def _rss_kb() -> int:
+    with open("/proc/self/status") as fh:
+        return int(fh.read().split("VmRSS:")[1].split()[0])
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/fd"), reason="reads /proc/self/status")
+def test_restoring_many_distinct_states_keeps_the_engine_small() -> None:
+    """The engine's file layer keeps every file it reads; 200 restores of distinct
+    ~90 kB states used to grow the process by 18 MB."""
+    with _settled() as w:
+        states = []
+        for _ in range(200):
+            w.step(2)
+            states.append(w._save_raw())  # noqa: SLF001
+        size = len(states[0])
+        for raw in states[:40]:  # the first clears of the engine's cache, and the allocator's pools
+            w._restore_raw(raw)  # noqa: SLF001
+        before = _rss_kb()
+        for raw in states:
+            w._restore_raw(raw)  # noqa: SLF001
+        grown = _rss_kb() - before
+        assert grown * 1024 < 40 * size, f"grew by {grown} kB over 200 restores of {size} byte states"
+
+
+def test_saving_and_restoring_create_no_named_files_a_kill_could_leave(tmp_path, monkeypatch) -> None:
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    seen: set[str] = set()
+    original = os.open
+
+    def watched(path, *args, **kwargs):  # every file opened while saving and restoring
+        seen.add(str(path))
+        return original(path, *args, **kwargs)
+
+    with _settled() as w:
+        monkeypatch.setattr(os, "open", watched)
+        raw = w._save_raw()  # noqa: SLF001
+        w._restore_raw(raw)  # noqa: SLF001
+        w.serialize_state()
+    assert not any(p.startswith(str(tmp_path)) for p in seen)
+    assert list(tmp_path.iterdir()) == []

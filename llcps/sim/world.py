@@ -13,7 +13,6 @@ from __future__ import annotations
 import functools
 import os
 import sys
-import tempfile
 import zlib
 from dataclasses import asdict, dataclass, field
 from importlib.metadata import PackageNotFoundError
@@ -29,6 +28,7 @@ from llcps.sim import snapshot as snapshots
 from llcps.sim.bodies import Entity, build_entity, build_fixture
 from llcps.sim.specs import FIXTURE_RGBA, FLOOR, TABLE, FixtureSpec, SceneSpec
 from llcps.sim.robot import Robot
+from llcps.sim.state_files import state_files
 
 #: zlib level of serialized states (a scene's state shrinks from ~90 kB to ~40 kB in ~1 ms).
 STATE_COMPRESSION = 3
@@ -460,30 +460,19 @@ class World:
         snapshots.TRUSTED.add((self._scene_key, snapshots.state_digest(raw)))
 
     def _save_raw(self) -> bytes:
-        fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
-        os.close(fd)
-        try:
-            self.client.saveBullet(path)
-            with open(path, "rb") as fh:
-                return fh.read()
-        finally:
-            os.unlink(path)
+        files = state_files(self.client)
+        self.client.saveBullet(files.save_path())
+        return files.read_saved()
 
     def _restore_raw(self, raw: bytes) -> None:
         self.load(self.scene)
-        fd, path = tempfile.mkstemp(suffix=".bullet", prefix="llcps-")
         try:
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(raw)
-            try:
-                self.client.restoreState(fileName=path)
-            except p.error as exc:
-                raise snapshots.StateError(
-                    "cannot restore the physics state: it does not match this scene",
-                    hint="restore a state into World.from_scene(<the scene it was saved with>)",
-                ) from exc
-        finally:
-            os.unlink(path)
+            self.client.restoreState(fileName=state_files(self.client).restore_path(raw))
+        except p.error as exc:
+            raise snapshots.StateError(
+                "cannot restore the physics state: it does not match this scene",
+                hint="restore a state into World.from_scene(<the scene it was saved with>)",
+            ) from exc
         # Motor targets are not part of a saved state: make them a function of it.
         self.robot.hold()
 
