@@ -9,7 +9,7 @@ here imports PyBullet, SQLAlchemy, torch or the CLI.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
 from llcps.errors import LlcpsError
@@ -166,7 +166,7 @@ class EntityFeatures:
     unit_z: float
 
     def as_dict(self) -> dict[str, float | str]:
-        return asdict(self)
+        return dict(self.__dict__)  # the fields, in order (asdict would deep-copy each one)
 
 
 #: EntityFeatures' numbers, in the order :class:`StoredFeatures` holds them.
@@ -204,15 +204,19 @@ class StoredFeatures:
     def __len__(self) -> int:
         return len(self.names) // 2
 
+    def entity_fields(self, i: int) -> dict[str, float | str]:
+        """Argument ``i``'s features by field name, as ``entities()[i].as_dict()`` gives them."""
+        names, (v, m, x, y, z) = self.names, self.numbers[5 * i : 5 * i + 5]
+        return {"shape": names[2 * i], "volume": v, "color": names[2 * i + 1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z}
+
     def entities(self) -> tuple[EntityFeatures, ...]:
         """One EntityFeatures per argument, built once."""
         if self._entities is None:
-            new, set_dict, names, numbers = object.__new__, object.__setattr__, self.names, self.numbers
+            new, set_dict = object.__new__, object.__setattr__
             out = []
-            for i in range(len(names) // 2):
+            for i in range(len(self)):
                 entity = new(EntityFeatures)  # checked values only: the store checks them before holding them
-                v, m, x, y, z = numbers[5 * i : 5 * i + 5]
-                set_dict(entity, "__dict__", {"shape": names[2 * i], "volume": v, "color": names[2 * i + 1], "vector_magnitude": m, "unit_x": x, "unit_y": y, "unit_z": z})
+                set_dict(entity, "__dict__", self.entity_fields(i))
                 out.append(entity)
             self._entities = tuple(out)
         return self._entities

@@ -155,3 +155,15 @@ def test_the_models_read_the_same_rows_and_digest_from_read_and_made_records(tmp
     first = made[0].features[0]
     nudged = [replace(made[0], features=(replace(first, volume=first.volume * (1 + 1e-12)),) + made[0].features[1:]), *made[1:]]
     assert training_digest(nudged, {}) != training_digest(made, {})
+
+
+def test_flat_rows_of_read_and_made_records_agree_without_building_features(tmp_path, new_trial) -> None:  # noqa: ANN001
+    from llcps.store.flat import base_values
+
+    made, read = _read_back(tmp_path, new_trial)
+    made = [replace(m, id=r.id, created_at=r.created_at) for m, r in zip(made, read)]
+    rows = [base_values(r) for r in read]
+    assert rows == [base_values(m) for m in made]
+    assert not any("features" in r.__dict__ for r in read)
+    assert rows[0]["arg0_volume"] == made[0].features[0].volume and rows[0]["arg0_shape"] == made[0].features[0].shape
+    assert [r.features[0].as_dict() for r in read] == [{k: getattr(m.features[0], k) for k in r.features[0].__dataclass_fields__} for m, r in zip(made, read)]

@@ -106,10 +106,14 @@ def base_values(record: TrialRecord) -> dict[str, Any]:
         "movement_magnitude": p.movement_magnitude,
         "orientation": p.orientation,
     }
+    stored = record.stored_features  # a read record: its names and numbers, no objects built
     for slot in range(ARGUMENT_SLOTS):
         has = slot < len(record.spec.arguments)
         row[f"arg{slot}"] = record.spec.arguments[slot] if has else None
-        features = record.features[slot].as_dict() if has and slot < len(record.features) else {}
+        if stored is not None:
+            features = stored.entity_fields(slot) if has and slot < len(stored) else {}
+        else:
+            features = record.features[slot].as_dict() if has and slot < len(record.features) else {}
         for name in ENTITY_FIELDS:
             row[f"arg{slot}_{name}"] = features.get(name)
     row.update({name: bool(bit) for name, bit in record.outcome.as_dict().items()})
@@ -161,7 +165,8 @@ def trial_columns() -> tuple[Column, ...]:
 
 def flat_rows(store: "Store", records: Sequence[TrialRecord]) -> list[dict[str, Any]]:
     """One flat row per record, with every column of every source (None where absent)."""
-    rows = [dict.fromkeys(c.name for c in trial_columns()) for _ in records]
+    empty = dict.fromkeys(c.name for c in trial_columns())
+    rows = [empty.copy() for _ in records]
     for source in TRIAL_COLUMN_SOURCES:
         names = [c.name for c in source.columns]
         for row, values in zip(rows, source.values(store, records), strict=True):
