@@ -315,7 +315,6 @@ def test_restoring_many_distinct_states_keeps_the_engine_small() -> None:
 def test_saving_and_restoring_create_no_named_files_a_kill_could_leave(tmp_path, monkeypatch) -> None:
     import tempfile
 
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     seen: set[str] = set()
     original = os.open
 
@@ -324,9 +323,49 @@ def test_saving_and_restoring_create_no_named_files_a_kill_could_leave(tmp_path,
         return original(path, *args, **kwargs)
 
     with _settled() as w:
+        monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
         monkeypatch.setattr(os, "open", watched)
         raw = w._save_raw()  # noqa: SLF001
         w._restore_raw(raw)  # noqa: SLF001
         w.serialize_state()
     assert not any(p.startswith(str(tmp_path)) for p in seen)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.fixture()
+def panda_files_in(tmp_path, monkeypatch):
+    """panda_urdf() writing into ``tmp_path`` as the temporary directory, for this test only."""
+    import tempfile
+
+    from llcps.sim.robot import panda_urdf
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    panda_urdf.cache_clear()
+    yield tmp_path
+    monkeypatch.undo()
+    panda_urdf.cache_clear()
+
+
+def test_the_pandas_files_are_written_once_and_shared_by_processes(panda_files_in) -> None:
+    from llcps.sim.robot import panda_urdf
+
+    first = panda_urdf()
+    script = f"import tempfile; tempfile.tempdir = {str(panda_files_in)!r}\nfrom llcps.sim.robot import panda_urdf; print(panda_urdf())"
+    other = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout.strip()
+    assert other == first
+    assert [p.name for p in panda_files_in.iterdir()] == [os.path.basename(os.path.dirname(first))]  # nothing else left
+    with World.from_scene(SceneSpec()) as w:  # the shared files build the robot
+        assert w.client.getNumJoints(w.robot.body_id) > 9
+
+
+def test_a_panda_directory_others_may_write_is_not_used(panda_files_in) -> None:
+    from llcps.sim.robot import panda_urdf
+
+    shared = os.path.dirname(panda_urdf())
+    os.chmod(shared, 0o777)
+    panda_urdf.cache_clear()
+    private = os.path.dirname(panda_urdf())
+    assert private != shared and os.stat(private).st_mode & 0o077 == 0
+    for name in os.listdir(os.path.join(shared, "meshes", "collision")):
+        with open(os.path.join(shared, "meshes", "collision", name), "rb") as a, open(os.path.join(private, "meshes", "collision", name), "rb") as b:
+            assert a.read() == b.read()

@@ -18,8 +18,11 @@ from __future__ import annotations
 
 import atexit
 import functools
+import hashlib
 import math
+import os
 import shutil
+import stat
 import tempfile
 from pathlib import Path
 from typing import Any, Sequence
@@ -63,6 +66,10 @@ _REACH_IK: dict[tuple[float, float, float, float], tuple[float, ...]] = {}
 REACH_IK_CAPACITY = 8192
 
 
+#: Version of what :func:`panda_urdf` writes (part of its directory's name).
+PANDA_FILES_VERSION = 1
+
+
 @functools.lru_cache(maxsize=1)
 def panda_urdf() -> str:
     """Path of the Panda's URDF with each collision mesh reduced to its convex hull's vertices.
@@ -70,12 +77,47 @@ def panda_urdf() -> str:
     PyBullet makes a convex hull of every collision mesh anyway; the shipped meshes
     repeat up to nine times more points than their hulls have. Writing the hull
     vertices alone keeps the shapes exactly and halves the time a scene takes to
-    build (trials restore by rebuilding). The files live in a private temporary
-    directory for the life of the process; visual meshes are the shipped ones.
+    build (trials restore by rebuilding). Visual meshes are the shipped ones.
+
+    The files are written once per user and content, into a private directory of the
+    temporary directory named by a digest of what they are made from (the shipped
+    files, SciPy's version, :data:`PANDA_FILES_VERSION`); every later process reads
+    them, and a killed one leaves nothing behind. A directory of that name this user
+    does not own privately is not used: the files go to a directory of this process.
     """
+    import scipy
+
     src = Path(pybullet_data.getDataPath()) / "franka_panda"
-    dst = Path(tempfile.mkdtemp(prefix="llcps-panda-"))
-    atexit.register(shutil.rmtree, dst, True)
+    sources = [src / "panda.urdf", *sorted((src / "meshes" / "collision").glob("*.obj"))]
+    digest = hashlib.sha256(f"{PANDA_FILES_VERSION} {scipy.__version__} {src}".encode())
+    for path in sources:
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    shared = Path(tempfile.gettempdir()) / f"llcps-panda-{os.getuid()}-{digest.hexdigest()[:16]}"
+    if _private_dir(shared):
+        return str(shared / "panda.urdf")
+    made = Path(tempfile.mkdtemp(prefix=".llcps-panda-"))  # mode 0700
+    _write_panda_files(src, made)
+    try:
+        made.rename(shared)  # whole or not at all; refused if another process was first
+        return str(shared / "panda.urdf")
+    except OSError:
+        if _private_dir(shared):
+            shutil.rmtree(made, ignore_errors=True)
+            return str(shared / "panda.urdf")
+    atexit.register(shutil.rmtree, made, True)
+    return str(made / "panda.urdf")
+
+
+def _private_dir(path: Path) -> bool:
+    """Whether ``path`` is a directory of this user that nobody else may write, with the URDF in it."""
+    try:
+        info = path.lstat()
+    except OSError:
+        return False
+    return stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and not info.st_mode & 0o022 and (path / "panda.urdf").is_file()
+
+
+def _write_panda_files(src: Path, dst: Path) -> None:
     (dst / "meshes" / "collision").mkdir(parents=True)
     (dst / "meshes" / "visual").symlink_to(src / "meshes" / "visual", target_is_directory=True)
     for obj in sorted((src / "meshes" / "collision").glob("*.obj")):
@@ -88,8 +130,7 @@ def panda_urdf() -> str:
         lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in points[keep].tolist()]
         lines += ["f " + " ".join(str(index[int(v)]) for v in face) for face in hull.simplices]
         (dst / "meshes" / "collision" / obj.name).write_text("\n".join(lines) + "\n")
-    shutil.copy(src / "panda.urdf", dst / "panda.urdf")
-    return str(dst / "panda.urdf")
+    shutil.copy(src / "panda.urdf", dst / "panda.urdf")  # last: a directory with the URDF is complete
 
 
 def top_down(yaw: float) -> tuple[float, float, float, float]:
