@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import struct
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -199,3 +200,22 @@ def test_new_trials_of_pretraining_and_solving_record_their_change(store: Store)
         assert {"table", "floor"} <= {b.name for b in c.bodies}
         kinds = np.array([b.kind for b in c.bodies])
         assert {"table", "floor"} <= set(kinds)
+
+
+def test_the_training_digest_reads_changes_as_stored_and_sees_every_field(store: Store, new_trial) -> None:
+    from llcps.models.persistence import training_digest
+
+    made = [new_trial(k) for k in range(4)]
+    ids = store.add_trials(made, changes=[change(k) for k in range(4)])
+    read, read_changes = store.visible_trials("main"), store.visible_changes("main")
+    made = [replace(m, id=i) for m, i in zip(made, ids)]
+    made_changes = {i: replace(change(k), trial_id=i) for k, i in enumerate(ids)}
+    digest = training_digest(made, made_changes)
+    assert training_digest(read, read_changes) == digest
+    first = made_changes[ids[0]]
+    cube = first.bodies[0]
+    nudged = replace(first, bodies=(replace(cube, centre=(cube.centre[0] + 1e-12, *cube.centre[1:])), *first.bodies[1:]))
+    assert training_digest(made, {**made_changes, ids[0]: nudged}) != digest
+    seen = replace(first, before=first.before | {fluent("visible", "bucket")})
+    assert training_digest(made, {**made_changes, ids[0]: seen}) != digest
+    assert training_digest(made, {i: c for i, c in made_changes.items() if i != ids[0]}) != digest

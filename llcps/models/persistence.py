@@ -30,6 +30,7 @@ from llcps.domain import StoredFeatures, TrialChange, TrialRecord, check_seed
 from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import WorldModelEntry, world_model_entry
+from llcps.store.changes import pack_atoms, pack_bodies
 
 if TYPE_CHECKING:
     from llcps.store import Store
@@ -48,11 +49,13 @@ def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialC
     """A digest of everything a fit reads from its training set, in order.
 
     That is each trial's id, seed, spec, features and outcome, and its known change
-    (the state before, the atoms added and deleted, the scene's bodies); provenance
+    (the state before, the atoms added and deleted, the scene's bodies, in the form the
+    store keeps them: :mod:`llcps.store.changes`); provenance
     (branch, run, timestamps, wall seconds) is left out, since no model reads it.
     """
     digest = hashlib.blake2b(digest_size=20)
     texts: dict[int, str] = {}  # by id() of a spec or outcome: the records share them, and keep them alive
+    packs: dict[int, bytes] = {}  # by id() of a change's state or bodies, in their stored form: shared alike
     for r in records:
         spec, outcome = r.spec, r.outcome
         spec_text = texts.get(id(spec))
@@ -69,8 +72,13 @@ def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialC
         change = changes.get(r.id) if r.id is not None else None
         if change is None:
             digest.update(b"|-\n")
-        else:
-            digest.update(f"|{sorted(change.before)!r}|{sorted(change.added)!r}|{sorted(change.deleted)!r}|{change.bodies!r}\n".encode())
+            continue
+        for part, pack in ((change.before, pack_atoms), (change.added, pack_atoms), (change.deleted, pack_atoms), (change.bodies, pack_bodies)):
+            packed = packs.get(id(part))
+            if packed is None:
+                packed = packs[id(part)] = pack(part)
+            digest.update(len(packed).to_bytes(4, "little") + packed)
+        digest.update(b"\n")
     return digest.hexdigest()
 
 
