@@ -369,3 +369,22 @@ def test_a_panda_directory_others_may_write_is_not_used(panda_files_in) -> None:
     for name in os.listdir(os.path.join(shared, "meshes", "collision")):
         with open(os.path.join(shared, "meshes", "collision", name), "rb") as a, open(os.path.join(private, "meshes", "collision", name), "rb") as b:
             assert a.read() == b.read()
+
+
+def test_without_memory_files_states_go_through_a_private_directory_and_restore_the_same(monkeypatch) -> None:
+    """Where the system has no anonymous in-memory files, a private temporary directory serves."""
+    from llcps.sim import state_files
+
+    with _settled() as w:
+        states = []
+        for _ in range(3):
+            w.step(3)
+            states.append(w._save_raw())  # noqa: SLF001
+        expected = [_state_after(w, raw) for raw in states]
+        monkeypatch.delattr(os, "memfd_create")
+        monkeypatch.setattr(state_files, "_BY_CLIENT", type(state_files._BY_CLIENT)())
+        assert [_state_after(w, raw) for raw in states] == expected
+        files = state_files.state_files(w.client)
+        directory = files._directory  # noqa: SLF001
+        assert directory is not None and os.stat(directory).st_mode & 0o077 == 0
+        assert sorted(os.listdir(directory)) == ["save.bullet", "state-0.bullet", "state-1.bullet", "state-2.bullet"]

@@ -48,11 +48,11 @@ class StateFiles:
         if self._memory:
             fd = os.memfd_create(f"llcps-{name}", os.MFD_CLOEXEC)
             return fd, f"{_PROC_FD}/{fd}"
-        if self._directory is None:  # pragma: no cover - not Linux
+        if self._directory is None:
             self._directory = tempfile.mkdtemp(prefix="llcps-states-")
             atexit.register(shutil.rmtree, self._directory, True)
-        path = os.path.join(self._directory, f"{name}.bullet")  # pragma: no cover
-        return os.open(path, os.O_RDWR | os.O_CREAT, 0o600), path  # pragma: no cover
+        path = os.path.join(self._directory, f"{name}.bullet")
+        return os.open(path, os.O_RDWR | os.O_CREAT, 0o600), path
 
     def save_path(self) -> str:
         """An empty file for the engine to save a state into (read it back with :meth:`read_saved`).
