@@ -40,7 +40,6 @@ class StateFiles:
         self._directory: str | None = None
         self._files: list[tuple[int, str]] = []  # (fd, path) of each restore file, reused after a clear
         self._held: dict[bytes, int] = {}  # raw state -> index of the file the engine read it from
-        self._used = 0  # files the engine has read since its cache was last cleared
         self._save: list[tuple[int, str]] = []
         weakref.finalize(self, _close, self._files, self._save)
 
@@ -75,13 +74,11 @@ class StateFiles:
         index = self._held.get(raw)
         if index is not None:
             return self._files[index][1]
-        if self._used >= CAPACITY:
+        if len(self._held) >= CAPACITY:
             self._client.setPhysicsEngineParameter(enableFileCaching=0)  # drops every file it holds
             self._client.setPhysicsEngineParameter(enableFileCaching=1)
             self._held.clear()
-            self._used = 0
-        index = self._used
-        self._used += 1
+        index = len(self._held)  # the engine has read files 0 .. index - 1 since its cache was cleared
         if index == len(self._files):
             self._files.append(self._new_file(f"state-{index}"))
         fd, path = self._files[index]

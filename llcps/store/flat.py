@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
-from llcps.domain import ACTION_ARITY, ACTIONS, COLORS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, TRIAL_SOURCES, EntityFeatures, TrialRecord
+from llcps.domain import ACTION_ARITY, ACTIONS, COLORS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, TRIAL_SOURCES, EntityFeatures, StoredFeatures, TrialRecord
 
 if TYPE_CHECKING:
     from llcps.store.store import Store
@@ -106,14 +106,11 @@ def base_values(record: TrialRecord) -> dict[str, Any]:
         "movement_magnitude": p.movement_magnitude,
         "orientation": p.orientation,
     }
-    stored = record.stored_features  # a read record: its names and numbers, no objects built
+    stored = record.stored_features or StoredFeatures.of(record.features)  # a read record's: no objects built
     for slot in range(ARGUMENT_SLOTS):
         has = slot < len(record.spec.arguments)
         row[f"arg{slot}"] = record.spec.arguments[slot] if has else None
-        if stored is not None:
-            features = stored.entity_fields(slot) if has and slot < len(stored) else {}
-        else:
-            features = record.features[slot].as_dict() if has and slot < len(record.features) else {}
+        features = stored.entity_fields(slot) if has and slot < len(stored) else {}
         for name in ENTITY_FIELDS:
             row[f"arg{slot}_{name}"] = features.get(name)
     row.update({name: bool(bit) for name, bit in record.outcome.as_dict().items()})
