@@ -38,6 +38,14 @@ EXPLORE_SCENARIO = "scenario1"
 EXPLORE_MEASURE = "most-changes"
 EXPLORE_BUDGET = 20
 EXPLORE_BUDGET_QUICK = 5
+#: Control-loop steps of each measurement of the exploration group's bound.
+BOUND_STEPS = 2400
+#: A drift of the bound beyond this (after / before the episodes) marks a machine whose
+#: speed changed during the group.
+DRIFT_WARNING = 0.05
+#: Workers of the scaling group that got less CPU time per wall second than this shared
+#: their cores with other jobs.
+CORE_SHARE_WARNING = 0.9
 #: Trials the deepest branch of the store bench sees.
 VISIBLE_TRIALS = 100_000
 VISIBLE_TRIALS_QUICK = 10_000
@@ -269,13 +277,16 @@ def bench_exploration(quick: bool = False, progress: Progress | None = None) -> 
     from llcps.sim.robot import Robot
     from llcps.sim.world import World
 
+    def bound(clock: Callable[[], float]) -> float:
+        world = _settled_world(EXPLORE_SCENARIO)
+        try:
+            return control_loop_rate(world, steps=BOUND_STEPS, clock=clock)
+        finally:
+            world.close()
+
+    load = os.getloadavg()[0]
     _say(progress, f"exploration: control-loop rate of {EXPLORE_SCENARIO}")
-    world = _settled_world(EXPLORE_SCENARIO)
-    try:
-        bound_cpu = control_loop_rate(world, steps=2400, clock=time.process_time)
-        bound_wall = control_loop_rate(world, steps=2400)
-    finally:
-        world.close()
+    before_cpu, bound_wall = bound(time.process_time), bound(time.perf_counter)
     startup = warm_up(SolveConfig(scenario=EXPLORE_SCENARIO).model)
     budget = EXPLORE_BUDGET_QUICK if quick else EXPLORE_BUDGET
     _say(progress, f"exploration: solve {EXPLORE_SCENARIO} novelty ({EXPLORE_MEASURE}), budget {budget}")
@@ -283,6 +294,12 @@ def bench_exploration(quick: bool = False, progress: Progress | None = None) -> 
     _say(progress, "exploration: the same episode, CPU time split by layer")
     with _cpu_in([(World, "step")]) as physics, _cpu_in([(Robot, "ik"), (Robot, "command_arm")]) as control:
         split = run_exploration(budget)
+    _say(progress, f"exploration: control-loop rate of {EXPLORE_SCENARIO} again")
+    after_cpu = bound(time.process_time)
+    # The episodes ran between the two measurements of the bound: their mean is the
+    # estimate of the bound the episodes met, and their difference says how steady
+    # the machine's speed was meanwhile.
+    bound_cpu = (before_cpu + after_cpu) / 2
     rate_cpu = run.sim_steps / run.cpu_seconds
     rate_wall = run.sim_steps / run.wall_seconds
     loop = physics["cpu"] + control["cpu"]
@@ -293,7 +310,16 @@ def bench_exploration(quick: bool = False, progress: Progress | None = None) -> 
         figure(f"{p}.sim_step_rate_wall", rate_wall, "steps/s wall"),
         figure(f"{p}.trial_rate", run.trials / run.cpu_seconds, "trials/s cpu"),
         figure(f"{p}.trial_rate_wall", run.trials / run.wall_seconds, "trials/s wall"),
-        figure(f"{p}.control_loop", bound_cpu, "steps/s cpu", note="the bound: control-loop rate of the same scene, arm in free air"),
+        figure(f"{p}.control_loop", bound_cpu, "steps/s cpu", note="the bound: control-loop rate of the same scene, arm in free air (mean of before and after the episodes)"),
+        figure(f"{p}.control_loop_before", before_cpu, "steps/s cpu"),
+        figure(f"{p}.control_loop_after", after_cpu, "steps/s cpu"),
+        figure(
+            f"{p}.control_loop_drift",
+            after_cpu / before_cpu - 1,
+            "ratio",
+            note=f"the bound after / before, minus 1: beyond +-{DRIFT_WARNING:.0%} the machine's speed changed during the group, and its ratios are uncertain by as much",
+        ),
+        figure(f"{p}.load_average", load, "runnable", note=f"1-minute load average before the group, on {os.cpu_count()} CPUs"),
         figure(f"{p}.efficiency", rate_cpu / bound_cpu, "ratio", at_least=0.8, note="achieved steps/s / control-loop rate (CPU time)"),
         figure(f"{p}.efficiency_wall", rate_wall / bound_wall, "ratio", note="the same on the wall clock (disturbed by other jobs)"),
         figure(f"{p}.process_startup", startup, "s cpu", note="once per process, not charged above: model library import, K's PDDL parser, the shipped scenario files, the physics engine's connection"),
@@ -622,4 +648,36 @@ def run_bench(*, quick: bool = False, groups: Sequence[str] | None = None, progr
     return figures
 
 
-__all__ = ["GROUPS", "SLOW_GROUPS", "Figure", "figure", "run_bench", "run_exploration", "run_scaling_grid", "warm_up"]
+def unsteady(figures: Sequence[Figure]) -> list[str]:
+    """What in ``figures`` says the machine was not steady while they were taken, in words.
+
+    The bench's ratios compare measurements taken one after the other, so they hold
+    only while the machine's speed holds: a bound that drifted beyond
+    :data:`DRIFT_WARNING` between before and after its episodes, or workers that got
+    less than :data:`CORE_SHARE_WARNING` of their cores, make a figure worth taking again.
+    """
+    said = []
+    for f in figures:
+        if f.name.endswith(".control_loop_drift") and abs(f.value) > DRIFT_WARNING:
+            group = f.name.rsplit(".", 1)[0]
+            said.append(
+                f"the control-loop bound of {group} moved by {f.value:+.1%} between before and after its episodes:"
+                f" its ratios are uncertain by as much; run it again on a quieter machine"
+            )
+        elif f.name.endswith(".core_share") and f.value < CORE_SHARE_WARNING:
+            run = f.name.rsplit(".", 1)[0]
+            said.append(f"{run} got {f.value:.2f} of its cores (other jobs ran beside it): its wall times and the speed-up are low")
+    return said
+
+
+__all__ = [
+    "GROUPS",
+    "SLOW_GROUPS",
+    "Figure",
+    "figure",
+    "run_bench",
+    "run_exploration",
+    "run_scaling_grid",
+    "unsteady",
+    "warm_up",
+]

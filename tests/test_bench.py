@@ -8,7 +8,7 @@ import math
 import pytest
 from typer.testing import CliRunner
 
-from llcps.bench import GROUPS, Figure, figure, run_bench
+from llcps.bench import GROUPS, Figure, figure, run_bench, unsteady
 from llcps.cli.main import app
 from llcps.errors import UnknownNameError
 
@@ -44,3 +44,17 @@ def test_cli_json_is_one_array_of_flat_figures() -> None:
     for row in data:
         assert {"name", "value", "unit"} <= set(row)
         assert all(not isinstance(v, (dict, list)) for v in row.values())
+
+
+def test_unsteady_names_a_drifting_bound_and_starved_workers() -> None:
+    steady = [
+        figure("exploration.control_loop_drift", -0.03, "ratio"),
+        figure("scaling.workers2.core_share", 0.97, "ratio"),
+        figure("exploration.efficiency", 0.5, "ratio", at_least=0.8),
+    ]
+    assert unsteady(steady) == []
+    said = unsteady([figure("exploration.control_loop_drift", 0.071, "ratio"), figure("scaling.workers2.core_share", 0.62, "ratio")])
+    assert len(said) == 2
+    assert "exploration" in said[0] and "+7.1%" in said[0]
+    assert "scaling.workers2" in said[1] and "0.62" in said[1]
+    assert unsteady([figure("exploration.control_loop_drift", -0.06, "ratio")])  # slower after counts too

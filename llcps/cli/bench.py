@@ -6,7 +6,7 @@ from typing import Annotated
 
 import typer
 
-from llcps.bench import GROUPS, SLOW_GROUPS, Figure, run_bench
+from llcps.bench import GROUPS, SLOW_GROUPS, Figure, run_bench, unsteady
 from llcps.cli._common import (
     JsonFlag,
     choice_enum,
@@ -42,18 +42,21 @@ def bench_cli(
 
     Rates are per second of this process's CPU time (stable on a busy machine) and of
     wall time. Temporary stores only: --db is not touched. Exit code 0 even when a
-    target is missed (the `met` column says which).
+    target is missed (the `met` column says which). A warning says when the machine's
+    speed changed while the figures were taken.
     """
     groups = [str(g.value) for g in group] if group else None  # type: ignore[attr-defined]
     with progress_display("bench", "loading") as progress:
         figures = run_bench(quick=quick, groups=groups, progress=progress.note)
     if as_json:
         print_json([f.as_json() for f in figures])
-        return
-    print_table("llcps bench" + (" --quick" if quick else ""), ("figure", "value", "unit", "target", "met"), [_row(f) for f in figures])
-    missed = [f.name for f in figures if f.met is False]
-    if missed:
-        message(f"targets missed: {', '.join(missed)} (see docs/performance.md)")
+    else:
+        print_table("llcps bench" + (" --quick" if quick else ""), ("figure", "value", "unit", "target", "met"), [_row(f) for f in figures])
+        missed = [f.name for f in figures if f.met is False]
+        if missed:
+            message(f"targets missed: {', '.join(missed)} (see docs/performance.md)")
+    for caution in unsteady(figures):  # on stderr, beside the JSON too
+        message(f"warning: {caution}")
 
 
 def _row(f: Figure) -> tuple[str, str, str, str, str]:
