@@ -127,3 +127,30 @@ def test_a_failure_without_subgoals_ranks_by_its_missing_atoms(db):
     assert point["subgoals"] == []
     ranked = point["rankings"]["nb"]["goal-directed"]
     assert all(c["resolve"] == pytest.approx(c["joint"], abs=1e-6) for c in ranked)
+
+
+def test_a_variant_s_candidates_are_ranked_in_that_variant_s_scene(db):
+    """--variant reaches the failure in the layout `llcps solve --variant` would build: the
+    candidates' Table-1 inputs carry that scene's geometry, not the canonical one's."""
+
+    def point(*extra):
+        result = run(db, "--scenario", "scenario3", "--limit", "1000", "--model", "nb", "--json", *extra)
+        assert result.exit_code == 0, result.output
+        return json.loads(result.stdout)["scenario"]
+
+    canonical, varied, again = point(), point("--variant", "7"), point("--variant", "7")
+    assert (canonical["variant"], varied["variant"]) == (0, 7)
+    assert varied == again  # the same variant, the same ranking
+    assert varied["candidates"] == canonical["candidates"]  # the same entities and controllers
+
+    def predicted(p):  # Omega's prediction reads the candidates' Table-1 inputs (sizes, colours, places)
+        return {c["trial"]: c["outcome"] for c in p["rankings"]["nb"]["most-changes"]}
+
+    assert predicted(varied).keys() == predicted(canonical).keys()
+    assert predicted(varied) != predicted(canonical)  # another layout, other inputs
+
+
+def test_a_variant_without_a_scenario_is_a_usage_error(db):
+    result = run(db, "--variant", "3")
+    assert result.exit_code == 2
+    assert "--variant needs --scenario" in result.output and "Traceback" not in result.output

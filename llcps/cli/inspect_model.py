@@ -12,8 +12,10 @@ from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.cli.inspect import app
 from llcps.domain import MAX_SEED, OUTCOME_NAMES
+from llcps.errors import LlcpsError
 from llcps.models import PAPER_MODELS, WORLD_MODELS
 from llcps.scenarios import get_scenario
+from llcps.scenarios.variants import MAX_VARIANT
 
 if TYPE_CHECKING:
     from llcps.cps.inspection import ModelInspection
@@ -31,6 +33,7 @@ _SHORT = {name: ("+" if name.startswith("positive") else "-") + name.split("_", 
     epilog=examples(
         "llcps inspect model                                   # nb and nn: held-out metrics",
         "llcps inspect model --scenario scenario2 --limit 3    # and each measure's top 3 candidates",
+        "llcps inspect model --scenario scenario3 --variant 7  # ranked in another layout of the scene",
         "llcps inspect model --model forest --model logreg --seed 1 --json",
     ),
 )
@@ -44,6 +47,16 @@ def model_cli(
         Optional[str],
         typer.Option("--scenario", metavar="NAME", help="Also rank this scenario's failure-state candidates under every measure.", show_default=False),
     ] = None,
+    variant: Annotated[
+        int,
+        typer.Option(
+            "--variant",
+            metavar="N",
+            min=0,
+            max=MAX_VARIANT,
+            help="Scene variant of --scenario, as `llcps solve --variant` draws it (0: the canonical scene).",
+        ),
+    ] = 0,
     limit: Annotated[int, typer.Option("--limit", min=1, max=MAX_TOP, metavar="N", help="Candidates shown per measure.")] = 5,
     seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Run seed: the held-out split and tie-breaks.")] = 0,
     model_seed: Annotated[
@@ -55,6 +68,8 @@ def model_cli(
 ) -> None:
     """Evaluate world models on the branch's trials (held-out split) next to the majority baseline."""
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
+    if variant and scenario is None:
+        raise LlcpsError("--variant needs --scenario", hint="e.g. `llcps inspect model --scenario scenario3 --variant 7`")
     scenario = None if scenario is None else get_scenario(scenario).name
     with progress_display("inspect model", "loading the world models") as progress:
         from llcps.cps.inspection import inspect_models  # sklearn loads only when used
@@ -70,6 +85,7 @@ def model_cli(
                 test_fraction=test_fraction,
                 scenario=scenario,
                 top=limit,
+                variant=variant,
                 progress=progress,
             )
     if as_json:
@@ -118,7 +134,8 @@ def show(report: "ModelInspection") -> None:
     if report.failure is None:
         return
     failure = report.failure
-    message(f"{failure.scenario}: {failure.missing_effects}; {len(failure.candidates)} candidates")
+    where = f" (variant {report.variant})" if report.variant else ""
+    message(f"{failure.scenario}{where}: {failure.missing_effects}; {len(failure.candidates)} candidates")
     for k, subgoal in enumerate(failure.subgoals, start=1):
         message(f"subgoal S{k}: {subgoal.label} (a trial that meets it lets K's step finish the job)")
     for model, by_measure in report.rankings.items():

@@ -72,6 +72,8 @@ class ModelInspection:
     evaluation_note: str | None = None
     #: Trials the goal-aware heads could learn from (those with a known change).
     n_changes: int = 0
+    #: The scene variant the failure point was reached in.
+    variant: int = 0
 
     def as_json(self) -> dict[str, Any]:
         data: dict[str, Any] = {
@@ -86,6 +88,7 @@ class ModelInspection:
         if self.failure is not None:
             data["scenario"] = {
                 "name": self.failure.scenario,
+                "variant": self.variant,
                 "failed_action": self.failure.failure.step.label,
                 "missing_effects": self.failure.missing_effects,
                 "missing_atoms": [atom.label for atom in self.failure.query([]).atoms],
@@ -126,9 +129,9 @@ def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top:
     ]
 
 
-def reach_failure(store: Store, *, branch: str, scenario: str, seed: int) -> FailurePoint:
-    """Run ``scenario``'s novelty plan and its repairs (nothing stored) to the failure
-    exploration starts from, as the agent does.
+def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, variant: int = 0) -> FailurePoint:
+    """Run ``scenario``'s novelty plan and its repairs (nothing stored) in scene ``variant``
+    to the failure exploration starts from, as the agent does.
 
     Raises:
         LlcpsError: unknown scenario, no plan, or a plan (or a repair) that reaches the goal.
@@ -139,9 +142,9 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int) -> Fai
     from llcps.sim.perception import perceive
     from llcps.sim.world import World
 
-    config = SolveConfig(scenario=scenario, seed=seed)
+    config = SolveConfig(scenario=scenario, seed=seed, variant=variant)
     spec = config.validate()
-    world = World.from_scene(spec.scene("novelty"))
+    world = World.from_scene(spec.scene("novelty", config.variant))
     try:
         world.settle(max_steps=SETTLE_STEPS)
         result = SolveResult(scenario=spec.name, condition="novelty", model="-", measure="-", seed=seed, branch=branch)
@@ -174,6 +177,7 @@ def inspect_models(
     scenario: str | None = None,
     top: int = 5,
     model_seed: int | None = None,
+    variant: int = 0,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> ModelInspection:
     """Evaluate ``models`` on the branch's trials and, with a scenario, rank its candidates.
@@ -187,6 +191,7 @@ def inspect_models(
         scenario: a scenario whose failure point's candidates to rank (optional).
         top: candidates shown per measure.
         model_seed: seed of the world models (None: ``seed``).
+        variant: the scene variant of ``scenario`` (0: the canonical scene).
         progress: called as ``progress(phase, done, total)`` as the work goes on.
     """
     check_seed(seed)
@@ -221,7 +226,7 @@ def inspect_models(
     rankings: dict[str, dict[str, list[RankedCandidate]]] = {}
     if scenario is not None:
         say(f"{scenario}: running the plan to its failure")
-        failure = reach_failure(store, branch=branch, scenario=scenario, seed=seed)
+        failure = reach_failure(store, branch=branch, scenario=scenario, seed=seed, variant=variant)
         for index, name in enumerate(models):
             say(f"ranking {len(failure.candidates)} candidates with {name}", index, len(models))
             model = fit_or_load(store, branch, name, fit_seed, records=records, changes=changes)
@@ -238,4 +243,5 @@ def inspect_models(
         rankings=rankings,
         evaluation_note=note,
         n_changes=len(changes),
+        variant=variant if scenario is not None else 0,
     )
