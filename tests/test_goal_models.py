@@ -274,6 +274,42 @@ def test_a_setting_one_controller_needs_is_not_carried_over_to_another(learner):
         assert pooled_slow > pooled_fast  # what the strata are for
 
 
+@pytest.mark.parametrize("learner", ["nb", "logreg"])
+def test_a_change_a_controller_never_made_backs_off_to_its_other_changes(learner):
+    """No push in training took the cube out of the bucket (five tried), but fast pushes
+    ended the cube's (on cube table) and slow ones did not: for the missing deletion of
+    (in cube bucket) the learners without interactions rank the fast push first (before
+    the back-off, every push of a one-class stratum had one flat rate), and a stratum
+    never seen at all gets its (action, sign) stratum's rate."""
+    from llcps.models.baselines import LogisticGoal
+    from llcps.models.goal import StratifiedLearner
+    from llcps.models.naive_bayes import NaiveBayesGoal
+
+    specs = {rate: TrialSpec("push", ("cube",), ControllerParams(rate, 0.15, "left")) for rate in (0.1, 1.0)}
+
+    def rows(atom):
+        query = GoalQuery.from_missing(list(specs.values()), missing_add=[], missing_del=[atom], bodies=scene())
+        return dict(zip(specs, encode_queries(query)))
+
+    seen, asked = rows(("on", "cube", "table")), rows(("in", "cube", "bucket"))
+    counts = {(0.1, "on"): (20, 0), (1.0, "on"): (10, 1), (0.1, "in"): (3, 0), (1.0, "in"): (2, 0)}
+    table = {"on": seen, "in": asked}
+    features = np.concatenate([np.repeat(table[atom][rate][None], n, axis=0) for (rate, atom), (n, _) in counts.items()])
+    labels = np.concatenate([np.full(n, label, dtype=np.uint8) for n, label in counts.values()])
+    stratified = StratifiedLearner(0, {"nb": NaiveBayesGoal, "logreg": LogisticGoal}[learner])
+    stratified.fit(features, labels, np.ones(len(labels)))
+    slow, fast = stratified.predict(np.stack([asked[0.1], asked[1.0]]))
+    assert fast > 2 * slow, (slow, fast)
+    assert 0.0 <= slow and fast <= 1.0
+    arrays = stratified.export()
+    again = StratifiedLearner(0, {"nb": NaiveBayesGoal, "logreg": LogisticGoal}[learner])
+    again.load(arrays)
+    assert np.array_equal(again.predict(np.stack([asked[0.1], asked[1.0]])), np.array([slow, fast]))
+    unseen = TrialSpec("push_together", ("cube", "ball"), ControllerParams(1.0, 0.15, "left"))
+    query = GoalQuery.from_missing([unseen], missing_add=[], missing_del=[("in", "cube", "bucket")], bodies=scene())
+    assert stratified.predict(encode_queries(query))[0] == pytest.approx(0.5)  # no push_together deletion seen: (0 + 1) / (0 + 2)
+
+
 def test_a_query_s_claims_must_match_its_candidates_and_atoms(query):
     with pytest.raises(ValueError, match="one flag per candidate and atom"):
         GoalQuery(query.candidates[:2], query.atoms, query.bodies, claimed=((True,),))

@@ -63,12 +63,14 @@ from llcps.domain import TrialChange, TrialRecord
 from llcps.models.base import array
 from llcps.models.relational import (
     CONTINUOUS_MASK,
+    N_ACTION_SIGNS,
     N_ACTION_STRATA,
     N_GOAL_FEATURES,
     N_STRATA,
     ExampleTable,
     Examples,
     GoalQuery,
+    action_sign_of,
     action_stratum_of,
     encode_queries,
     family_keys,
@@ -121,9 +123,17 @@ class StratifiedLearner(GoalLearner):
     controller make a change can hinder another (a slow, careful grasp lifts an object
     out of a container; a slow push does not tip one over). Pooled over controllers,
     such a learner would carry the settings of the controller that makes a change most
-    often over to every other. Each stratum gets its own fit; a stratum with one class
-    in training predicts its weighted Laplace-smoothed change rate. The network and the
-    forest learn such interactions themselves and are fitted on all rows.
+    often over to every other. Each stratum gets its own fit.
+
+    A stratum with one class in training (a change its controller was never seen to
+    make) backs off to its (action, sign) stratum: a sub-learner fitted on every change
+    of that sign the controller made, whatever the predicate, says which candidates
+    change the relations of the atom's bodies at all (roles, geometry, settings). The
+    prediction is that probability times the stratum's change rate over its parent's;
+    a stratum's rate is its weighted change rate smoothed toward its parent's rate (two
+    pseudo-rows), so one never seen is its parent's. Without a back-off either, the rate alone.
+    The network and the forest learn such interactions themselves and are fitted on
+    all rows.
     """
 
     def __init__(self, seed: int, make: Callable[[int], GoalLearner]) -> None:
@@ -132,14 +142,33 @@ class StratifiedLearner(GoalLearner):
         self._make = make
         self.priors = np.full(N_ACTION_STRATA, 0.5)
         self.subs: dict[int, GoalLearner] = {}
+        #: Sub-learners of the (action, sign) strata (the back-off).
+        self.backoffs: dict[int, GoalLearner] = {}
+        #: Per (action, predicate, sign) stratum, the change rate of its (action, sign) stratum.
+        self.parents = np.full(N_ACTION_STRATA, 0.5)
 
     def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
         strata = action_stratum_of(features)
+        signs = action_sign_of(features)
         self.subs = {}
+        self.backoffs = {}
+        rates = np.full(N_ACTION_SIGNS, 0.5)
+        for c in range(N_ACTION_SIGNS):
+            rows = signs == c
+            y, w = labels[rows], weights[rows]
+            rates[c] = (float(w @ y) + 1.0) / (float(w.sum()) + 2.0)
+            if 0 < y.sum() < len(y):
+                sub = self._make(self.seed)
+                sub.fit(features[rows], y, w)
+                self.backoffs[c] = sub
+        # A stratum's rate is smoothed toward its (action, sign) stratum's rate (two
+        # pseudo-rows of it), so a stratum seen on a few rows, or none, gets its parent's.
+        every = np.arange(N_ACTION_STRATA)
+        self.parents = rates[every // N_STRATA * 2 + every % 2]  # action_sign_of for action_stratum_of
         for k in range(N_ACTION_STRATA):
             rows = strata == k
             y, w = labels[rows], weights[rows]
-            self.priors[k] = (float(w @ y) + 1.0) / (float(w.sum()) + 2.0)
+            self.priors[k] = (float(w @ y) + 2.0 * self.parents[k]) / (float(w.sum()) + 2.0)
             if 0 < y.sum() < len(y):
                 sub = self._make(self.seed)
                 sub.fit(features[rows], y, w)
@@ -148,30 +177,54 @@ class StratifiedLearner(GoalLearner):
     def predict(self, features: np.ndarray) -> np.ndarray:
         strata = action_stratum_of(features)
         out = self.priors[strata]
+        backed = np.ones(len(features), dtype=bool)
         for k, sub in self.subs.items():
             rows = strata == k
             if rows.any():
                 out[rows] = sub.predict(features[rows])
+                backed[rows] = False
+        if self.backoffs and backed.any():
+            signs = action_sign_of(features)
+            for c, sub in self.backoffs.items():
+                rows = backed & (signs == c)
+                if rows.any():
+                    ratio = np.clip(sub.predict(features[rows]), 0.0, 1.0) / self.parents[strata[rows]]
+                    out[rows] = np.clip(out[rows] * ratio, 0.0, 1.0)
         return out
 
     def export(self) -> dict[str, np.ndarray]:
-        arrays = {"priors": self.priors, "learned": np.array([k in self.subs for k in range(N_ACTION_STRATA)])}
+        arrays = {
+            "priors": self.priors,
+            "learned": np.array([k in self.subs for k in range(N_ACTION_STRATA)]),
+            "backoff": np.array([c in self.backoffs for c in range(N_ACTION_SIGNS)]),
+            "parents": self.parents,
+        }
         for k, sub in self.subs.items():
             arrays.update({f"s{k}/{name}": value for name, value in sub.export().items()})
+        for c, sub in self.backoffs.items():
+            arrays.update({f"b{c}/{name}": value for name, value in sub.export().items()})
         return arrays
 
     def load(self, arrays: Mapping[str, np.ndarray]) -> None:
         priors = array(arrays, "priors", (N_ACTION_STRATA,))
         if np.any((priors <= 0) | (priors >= 1)):
             raise ValueError("stratum priors must lie strictly inside (0, 1)")
+        parents = array(arrays, "parents", (N_ACTION_STRATA,))
+        if np.any((parents <= 0) | (parents >= 1)):
+            raise ValueError("parent rates must lie strictly inside (0, 1)")
         self.priors = priors.astype(np.float64)
-        learned = array(arrays, "learned", (N_ACTION_STRATA,), kind="b")
-        self.subs = {}
-        for k in np.flatnonzero(learned):
+        self.parents = parents.astype(np.float64)
+        self.subs = self._load_subs(arrays, "learned", N_ACTION_STRATA, "s")
+        self.backoffs = self._load_subs(arrays, "backoff", N_ACTION_SIGNS, "b")
+
+    def _load_subs(self, arrays: Mapping[str, np.ndarray], flags: str, n: int, letter: str) -> dict[int, GoalLearner]:
+        subs = {}
+        for k in np.flatnonzero(array(arrays, flags, (n,), kind="b")):
             sub = self._make(self.seed)
-            prefix = f"s{k}/"
+            prefix = f"{letter}{k}/"
             sub.load({name[len(prefix) :]: v for name, v in arrays.items() if name.startswith(prefix)})
-            self.subs[int(k)] = sub
+            subs[int(k)] = sub
+        return subs
 
 
 class Standardizer:

@@ -529,3 +529,13 @@ def action_stratum_of(features: np.ndarray) -> np.ndarray:
     """Each row's (action, predicate, sign) stratum: ``N_STRATA * action index + stratum_of``."""
     action = np.argmax(features[:, _ACTION_COLUMNS], axis=1)
     return (N_STRATA * action + stratum_of(features)).astype(np.int64)
+
+
+#: (action, sign) strata: which kind of change (adding or deleting any atom) of which controller.
+N_ACTION_SIGNS = 2 * len(ACTIONS)
+
+
+def action_sign_of(features: np.ndarray) -> np.ndarray:
+    """Each row's (action, sign) stratum: ``2 * action index + add``."""
+    action = np.argmax(features[:, _ACTION_COLUMNS], axis=1)
+    return (2 * action + (features[:, _INDEX["add"]] > 0.5)).astype(np.int64)
