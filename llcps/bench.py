@@ -319,6 +319,12 @@ def bench_exploration(quick: bool = False, progress: Progress | None = None) -> 
             "ratio",
             note=f"the bound after / before, minus 1: beyond +-{DRIFT_WARNING:.0%} the machine's speed changed during the group, and its ratios are uncertain by as much",
         ),
+        figure(
+            f"{p}.episode_drift",
+            split.cpu_seconds / run.cpu_seconds - 1,
+            "ratio",
+            note=f"CPU of the instrumented run of the episode / the first, minus 1: the same episode twice, a few percent apart on a quiet machine; beyond +-{DRIFT_WARNING:.0%} the machine's speed changed between them",
+        ),
         figure(f"{p}.load_average", load, "runnable", note=f"1-minute load average before the group, on {os.cpu_count()} CPUs"),
         figure(f"{p}.efficiency", rate_cpu / bound_cpu, "ratio", at_least=0.8, note="achieved steps/s / control-loop rate (CPU time)"),
         figure(f"{p}.efficiency_wall", rate_wall / bound_wall, "ratio", note="the same on the wall clock (disturbed by other jobs)"),
@@ -653,7 +659,8 @@ def unsteady(figures: Sequence[Figure]) -> list[str]:
 
     The bench's ratios compare measurements taken one after the other, so they hold
     only while the machine's speed holds: a bound that drifted beyond
-    :data:`DRIFT_WARNING` between before and after its episodes, or workers that got
+    :data:`DRIFT_WARNING` between before and after its episodes, the same episode
+    run twice at CPU costs that far apart, or workers that got
     less than :data:`CORE_SHARE_WARNING` of their cores, make a figure worth taking again.
     """
     said = []
@@ -663,6 +670,12 @@ def unsteady(figures: Sequence[Figure]) -> list[str]:
             said.append(
                 f"the control-loop bound of {group} moved by {f.value:+.1%} between before and after its episodes:"
                 f" its ratios are uncertain by as much; run it again on a quieter machine"
+            )
+        elif f.name.endswith(".episode_drift") and abs(f.value) > DRIFT_WARNING:
+            group = f.name.rsplit(".", 1)[0]
+            said.append(
+                f"the second run of {group}'s episode took {f.value:+.1%} the CPU of the first: the machine's speed"
+                f" changed while it ran, and its ratios are uncertain by as much; run it again on a quieter machine"
             )
         elif f.name.endswith(".core_share") and f.value < CORE_SHARE_WARNING:
             run = f.name.rsplit(".", 1)[0]

@@ -58,3 +58,5 @@ def test_unsteady_names_a_drifting_bound_and_starved_workers() -> None:
     assert "exploration" in said[0] and "+7.1%" in said[0]
     assert "scaling.workers2" in said[1] and "0.62" in said[1]
     assert unsteady([figure("exploration.control_loop_drift", -0.06, "ratio")])  # slower after counts too
+    episode = unsteady([figure("exploration.episode_drift", -0.12, "ratio"), figure("exploration.episode_drift", 0.01, "ratio")])
+    assert len(episode) == 1 and "-12.0%" in episode[0]
