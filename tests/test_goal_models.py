@@ -375,7 +375,7 @@ def test_only_trials_from_the_ranked_start_state_are_episode_evidence(toy, query
 
 def test_families_are_action_predicate_sign_roles_and_each_setting(query):
     rows = encode_queries(query)
-    coarse, by_orientation, by_magnitude, by_rate = family_keys(rows)
+    coarse, by_orientation, by_magnitude, by_rate, motion = family_keys(rows)
     settings = [c.params for c in query.candidates]
     actions = [c.action for c in query.candidates]
     for i in range(0, len(rows), 37):
@@ -386,6 +386,30 @@ def test_families_are_action_predicate_sign_roles_and_each_setting(query):
                 assert (by_orientation[i] == by_orientation[j]) == (settings[i].orientation == settings[j].orientation)
                 assert (by_magnitude[i] == by_magnitude[j]) == (settings[i].movement_magnitude == settings[j].movement_magnitude)
                 assert (by_rate[i] == by_rate[j]) == (settings[i].rate == settings[j].rate)
+            if actions[i] == actions[j]:  # the motion: the action and all its settings, whatever the bodies
+                assert (motion[i] == motion[j]) == (settings[i] == settings[j])
             if actions[i] != actions[j]:
-                assert coarse[i] != coarse[j]
+                assert coarse[i] != coarse[j] and motion[i] != motion[j]
                 assert by_orientation[i] != by_orientation[j] and by_magnitude[i] != by_magnitude[j] and by_rate[i] != by_rate[j]
+
+
+@pytest.mark.parametrize("name", ["nb", "logreg"])
+def test_a_failed_motion_drops_on_the_action_s_other_bodies(toy, query, name):
+    """The same stroke with the same settings from the same start state tends to do the
+    same whichever bodies it names: one failure lowers it on the other bodies too, more
+    than it lowers any other motion of the same family."""
+    records, changes = toy
+    model = make_world_model(name, 0).fit(records, changes)
+    p = model.predict_goal(query)[:, 0]
+    coarse, *_, motion = family_keys(encode_queries(query))
+    pushes = [i for i, c in enumerate(query.candidates) if c.action == "push_together"]
+    tried = pushes[0]
+    same_motion = [i for i in pushes if coarse[i] != coarse[tried] and motion[i] == motion[tried]]
+    assert same_motion
+    failed, failed_changes = failing_trials(query, [tried], 10_000, 1)
+    model.update(list(records) + failed, {**changes, **failed_changes})
+    ratio = model.predict_goal(query)[:, 0] / p
+    for i in same_motion:
+        assert ratio[i] < 1.0
+        siblings = [j for j in pushes if coarse[j] == coarse[i] and motion[j] != motion[i]]
+        assert siblings and np.all(ratio[i] < ratio[siblings])

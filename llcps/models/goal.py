@@ -13,7 +13,8 @@ take many failures to move, and costs a second for some learners) but keeps
 *episode evidence*: every example of the trials the learner has not seen, grouped into
 families by :func:`~llcps.models.relational.family_keys` (action, predicate, sign and
 roles; and that with the same orientation, with the same movement magnitude, with the
-same rate). Physics is deterministic and every exploration trial
+same rate; and the motion, the action with all three settings, whatever bodies it
+names). Physics is deterministic and every exploration trial
 starts from the same state, so the outcomes of one family's parameterizations are not
 independent draws: either the family can work in this scene or it cannot. That holds
 from one start state only, so the agent names it (``start``: the failure snapshot) and
@@ -29,7 +30,9 @@ fails here). After ``n`` failures and no success the belief is
 probability is scaled by posterior over prior belief. With the defaults every failure
 roughly halves a family's probability whatever the learner said, and halves it again
 for each setting (orientation, magnitude, rate) a member shares with the failure:
-exploration moves away from what failed in every setting, then in kind. (Without the
+exploration moves away from what failed in every setting, then in kind; and a motion
+that failed drops on the action's other bodies too, so one stroke is not tried on every
+pair of bodies in turn before any other. (Without the
 rate, a learner that prefers slow trials tried the slow setting of every family before
 any fast one, and strikes are fast.) The evidence lives for one fit: the next fit learns
 from those trials anyway.

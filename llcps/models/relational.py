@@ -483,29 +483,39 @@ FAMILY_COLUMNS: tuple[tuple[str, ...], ...] = (
     _onehot("action", ACTIONS) + _onehot("predicate", PREDICATES) + ("add",) + _onehot("role1", ROLES) + _onehot("role2", _ROLE2),
     _onehot("orientation", ORIENTATIONS),
 )
+#: The first columns of the coarse key that say which change of which controller, not
+#: which bodies: (action, predicate, sign).
+_N_KIND_COLUMNS = len(ACTIONS) + len(PREDICATES) + 1
 
 
 def family_keys(features: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Four family keys per row: (action, predicate, sign, roles); that and the
-    orientation; that and the movement magnitude; that and the rate.
+    """Five family keys per row: (action, predicate, sign, roles); that and the
+    orientation; that and the movement magnitude; that and the rate; and the motion
+    itself, (action, predicate, sign) with all three settings, whatever the roles.
 
     Within one episode, pairs of a family share what matters physically: a family the
     robot keeps failing with drops, and so, once more for each setting it shares with
     a failure, does each of its parameterizations: exploration moves away from what
-    failed in every setting (see :mod:`llcps.models.goal`).
+    failed in every setting (see :mod:`llcps.models.goal`). The last key carries a
+    failed motion over to the action's other bodies: the same stroke with the same
+    settings from the same start state tends to do the same thing whichever of the
+    scene's bodies it names.
     """
     coarse_cols = [_INDEX[c] for c in FAMILY_COLUMNS[0]]
     orientation_cols = [_INDEX[c] for c in FAMILY_COLUMNS[1]]
     bits = features[:, coarse_cols] > 0.5
     coarse = (bits @ (1 << np.arange(len(coarse_cols), dtype=np.int64))).astype(np.int64)
+    kind = (bits[:, :_N_KIND_COLUMNS] @ (1 << np.arange(_N_KIND_COLUMNS, dtype=np.int64))).astype(np.int64)
     orientation = (features[:, orientation_cols] > 0.5) @ np.arange(1, len(orientation_cols) + 1, dtype=np.int64)
     magnitude = np.round(features[:, _INDEX["movement_magnitude"]] * 1e4).astype(np.int64)  # 0.1 mm steps
     rate = np.round(features[:, _INDEX["rate"]] * 1e4).astype(np.int64)  # 0.1 mm/s steps
+    motion = ((kind * (len(orientation_cols) + 1) + orientation) * 100_003 + magnitude) * 100_003 + rate
     return (
         coarse,
         coarse * (len(orientation_cols) + 1) + orientation,
         coarse * 100_003 + magnitude,
         coarse * 100_003 + rate,
+        motion,
     )
 
 
