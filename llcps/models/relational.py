@@ -479,13 +479,12 @@ class ExampleTable:
 
 #: Columns of the evidence keys: what makes two (candidate, atom) pairs one *family*,
 #: and the one-hot setting that narrows it (the orientation).
+#: The columns that say which change is asked of which controller: (action, predicate, sign).
+_KIND_COLUMNS: tuple[str, ...] = _onehot("action", ACTIONS) + _onehot("predicate", PREDICATES) + ("add",)
 FAMILY_COLUMNS: tuple[tuple[str, ...], ...] = (
-    _onehot("action", ACTIONS) + _onehot("predicate", PREDICATES) + ("add",) + _onehot("role1", ROLES) + _onehot("role2", _ROLE2),
+    _KIND_COLUMNS + _onehot("role1", ROLES) + _onehot("role2", _ROLE2),
     _onehot("orientation", ORIENTATIONS),
 )
-#: The first columns of the coarse key that say which change of which controller, not
-#: which bodies: (action, predicate, sign).
-_N_KIND_COLUMNS = len(ACTIONS) + len(PREDICATES) + 1
 
 
 def family_keys(features: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -505,7 +504,7 @@ def family_keys(features: np.ndarray) -> tuple[np.ndarray, ...]:
     orientation_cols = [_INDEX[c] for c in FAMILY_COLUMNS[1]]
     bits = features[:, coarse_cols] > 0.5
     coarse = (bits @ (1 << np.arange(len(coarse_cols), dtype=np.int64))).astype(np.int64)
-    kind = (bits[:, :_N_KIND_COLUMNS] @ (1 << np.arange(_N_KIND_COLUMNS, dtype=np.int64))).astype(np.int64)
+    kind = (bits[:, : len(_KIND_COLUMNS)] @ (1 << np.arange(len(_KIND_COLUMNS), dtype=np.int64))).astype(np.int64)
     orientation = (features[:, orientation_cols] > 0.5) @ np.arange(1, len(orientation_cols) + 1, dtype=np.int64)
     magnitude = np.round(features[:, _INDEX["movement_magnitude"]] * 1e4).astype(np.int64)  # 0.1 mm steps
     rate = np.round(features[:, _INDEX["rate"]] * 1e4).astype(np.int64)  # 0.1 mm/s steps
