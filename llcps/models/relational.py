@@ -477,10 +477,10 @@ class ExampleTable:
         return Examples.concatenate(parts)
 
 
-#: Columns of the evidence keys: what makes two (candidate, atom) pairs one *family*,
-#: and the one-hot setting that narrows it (the orientation).
 #: The columns that say which change is asked of which controller: (action, predicate, sign).
 _KIND_COLUMNS: tuple[str, ...] = _onehot("action", ACTIONS) + _onehot("predicate", PREDICATES) + ("add",)
+#: Columns of the evidence keys: what makes two (candidate, atom) pairs one *family*,
+#: and the one-hot setting that narrows it (the orientation).
 FAMILY_COLUMNS: tuple[tuple[str, ...], ...] = (
     _KIND_COLUMNS + _onehot("role1", ROLES) + _onehot("role2", _ROLE2),
     _onehot("orientation", ORIENTATIONS),
