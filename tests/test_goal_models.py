@@ -24,7 +24,11 @@ from llcps.models.measures import rank
 from llcps.models.relational import (
     GOAL_FEATURES,
     N_GOAL_FEATURES,
+    ExampleTable,
     GoalQuery,
+    action_sign_of,
+    action_sign_of_stratum,
+    action_stratum_of,
     encode_queries,
     family_keys,
     trial_examples,
@@ -391,6 +395,15 @@ def test_families_are_action_predicate_sign_roles_and_each_setting(query):
             if actions[i] != actions[j]:
                 assert coarse[i] != coarse[j] and motion[i] != motion[j]
                 assert by_orientation[i] != by_orientation[j] and by_magnitude[i] != by_magnitude[j] and by_rate[i] != by_rate[j]
+
+
+def test_each_stratum_backs_off_to_its_own_action_and_sign(toy):
+    """The back-off's index of a row's stratum is the row's own (action, sign)."""
+    records, changes = toy
+    rows = ExampleTable().encode(records, changes).features
+    signs = action_sign_of(rows)
+    assert len(np.unique(signs)) == 2 * len(ACTIONS)  # every controller, adding and deleting
+    assert np.array_equal(action_sign_of_stratum(action_stratum_of(rows)), signs)
 
 
 @pytest.mark.parametrize("name", ["nb", "logreg"])

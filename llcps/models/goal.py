@@ -74,6 +74,7 @@ from llcps.models.relational import (
     Examples,
     GoalQuery,
     action_sign_of,
+    action_sign_of_stratum,
     action_stratum_of,
     encode_queries,
     family_keys,
@@ -166,8 +167,7 @@ class StratifiedLearner(GoalLearner):
                 self.backoffs[c] = sub
         # A stratum's rate is smoothed toward its (action, sign) stratum's rate (two
         # pseudo-rows of it), so a stratum seen on a few rows, or none, gets its parent's.
-        every = np.arange(N_ACTION_STRATA)
-        self.parents = rates[every // N_STRATA * 2 + every % 2]  # action_sign_of for action_stratum_of
+        self.parents = rates[action_sign_of_stratum(np.arange(N_ACTION_STRATA))]
         for k in range(N_ACTION_STRATA):
             rows = strata == k
             y, w = labels[rows], weights[rows]

@@ -548,3 +548,10 @@ def action_sign_of(features: np.ndarray) -> np.ndarray:
     """Each row's (action, sign) stratum: ``2 * action index + add``."""
     action = np.argmax(features[:, _ACTION_COLUMNS], axis=1)
     return (2 * action + (features[:, _INDEX["add"]] > 0.5)).astype(np.int64)
+
+
+def action_sign_of_stratum(strata: np.ndarray) -> np.ndarray:
+    """The (action, sign) stratum of each (action, predicate, sign) stratum: what
+    :func:`action_sign_of` gives for a row whose :func:`action_stratum_of` is ``strata``."""
+    strata = np.asarray(strata, dtype=np.int64)
+    return 2 * (strata // N_STRATA) + strata % 2
