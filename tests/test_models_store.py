@@ -58,6 +58,31 @@ def test_fit_once_then_load_until_new_trials(store, candidates, name):
     assert refit.n_trials == 130
 
 
+def test_a_model_stored_by_other_model_code_is_refitted(store, candidates, monkeypatch):
+    from llcps.models import persistence
+
+    add_toy_trials(store, 60, seed=1)
+    first = fit_or_load(store, "main", "nb", 0)
+    saved = stored_ids(store, "main", "nb")
+    assert store.latest_world_model("main", "nb", 0).meta["code"] == persistence.model_code()
+    fit_or_load(store, "main", "nb", 0)
+    assert stored_ids(store, "main", "nb") == saved  # same code: loaded
+    monkeypatch.setattr(persistence, "model_code", lambda: "another-release")
+    monkeypatch.setattr(persistence, "_FITS", type(persistence._FITS)())
+    again = fit_or_load(store, "main", "nb", 0)
+    latest = store.latest_world_model("main", "nb", 0)
+    assert latest.id != saved[0] and latest.watermark == saved[1] and latest.meta["code"] == "another-release"
+    assert np.array_equal(again.predict_proba(candidates), first.predict_proba(candidates))
+
+
+def test_the_model_code_digest_covers_the_models_package():
+    from llcps.models import persistence
+
+    code = persistence.model_code()
+    assert len(code) == 16 and int(code, 16) >= 0
+    assert persistence.model_code() == code  # one value per process
+
+
 def test_empty_branch_fits_the_prior(store, candidates):
     model = fit_or_load(store, "main", "nb", 0)
     assert np.array_equal(model.predict_proba(candidates), np.full((len(candidates), 6), 0.5))
@@ -86,7 +111,8 @@ def test_a_child_branch_reuses_its_parents_model_at_the_fork(store):
 def test_a_tampered_stored_model_is_refitted_not_executed(store, candidates, caplog):
     add_toy_trials(store, 60, seed=1)
     honest = fit_or_load(store, "main", "nb", 0)
-    artifact, meta = honest.to_artifact()
+    artifact = honest.to_artifact()[0]
+    meta = store.latest_world_model("main", "nb", 0).meta  # current in every respect but its bytes
     watermark = store.max_visible_trial_id("main")
     store.save_world_model(
         branch="main", name="nb", seed=0, watermark=watermark, artifact=b"\x80\x04cos\nsystem\n", meta=meta

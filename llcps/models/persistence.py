@@ -3,9 +3,13 @@
 A stored model carries its *watermark*, the largest trial id its branch could see
 when it was fitted. A branch's visible trials only grow (new trials get larger ids),
 so a stored model whose watermark equals the branch's current one was fitted on
-exactly today's training set and is loaded instead of refitted. Artifacts load
-without executing anything (see :mod:`llcps.models.base`); one that fails to load
-is refitted and replaced, with a warning.
+exactly today's training set and is loaded instead of refitted, if the same model
+code fitted it: a stored model also carries :func:`model_code`, a digest of the
+source of :mod:`llcps.models`, and one fitted by other code (an older release, a
+changed encoder or learner) is refitted and replaced, so that what a model predicts
+never depends on when its store was made. Artifacts load without executing anything
+(see :mod:`llcps.models.base`); one that fails to load is refitted and replaced, with
+a warning.
 
 Within one process, fits are also remembered by the content of their training set
 (:func:`training_digest`): a process that solves many episodes on copies of the
@@ -18,12 +22,14 @@ model a fit would give, and it is stored on the branch all the same.
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import logging
 import struct
 import time
 from collections import OrderedDict
 from dataclasses import asdict, dataclass
+from importlib import resources
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 from llcps.domain import StoredFeatures, TrialChange, TrialRecord, check_seed
@@ -43,6 +49,20 @@ _FITS: OrderedDict[tuple[str, int, str, bool], WorldModel] = OrderedDict()
 FIT_MEMO_SIZE = 8
 #: Between a trial's entity names in its digest (a control character, in no name).
 _SEPARATOR = "\x1f"
+
+
+@functools.cache
+def model_code() -> str:
+    """A digest of the source of every module of :mod:`llcps.models` (what a fit runs).
+
+    Any change to that source makes stored models stale, comments included: a refit
+    costs a fit, while a stale model would make predictions depend on the store's history.
+    """
+    digest = hashlib.sha256()
+    for module in sorted(resources.files("llcps.models").iterdir(), key=lambda f: f.name):
+        if module.name.endswith(".py"):
+            digest.update(module.name.encode() + b"\0" + module.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
 
 
 def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> str:
@@ -123,8 +143,9 @@ def fit_or_load(
 
     Returns:
         The stored model when it is current (fitted on today's trials and on as many
-        known changes as the branch has: a backfill makes it stale) and has the goal
-        head if asked for, else a fresh fit (which is stored).
+        known changes as the branch has: a backfill makes it stale; by today's model
+        code, :func:`model_code`) and has the goal head if asked for, else a fresh fit
+        (which is stored).
 
     Raises:
         UnknownNameError: ``name`` is not a registered world model.
@@ -142,6 +163,7 @@ def fit_or_load(
         stored is not None
         and stored.watermark == watermark
         and stored.meta.get("changes", known) == known
+        and stored.meta.get("code") == model_code()
         and (stored.meta.get("goal", True) is True or not goal)
     ):
         try:
@@ -155,6 +177,7 @@ def fit_or_load(
     model = _fit(entry, seed, records, changes, goal)
     artifact, meta = model.to_artifact()
     meta["changes"] = known
+    meta["code"] = model_code()
     store.save_world_model(branch=branch, name=name, seed=seed, watermark=watermark, artifact=artifact, meta=meta)
     return model
 
