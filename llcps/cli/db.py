@@ -83,12 +83,11 @@ def _print_branch(info: BranchInfo, as_json: bool, text: str) -> None:
     message(text)
 
 
-def _report_removal(change: BranchChange, *, done: bool, as_json: bool) -> None:
-    """Report a removal, or (not ``done``) what it would do: a dry run changed nothing
-    (exit 0: a dry run is not an error)."""
+def _report_removal(change: BranchChange, as_json: bool) -> None:
+    """Report a removal, or what a dry run of it would do (exit 0: a dry run is not an error)."""
     if as_json:
         print_json(change.as_json())
-    message(change.summary if done else f"{change.summary}; nothing changed (rerun with --yes to do it)")
+    message(f"{change.summary}; nothing changed (rerun with --yes to do it)" if change.dry_run else change.summary)
 
 
 def _fork_point(value: Optional[str]) -> Optional[str]:
@@ -233,7 +232,7 @@ def reset_cli(
         name = store.resolve_branch(selected_branch(ctx)).name
         target = str(to.value)  # type: ignore[attr-defined]
         change = store.reset_branch(name, to=target, dry_run=not yes)
-    _report_removal(change, done=yes, as_json=as_json)
+    _report_removal(change, as_json)
 
 
 @app.command(
@@ -247,7 +246,7 @@ def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_js
     """Delete a branch and everything it owns (not main, the current branch, or a parent)."""
     with open_store(ctx) as store:
         change = store.delete_branch(name, dry_run=not yes)
-    _report_removal(change, done=yes, as_json=as_json)
+    _report_removal(change, as_json)
 
 
 @app.command(
