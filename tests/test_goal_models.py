@@ -19,7 +19,7 @@ from llcps.cps.candidates import enumerate_candidates
 from llcps.domain import ACTIONS, Body, ControllerParams, EntityFeatures, Outcome, TrialChange, TrialRecord, TrialSpec, fluent
 from llcps.errors import LlcpsError
 from llcps.models import WORLD_MODELS, load_world_model, make_world_model
-from llcps.models.goal import joint_probability
+from llcps.models.goal import family_scale, joint_probability
 from llcps.models.measures import rank
 from llcps.models.relational import (
     GOAL_FEATURES,
@@ -375,6 +375,20 @@ def test_only_trials_from_the_ranked_start_state_are_episode_evidence(toy, query
     only_elsewhere = make_world_model(name, 0).fit(records, changes)
     only_elsewhere.update(list(records) + elsewhere, {**changes, **elsewhere_changes}, start=1)
     assert np.allclose(only_elsewhere.predict_goal(query)[:, 0], p)
+
+
+@pytest.mark.parametrize("mean_probability", [0.02, 0.1, 0.25, 0.6])
+def test_a_family_s_scale_falls_with_failures_but_never_rules_it_out(mean_probability):
+    """No evidence leaves a family as the learner said; each failure lowers it; a
+    success raises it. The share of a working family's members that change the atom is
+    unknown, so a family whose working members are rare is lowered polynomially in its
+    failures, not geometrically: after 40 failures it keeps more than a tenth of what it
+    had after 20 (a fixed share of one half would keep 2^-20 of it)."""
+    assert family_scale(0, 0.0, mean_probability) == pytest.approx(1.0)
+    scales = [family_scale(n, 0.0, mean_probability) for n in range(0, 41)]
+    assert all(b < a for a, b in zip(scales, scales[1:]))
+    assert scales[40] / scales[20] > 0.1
+    assert family_scale(3, 1.0, mean_probability) > 1.0
 
 
 def test_families_are_action_predicate_sign_roles_and_each_setting(query):

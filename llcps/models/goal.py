@@ -20,16 +20,23 @@ independent draws: either the family can work in this scene or it cannot. That h
 from one start state only, so the agent names it (``start``: the failure snapshot) and
 only trials that started there are evidence; the plan steps K runs from the state a
 trial left behind wait for the next fit. Each family
-is therefore a two-way mixture: it works here with belief ``b``, and then a share
-:data:`FAMILY_SUCCESS` of its members changes the atom; or it does not, and none does.
-The learner's mean probability ``p`` over the family's tried members sets the prior
-belief ``b = min(p / FAMILY_SUCCESS, MAX_BELIEF)`` (never more than :data:`MAX_BELIEF`:
-the scene is novel, and the learner may not see why a family that works elsewhere
-fails here). After ``n`` failures and no success the belief is
-``b (1 - s)^n / (b (1 - s)^n + 1 - b)``, a success makes it 1, and every member's
-probability is scaled by posterior over prior belief. With the defaults every failure
-roughly halves a family's probability whatever the learner said, and halves it again
-for each setting (orientation, magnitude, rate) a member shares with the failure:
+is therefore a two-way mixture: it works here with belief ``b``, and then some share
+``s`` of its members changes the atom; or it does not, and none does. The share is not
+known: it is Beta-distributed with mean :data:`FAMILY_SUCCESS` and strength
+:data:`FAMILY_SHARE_STRENGTH` (uniform with the defaults), since in one scene every
+stroke of a family may work and in another only one setting in thirty-six. The
+learner's mean probability ``p`` over the family's tried members sets the prior belief
+``b = min(p / FAMILY_SUCCESS, MAX_BELIEF)`` (never more than :data:`MAX_BELIEF`: the
+scene is novel, and the learner may not see why a family that works elsewhere fails
+here). After ``n`` failures and no success the belief is
+``b m / (b m + 1 - b)`` with ``m = E[(1 - s)^n]``, and the share's mean falls to
+``(a + k) / (a + c + n)`` after ``k`` successes (``a``: the prior's first parameter,
+``c`` the second); a success makes the belief 1. Every member's probability is scaled
+by the posterior chance that a further member works over the prior one
+(:func:`family_scale`). With the defaults, for a family the learner gave 0.25, the first failure lowers its
+probability to 0.44 of that, the fifth to 0.08 and the fortieth to 0.002 (a fixed share
+of one half: 0.67, 0.06 and 2e-12), and each setting
+(orientation, magnitude, rate) a member shares with a failure lowers it again:
 exploration moves away from what failed in every setting, then in kind; and a motion
 that failed drops on the action's other bodies too, so one stroke is not tried on every
 pair of bodies in turn before any other. (Without the
@@ -57,6 +64,7 @@ the atoms are treated as independent given the candidate (:func:`joint_probabili
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from typing import Any, Callable, ClassVar, Mapping, Sequence
 
@@ -81,8 +89,10 @@ from llcps.models.relational import (
     stratum_of,
 )
 
-#: Share of a family's members that change the atom when the family works in a scene.
+#: Expected share of a family's members that change the atom when the family works in a scene.
 FAMILY_SUCCESS = 0.5
+#: Strength (alpha + beta) of the Beta prior over that share: 2 with a mean of 0.5 is uniform.
+FAMILY_SHARE_STRENGTH = 2.0
 #: Most belief, before any evidence, that a family works in a novel scene.
 MAX_BELIEF = 0.5
 #: Share of the base rate of its kind of change mixed into every learned probability:
@@ -263,13 +273,26 @@ class Standardizer:
 
 def family_scale(tried: int, changed: float, mean_probability: float) -> float:
     """How much a family's probabilities change after ``tried`` members of it, ``changed``
-    of which changed the atom as asked (see the module docstring): posterior over prior
-    belief that the family works here."""
+    of which changed the atom as asked (see the module docstring): the posterior
+    probability that a further member changes it, over the prior one.
+
+    A family works here with belief ``b``; if it does, the share of its members that
+    change the atom is unknown, Beta-distributed with mean :data:`FAMILY_SUCCESS` and
+    strength :data:`FAMILY_SHARE_STRENGTH`. A member's probability is ``b`` times the
+    expected share; failures lower both.
+    """
     prior = min(mean_probability / FAMILY_SUCCESS, MAX_BELIEF)
+    works = FAMILY_SUCCESS * FAMILY_SHARE_STRENGTH  # Beta(works, fails) over the share
+    fails = FAMILY_SHARE_STRENGTH - works
+    share = (works + changed) / (FAMILY_SHARE_STRENGTH + tried)
     if changed > 0:
-        return 1.0 / prior
-    stays = prior * (1.0 - FAMILY_SUCCESS) ** tried
-    return (stays / (stays + 1.0 - prior)) / prior
+        belief = 1.0
+    else:  # E[(1 - share)^tried] under the prior: the chance a working family failed every time
+        stays = prior * math.exp(
+            math.lgamma(fails + tried) - math.lgamma(fails) + math.lgamma(FAMILY_SHARE_STRENGTH) - math.lgamma(FAMILY_SHARE_STRENGTH + tried)
+        )
+        belief = stays / (stays + 1.0 - prior)
+    return (belief * share) / (prior * FAMILY_SUCCESS)
 
 
 def joint_probability(proba: np.ndarray) -> np.ndarray:
