@@ -8,7 +8,7 @@ import math
 import pytest
 from typer.testing import CliRunner
 
-from llcps.bench import GROUPS, Figure, figure, run_bench, unsteady
+from llcps.bench import GROUPS, Figure, figure, judged, run_bench, unsteady
 from llcps.cli.main import app
 from llcps.errors import UnknownNameError
 
@@ -60,3 +60,25 @@ def test_unsteady_names_a_drifting_bound_and_starved_workers() -> None:
     assert unsteady([figure("exploration.control_loop_drift", -0.06, "ratio")])  # slower after counts too
     episode = unsteady([figure("exploration.episode_drift", -0.12, "ratio"), figure("exploration.episode_drift", 0.01, "ratio")])
     assert len(episode) == 1 and "-12.0%" in episode[0]
+
+
+def test_an_unsteady_group_s_targets_are_neither_met_nor_missed() -> None:
+    """A ratio taken while the machine's speed moved is uncertain by as much: the target
+    checks of that group are withdrawn, the other groups' stand."""
+    figures = [
+        figure("exploration.control_loop_drift", -0.39, "ratio"),
+        figure("exploration.efficiency", 0.95, "ratio", at_least=0.8),
+        figure("exploration.sim_step_rate", 7000.0, "steps/s cpu"),
+        figure("scaling.workers2.core_share", 0.97, "ratio"),
+        figure("scaling.speedup", 1.5, "ratio", at_least=1.7),
+        figure("store.visible_load", 0.9, "s wall", at_most=1),
+    ]
+    out = {f.name: f for f in judged(figures)}
+    assert out["exploration.efficiency"].met is None and "not judged" in out["exploration.efficiency"].note
+    assert out["exploration.efficiency"].value == 0.95 and out["exploration.efficiency"].target == ">= 0.8"
+    assert out["exploration.sim_step_rate"] == figures[2]
+    assert out["scaling.speedup"].met is False and out["store.visible_load"].met is True
+    steady = [figure("exploration.control_loop_drift", 0.01, "ratio"), figure("exploration.efficiency", 0.75, "ratio", at_least=0.8)]
+    assert judged(steady) == steady
+    starved = judged([figure("scaling.workers2.core_share", 0.6, "ratio"), figure("scaling.speedup", 1.5, "ratio", at_least=1.7)])
+    assert starved[1].met is None

@@ -43,7 +43,7 @@ def bench_cli(
     Rates are per second of this process's CPU time (stable on a busy machine) and of
     wall time. Temporary stores only: --db is not touched. Exit code 0 even when a
     target is missed (the `met` column says which). A warning says when the machine's
-    speed changed while the figures were taken.
+    speed changed while the figures were taken; that group's targets are then not judged.
     """
     groups = [str(g.value) for g in group] if group else None  # type: ignore[attr-defined]
     with progress_display("bench", "loading") as progress:
@@ -60,7 +60,7 @@ def bench_cli(
 
 
 def _row(f: Figure) -> tuple[str, str, str, str, str]:
-    met = "" if f.met is None else ("yes" if f.met else "NO")
+    met = ("not judged" if f.target else "") if f.met is None else ("yes" if f.met else "NO")
     return f.name, _num(f.value), f.unit, f.target or "", met
 
 
