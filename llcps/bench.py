@@ -690,7 +690,7 @@ def judged(figures: Sequence[Figure]) -> list[Figure]:
 
     A ratio taken while the machine's speed moved by more than the warning's threshold
     is uncertain by as much, so it can neither meet nor miss a target: a bound that
-    fell by a third during the episodes once gave an efficiency of 0.95.
+    fell by 39 % during the episodes once gave an efficiency of 0.95.
     """
     shaky = {group for group, _ in _unsteadiness(figures)}
     return [
