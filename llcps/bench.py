@@ -655,18 +655,19 @@ def _unsteadiness(figures: Sequence[Figure]) -> Iterator[tuple[str, str]]:
     machine's speed did not hold while they were taken (see :func:`unsteady`)."""
     for f in figures:
         group = f.name.split(".", 1)[0]
-        if f.name.endswith(".control_loop_drift") and abs(f.value) > DRIFT_WARNING:
+        where, sign = f.name.rsplit(".", 1)  # e.g. "scaling.workers2", "core_share"
+        if sign == "control_loop_drift" and abs(f.value) > DRIFT_WARNING:
             yield group, (
-                f"the control-loop bound of {f.name.rsplit('.', 1)[0]} moved by {f.value:+.1%} between before and after its episodes:"
+                f"the control-loop bound of {where} moved by {f.value:+.1%} between before and after its episodes:"
                 f" its ratios are uncertain by as much; run it again on a quieter machine"
             )
-        elif f.name.endswith(".episode_drift") and abs(f.value) > DRIFT_WARNING:
+        elif sign == "episode_drift" and abs(f.value) > DRIFT_WARNING:
             yield group, (
-                f"the second run of {f.name.rsplit('.', 1)[0]}'s episode took {f.value:+.1%} the CPU of the first: the machine's speed"
+                f"the second run of {where}'s episode took {f.value:+.1%} the CPU of the first: the machine's speed"
                 f" changed while it ran, and its ratios are uncertain by as much; run it again on a quieter machine"
             )
-        elif f.name.endswith(".core_share") and f.value < CORE_SHARE_WARNING:
-            yield group, f"{f.name.rsplit('.', 1)[0]} got {f.value:.2f} of its cores (other jobs ran beside it): its wall times and the speed-up are low"
+        elif sign == "core_share" and f.value < CORE_SHARE_WARNING:
+            yield group, f"{where} got {f.value:.2f} of its cores (other jobs ran beside it): its wall times and the speed-up are low"
 
 
 def unsteady(figures: Sequence[Figure]) -> list[str]:
