@@ -6,7 +6,9 @@ world model trained on every trial it has ever executed, until it resolves the
 novelty and learns a new operator.
 """
 
-__version__ = "0.1.0"
+from llcps._version import __version__
+
+__all__ = ["__version__", "open"]
 
 
 def open(url_or_path="llcps.db", *, create=False):  # noqa: A001 - the API's entry point

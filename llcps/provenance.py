@@ -18,7 +18,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, Mapping
 
-import llcps
+from llcps._version import __version__
 
 #: Distribution name of each library whose version a run records, by record field.
 LIBRARIES: Mapping[str, str] = {
@@ -89,7 +89,7 @@ def cpu_count() -> int:
 
 def source_tree() -> Path | None:
     """The git checkout llcps runs from, or None (an installed wheel has none)."""
-    root = Path(llcps.__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parent.parent
     if (root / ".git").exists() and (root / "pyproject.toml").is_file():
         return root
     return None
@@ -127,7 +127,7 @@ def current() -> Provenance:
     """The provenance of this process (computed once)."""
     commit, dirty = git_state()
     return Provenance(
-        llcps_version=llcps.__version__,
+        llcps_version=__version__,
         git_commit=commit,
         git_dirty=dirty,
         python_version=platform.python_version(),
