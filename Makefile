@@ -34,9 +34,12 @@ test: lint
 	bash .ci/services.sh
 	tests/services.sh $(BIN)/python -m pytest -n 2 --dist loadfile --durations=25
 
-# Unused imports and variables, undefined names, syntax errors (pyproject.toml [tool.ruff]).
+# Unused imports and variables, undefined names, syntax errors (pyproject.toml [tool.ruff]);
+# then the import contract (pyproject.toml [tool.importlinter]): layers import downward only,
+# and no two modules of a package import each other in a loop.
 lint: setup
 	$(BIN)/ruff check llcps tests migrations
+	$(BIN)/lint-imports --no-cache
 
 # The inner loop: everything but the slow tests (sweeps, lifelong sequences in physics).
 test-fast: setup
