@@ -61,23 +61,39 @@ Progress = Callable[[str], None]
 
 @dataclass(frozen=True)
 class Figure:
-    """One measured figure.
+    """One measured figure, named by its parts: ``group[.subject][.sign]``.
 
     Attributes:
-        name: dotted name, group first (``store.commits_per_s``).
+        group: the group that measured it (one of :data:`GROUPS`).
+        sign: which quantity it is (``core_share``, ``step_rate``); empty for a
+            subject's own figure (``scaling.workers1``: the grid's wall time).
         value: the measurement (finite).
         unit: unit of ``value``.
         target: the goal, as text (``">= 1000"``), or None.
         met: whether ``value`` meets ``target`` (None without a target).
         note: what was measured, briefly.
+        subject: what in the group it measures (``workers2``, ``scenario1``,
+            ``nb.10000``); empty for the group as a whole.
     """
 
-    name: str
+    group: str
+    sign: str
     value: float
     unit: str
     target: str | None = None
     met: bool | None = None
     note: str = ""
+    subject: str = ""
+
+    @property
+    def where(self) -> str:
+        """The group and the subject (``scaling.workers2``): what the figure is about."""
+        return f"{self.group}.{self.subject}" if self.subject else self.group
+
+    @property
+    def name(self) -> str:
+        """The dotted name, group first (``scaling.workers2.core_share``)."""
+        return f"{self.where}.{self.sign}" if self.sign else self.where
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -90,14 +106,24 @@ class Figure:
         }
 
 
-def figure(name: str, value: float, unit: str, *, at_least: float | None = None, at_most: float | None = None, note: str = "") -> Figure:
+def figure(
+    group: str,
+    sign: str,
+    value: float,
+    unit: str,
+    *,
+    subject: str = "",
+    at_least: float | None = None,
+    at_most: float | None = None,
+    note: str = "",
+) -> Figure:
     """A figure, with its target check when it has one."""
     value = float(value)
     if at_least is not None:
-        return Figure(name, value, unit, f">= {at_least:g}", value >= at_least, note)
+        return Figure(group, sign, value, unit, f">= {at_least:g}", value >= at_least, note, subject)
     if at_most is not None:
-        return Figure(name, value, unit, f"<= {at_most:g}", value <= at_most, note)
-    return Figure(name, value, unit, note=note)
+        return Figure(group, sign, value, unit, f"<= {at_most:g}", value <= at_most, note, subject)
+    return Figure(group, sign, value, unit, note=note, subject=subject)
 
 
 class _Clock:
@@ -148,21 +174,24 @@ def bench_physics(quick: bool = False, progress: Progress | None = None) -> list
     from llcps.sim.motion import control_loop_rate
 
     steps = 600 if quick else 2400
+    p = "physics"
     figures = []
     for name in SCENARIOS:
         _say(progress, f"physics: {name}")
         world = _settled_world(name)
         try:
             figures += [
-                figure(f"physics.{name}.step_rate", _raw_step_rate(world, steps, time.process_time), "steps/s cpu", note="world.step(), motors holding"),
-                figure(f"physics.{name}.step_rate_wall", _raw_step_rate(world, steps, time.perf_counter), "steps/s wall"),
+                figure(p, "step_rate", _raw_step_rate(world, steps, time.process_time), "steps/s cpu", subject=name, note="world.step(), motors holding"),
+                figure(p, "step_rate_wall", _raw_step_rate(world, steps, time.perf_counter), "steps/s wall", subject=name),
                 figure(
-                    f"physics.{name}.control_loop",
+                    p,
+                    "control_loop",
                     control_loop_rate(world, steps=steps, clock=time.process_time),
                     "steps/s cpu",
+                    subject=name,
                     note="IK + motor command + step: the bound of a moving arm",
                 ),
-                figure(f"physics.{name}.control_loop_wall", control_loop_rate(world, steps=steps), "steps/s wall"),
+                figure(p, "control_loop_wall", control_loop_rate(world, steps=steps), "steps/s wall", subject=name),
             ]
         finally:
             world.close()
@@ -305,40 +334,43 @@ def bench_exploration(quick: bool = False, progress: Progress | None = None) -> 
     loop = physics["cpu"] + control["cpu"]
     p = "exploration"
     return [
-        figure(f"{p}.sim_steps", run.sim_steps, "steps", note=f"{run.status}: {run.exploration_trials} exploration + {run.trials - run.exploration_trials} plan trials"),
-        figure(f"{p}.sim_step_rate", rate_cpu, "steps/s cpu"),
-        figure(f"{p}.sim_step_rate_wall", rate_wall, "steps/s wall"),
-        figure(f"{p}.trial_rate", run.trials / run.cpu_seconds, "trials/s cpu"),
-        figure(f"{p}.trial_rate_wall", run.trials / run.wall_seconds, "trials/s wall"),
-        figure(f"{p}.control_loop", bound_cpu, "steps/s cpu", note="the bound: control-loop rate of the same scene, arm in free air (mean of before and after the episodes)"),
-        figure(f"{p}.control_loop_before", before_cpu, "steps/s cpu"),
-        figure(f"{p}.control_loop_after", after_cpu, "steps/s cpu"),
+        figure(p, "sim_steps", run.sim_steps, "steps", note=f"{run.status}: {run.exploration_trials} exploration + {run.trials - run.exploration_trials} plan trials"),
+        figure(p, "sim_step_rate", rate_cpu, "steps/s cpu"),
+        figure(p, "sim_step_rate_wall", rate_wall, "steps/s wall"),
+        figure(p, "trial_rate", run.trials / run.cpu_seconds, "trials/s cpu"),
+        figure(p, "trial_rate_wall", run.trials / run.wall_seconds, "trials/s wall"),
+        figure(p, "control_loop", bound_cpu, "steps/s cpu", note="the bound: control-loop rate of the same scene, arm in free air (mean of before and after the episodes)"),
+        figure(p, "control_loop_before", before_cpu, "steps/s cpu"),
+        figure(p, "control_loop_after", after_cpu, "steps/s cpu"),
         figure(
-            f"{p}.control_loop_drift",
+            p,
+            "control_loop_drift",
             after_cpu / before_cpu - 1,
             "ratio",
             note=f"the bound after / before, minus 1: beyond +-{DRIFT_WARNING:.0%} the machine's speed changed during the group, and its ratios are uncertain by as much",
         ),
         figure(
-            f"{p}.episode_drift",
+            p,
+            "episode_drift",
             split.cpu_seconds / run.cpu_seconds - 1,
             "ratio",
             note=f"CPU of the instrumented run of the episode / the first, minus 1: the same episode twice, a few percent apart on a quiet machine; beyond +-{DRIFT_WARNING:.0%} the machine's speed changed between them",
         ),
-        figure(f"{p}.load_average", load, "runnable", note=f"1-minute load average before the group, on {os.cpu_count()} CPUs"),
-        figure(f"{p}.efficiency", rate_cpu / bound_cpu, "ratio", at_least=0.8, note="achieved steps/s / control-loop rate (CPU time)"),
-        figure(f"{p}.efficiency_wall", rate_wall / bound_wall, "ratio", note="the same on the wall clock (disturbed by other jobs)"),
-        figure(f"{p}.process_startup", startup, "s cpu", note="once per process, not charged above: model library import, K's PDDL parser, the shipped scenario files, the physics engine's connection"),
-        figure(f"{p}.step_cost", 1e6 * physics["cpu"] / max(physics["calls"], 1), "us cpu", note="per physics step in the episode, contacts included"),
-        figure(f"{p}.control_loop_cost", 1e6 / bound_cpu, "us cpu", note="per control-loop step in free air (IK + motors + step)"),
-        figure(f"{p}.control_loop_share", loop / split.cpu_seconds, "ratio", note="episode CPU in physics steps, IK and motor commands (instrumented run)"),
+        figure(p, "load_average", load, "runnable", note=f"1-minute load average before the group, on {os.cpu_count()} CPUs"),
+        figure(p, "efficiency", rate_cpu / bound_cpu, "ratio", at_least=0.8, note="achieved steps/s / control-loop rate (CPU time)"),
+        figure(p, "efficiency_wall", rate_wall / bound_wall, "ratio", note="the same on the wall clock (disturbed by other jobs)"),
+        figure(p, "process_startup", startup, "s cpu", note="once per process, not charged above: model library import, K's PDDL parser, the shipped scenario files, the physics engine's connection"),
+        figure(p, "step_cost", 1e6 * physics["cpu"] / max(physics["calls"], 1), "us cpu", note="per physics step in the episode, contacts included"),
+        figure(p, "control_loop_cost", 1e6 / bound_cpu, "us cpu", note="per control-loop step in free air (IK + motors + step)"),
+        figure(p, "control_loop_share", loop / split.cpu_seconds, "ratio", note="episode CPU in physics steps, IK and motor commands (instrumented run)"),
         figure(
-            f"{p}.efficiency_ceiling",
+            p,
+            "efficiency_ceiling",
             (split.sim_steps / loop) / bound_cpu,
             "ratio",
             note="efficiency with no agent overhead: the control loop's rate in the scene (contacts) / in free air",
         ),
-        figure(f"{p}.agent_overhead", (split.cpu_seconds - loop) / split.cpu_seconds, "ratio", note="episode CPU outside the control loop: restores, snapshots, perception, models, store, planner"),
+        figure(p, "agent_overhead", (split.cpu_seconds - loop) / split.cpu_seconds, "ratio", note="episode CPU outside the control loop: restores, snapshots, perception, models, store, planner"),
     ]
 
 
@@ -372,18 +404,18 @@ def bench_models(quick: bool = False, progress: Progress | None = None) -> list[
         repeats = 1 if quick or name in SLOW_MODELS else 3
         what = _update_note(name)
         for row in time_world_models([name], sizes, repeats=repeats):
-            p = f"models.{name}.{row.n_trials}"
+            p, subject = "models", f"{name}.{row.n_trials}"
             target = UPDATE_TARGETS.get(name) if row.n_trials == 10_000 else None
             figures += [
-                figure(f"{p}.fit", row.fit * 1e3, "ms"),
-                figure(f"{p}.update", row.update * 1e3, "ms", at_most=None if target is None else target * 1e3, note=what),
-                figure(f"{p}.predict", row.predict * 1e3, "ms", note="1,000 candidates"),
+                figure(p, "fit", row.fit * 1e3, "ms", subject=subject),
+                figure(p, "update", row.update * 1e3, "ms", subject=subject, at_most=None if target is None else target * 1e3, note=what),
+                figure(p, "predict", row.predict * 1e3, "ms", subject=subject, note="1,000 candidates"),
             ]
     # CPU time where it means the model's own work: naive Bayes runs on one thread (torch
     # uses several, so its CPU time would count each of them).
     _say(progress, "models: nb update at 10,000 trials in CPU time")
     (row,) = time_world_models(["nb"], (10_000,), repeats=5, clock=time.process_time)
-    figures.append(figure("models.nb.10000.update_cpu", row.update * 1e3, "ms cpu", note="the same update in CPU time, steady on a busy machine"))
+    figures.append(figure("models", "update_cpu", row.update * 1e3, "ms cpu", subject="nb.10000", note="the same update in CPU time, steady on a busy machine"))
     return figures
 
 
@@ -404,7 +436,7 @@ def bench_ranking(quick: bool = False, progress: Progress | None = None) -> list
 
     _say(progress, "ranking: 1,000 candidates")
     seconds = time_ranking(1000, repeats=3 if quick else 10)
-    return [figure("ranking.all_measures_1000", seconds * 1e3, "ms", at_most=50, note=f"all {len(MEASURES)} measures")]
+    return [figure("ranking", "all_measures_1000", seconds * 1e3, "ms", at_most=50, note=f"all {len(MEASURES)} measures")]
 
 
 # --------------------------------------------------------------------------- store
@@ -534,15 +566,15 @@ def bench_store(quick: bool = False, progress: Progress | None = None) -> list[F
         _, batched, shared, _ = _deep_branch(Path(tmp) / "shared.db", visible, unique=False, repeats=repeats)
     p = "store"
     return [
-        figure(f"{p}.commits_per_s", commits / single.wall, "trials/s wall", at_least=1000, note="add_trial one at a time, each durable on return"),
-        figure(f"{p}.batched_inserts_per_s", batched, "trials/s wall", note="add_trials, 5,000 per transaction (trials without changes)"),
-        figure(f"{p}.visible_trials", seen, "trials", note="seen by a branch 3 levels deep"),
-        figure(f"{p}.visible_load", min(c.wall for c in unique), "s wall", at_most=target, note="every trial's features distinct (pretraining)"),
-        figure(f"{p}.visible_load_cpu", min(c.cpu for c in unique), "s cpu"),
-        figure(f"{p}.visible_load_shared", min(c.wall for c in shared), "s wall", note="features repeated (exploration in one scene)"),
-        figure(f"{p}.visible_load_shared_cpu", min(c.cpu for c in shared), "s cpu"),
-        figure(f"{p}.visible_changes_load", min(c.wall for c in changes), "s wall", note="the same trials' symbolic changes, each in a scene of its own: what a fit reads beside them"),
-        figure(f"{p}.visible_changes_load_cpu", min(c.cpu for c in changes), "s cpu"),
+        figure(p, "commits_per_s", commits / single.wall, "trials/s wall", at_least=1000, note="add_trial one at a time, each durable on return"),
+        figure(p, "batched_inserts_per_s", batched, "trials/s wall", note="add_trials, 5,000 per transaction (trials without changes)"),
+        figure(p, "visible_trials", seen, "trials", note="seen by a branch 3 levels deep"),
+        figure(p, "visible_load", min(c.wall for c in unique), "s wall", at_most=target, note="every trial's features distinct (pretraining)"),
+        figure(p, "visible_load_cpu", min(c.cpu for c in unique), "s cpu"),
+        figure(p, "visible_load_shared", min(c.wall for c in shared), "s wall", note="features repeated (exploration in one scene)"),
+        figure(p, "visible_load_shared_cpu", min(c.cpu for c in shared), "s cpu"),
+        figure(p, "visible_changes_load", min(c.wall for c in changes), "s wall", note="the same trials' symbolic changes, each in a scene of its own: what a fit reads beside them"),
+        figure(p, "visible_changes_load_cpu", min(c.cpu for c in changes), "s cpu"),
     ]
 
 
@@ -598,23 +630,24 @@ def bench_scaling(quick: bool = False, progress: Progress | None = None) -> list
             runs[workers, cache] = run
     figures = []
     for (workers, cache), run in runs.items():
-        p = f"scaling.workers{workers}" + ("" if cache else ".no_cache")
+        p, subject = "scaling", f"workers{workers}" + ("" if cache else ".no_cache")
         figures += [
-            figure(p, run.wall, "s wall", note=f"{SCALING_PRESET} preset grid"),
-            figure(f"{p}.task_seconds", run.task_seconds, "s wall", note="the tasks' own wall seconds, summed"),
-            figure(f"{p}.cpu", run.cpu, "s cpu", note="this process and its workers"),
-            figure(f"{p}.core_share", run.cpu / (run.wall * workers), "ratio", note="CPU seconds per worker per wall second: below 1, the cores were busy elsewhere"),
+            figure(p, "", run.wall, "s wall", subject=subject, note=f"{SCALING_PRESET} preset grid"),
+            figure(p, "task_seconds", run.task_seconds, "s wall", subject=subject, note="the tasks' own wall seconds, summed"),
+            figure(p, "cpu", run.cpu, "s cpu", subject=subject, note="this process and its workers"),
+            figure(p, "core_share", run.cpu / (run.wall * workers), "ratio", subject=subject, note="CPU seconds per worker per wall second: below 1, the cores were busy elsewhere"),
         ]
     return figures + [
-        figure("scaling.speedup", runs[1, True].wall / runs[2, True].wall, "ratio", at_least=1.7, note="1-worker / 2-worker wall time"),
+        figure("scaling", "speedup", runs[1, True].wall / runs[2, True].wall, "ratio", at_least=1.7, note="1-worker / 2-worker wall time"),
         figure(
-            "scaling.speedup_no_cache",
+            "scaling",
+            "speedup_no_cache",
             runs[1, False].wall / runs[2, False].wall,
             "ratio",
             note="the same without the physics cache: one worker alone gets the cache hits of a twin run before",
         ),
-        figure("scaling.load_average", load_before, "runnable", note=f"1-minute load average before, on {os.cpu_count()} CPUs"),
-        figure("scaling.load_average_after", os.getloadavg()[0], "runnable"),
+        figure("scaling", "load_average", load_before, "runnable", note=f"1-minute load average before, on {os.cpu_count()} CPUs"),
+        figure("scaling", "load_average_after", os.getloadavg()[0], "runnable"),
     ]
 
 
@@ -654,20 +687,18 @@ def _unsteadiness(figures: Sequence[Figure]) -> Iterator[tuple[str, str]]:
     """(group, what was not steady, in words) for each sign in ``figures`` that the
     machine's speed did not hold while they were taken (see :func:`unsteady`)."""
     for f in figures:
-        group = f.name.split(".", 1)[0]
-        where, sign = f.name.rsplit(".", 1)  # e.g. "scaling.workers2", "core_share"
-        if sign == "control_loop_drift" and abs(f.value) > DRIFT_WARNING:
-            yield group, (
-                f"the control-loop bound of {where} moved by {f.value:+.1%} between before and after its episodes:"
+        if f.sign == "control_loop_drift" and abs(f.value) > DRIFT_WARNING:
+            yield f.group, (
+                f"the control-loop bound of {f.where} moved by {f.value:+.1%} between before and after its episodes:"
                 f" its ratios are uncertain by as much; run it again on a quieter machine"
             )
-        elif sign == "episode_drift" and abs(f.value) > DRIFT_WARNING:
-            yield group, (
-                f"the second run of {where}'s episode took {f.value:+.1%} the CPU of the first: the machine's speed"
+        elif f.sign == "episode_drift" and abs(f.value) > DRIFT_WARNING:
+            yield f.group, (
+                f"the second run of {f.where}'s episode took {f.value:+.1%} the CPU of the first: the machine's speed"
                 f" changed while it ran, and its ratios are uncertain by as much; run it again on a quieter machine"
             )
-        elif sign == "core_share" and f.value < CORE_SHARE_WARNING:
-            yield group, f"{where} got {f.value:.2f} of its cores (other jobs ran beside it): its wall times and the speed-up are low"
+        elif f.sign == "core_share" and f.value < CORE_SHARE_WARNING:
+            yield f.group, f"{f.where} got {f.value:.2f} of its cores (other jobs ran beside it): its wall times and the speed-up are low"
 
 
 def unsteady(figures: Sequence[Figure]) -> list[str]:
@@ -696,7 +727,7 @@ def judged(figures: Sequence[Figure]) -> list[Figure]:
     shaky = {group for group, _ in _unsteadiness(figures)}
     return [
         replace(f, met=None, note=f"{f.note}; {NOT_JUDGED}" if f.note else NOT_JUDGED)
-        if f.target is not None and f.name.split(".", 1)[0] in shaky
+        if f.target is not None and f.group in shaky
         else f
         for f in figures
     ]
