@@ -1,18 +1,34 @@
 """The cost of fitting W: fit, update with one more trial and predict of every registered world model.
 
-``update`` is what the agent calls during exploration, and it is not the same work
-for every model: a refit on n + 1 trials for naive Bayes and the baselines, a fixed
-number of fine-tuning steps of the current weights for the network.
+Times are the minimum over repeats (the least disturbed run) on seeded synthetic
+trials (:mod:`llcps.models.synthetic`):
+
+- *fit*: a fresh model fitted on n trials (every trial encoded).
+- *update*: ``WorldModel.update`` with those n trials plus one new one, as the agent does
+  during exploration. What that costs depends on the model: naive Bayes and the
+  scikit-learn baselines refit on the n + 1 trials (known trials' rows reused); the
+  network fine-tunes its current weights for a fixed number of steps
+  (``NeuralNetworkModel.update_steps``), which is not a fit on n + 1 trials.
+- *predict*: predicted Omega for 1,000 candidates.
+
+``llcps bench --group models`` reports them as figures; ``python -m llcps.bench.models``
+prints the table docs/world_models.md reports.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
 from functools import partial
 
-from llcps.bench.core import Figure, Progress, figure, say
-from llcps.models.benchmark import time_world_models
-from llcps.models.registry import PAPER_MODELS, WORLD_MODELS
+from llcps.bench.core import Figure, Progress, best_of, figure, say
+from llcps.bench.ranking import time_ranking
+from llcps.models.measures import MEASURES
+from llcps.models.registry import PAPER_MODELS, WORLD_MODELS, make_world_model
+from llcps.models.synthetic import synthetic_trials
 
 GROUP = "models"
 _figure = partial(figure, GROUP)
@@ -25,6 +41,56 @@ UPDATE_TARGETS = {"nb": 0.020, "nn": 2.0}
 #: Models timed once per size in the full run: a fit takes about a second or more, so the
 #: minimum of three adds little but time.
 SLOW_MODELS = ("nn", "logreg", "forest")
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Seconds for one model at one training-set size."""
+
+    model: str
+    n_trials: int
+    fit: float
+    update: float
+    predict: float
+
+
+def time_world_models(
+    names: Sequence[str] = PAPER_MODELS,
+    sizes: Sequence[int] = MODEL_SIZES,
+    *,
+    seed: int = 0,
+    candidates: int = 1000,
+    repeats: int = 3,
+    clock: Callable[[], float] = time.perf_counter,
+) -> list[Timing]:
+    """Time fit / update / predict of each model at each training-set size.
+
+    ``clock``: wall time by default; ``time.process_time`` (CPU time of the process)
+    is steadier on a busy machine for single-threaded models.
+    """
+    pool = synthetic_trials(max(sizes) + 1, seed=seed)
+    queries = [r.model_input for r in synthetic_trials(candidates, seed=seed + 1)]
+    rows = []
+    for name in names:
+        for n in sizes:
+            fit = best_of(lambda: make_world_model(name, seed).fit(pool[:n]), repeats, clock)
+            model = make_world_model(name, seed)
+            growing = list(pool[:n])
+
+            def update() -> None:
+                model.fit(growing[:n])
+                growing.append(pool[n])
+                start = clock()
+                model.update(growing)
+                update_times.append(clock() - start)
+                growing.pop()
+
+            update_times: list[float] = []
+            for _ in range(repeats):
+                update()
+            predict = best_of(lambda: model.predict_proba(queries), repeats, clock)
+            rows.append(Timing(name, n, fit, min(update_times), predict))
+    return rows
 
 
 def run(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
@@ -65,4 +131,37 @@ def _update_note(name: str) -> str:
     return "update() with one more trial: a refit on n + 1 trials"
 
 
-__all__ = ["GROUP", "MODEL_SIZES", "MODEL_SIZES_QUICK", "SLOW_MODELS", "UPDATE_TARGETS", "run"]
+def markdown(rows: Sequence[Timing], ranking: float) -> str:
+    """The timing table as Markdown (milliseconds), with the ranking time below it."""
+    lines = [
+        "| model | trials | fit (ms) | update +1 trial (ms) | predict 1,000 (ms) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(f"| {r.model} | {r.n_trials:,} | {r.fit * 1e3:.1f} | {r.update * 1e3:.1f} | {r.predict * 1e3:.1f} |")
+    lines.append("")
+    lines.append(f"Ranking 1,000 candidates under all {len(MEASURES)} measures: {ranking * 1e3:.2f} ms.")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """``python -m llcps.bench.models``: the table of docs/world_models.md (or ``--json``)."""
+    parser = argparse.ArgumentParser(description="Fit, update, predict and ranking times of the world models on toy trials.")
+    parser.add_argument("--models", nargs="+", default=list(PAPER_MODELS))
+    parser.add_argument("--sizes", nargs="+", type=int, default=list(MODEL_SIZES))
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+    rows = time_world_models(args.models, args.sizes, repeats=args.repeats)
+    ranking = time_ranking()
+    if args.json:
+        print(json.dumps({"timings": [asdict(r) for r in rows], "ranking_seconds": ranking}, indent=2))
+    else:
+        print(markdown(rows, ranking))
+
+
+__all__ = ["GROUP", "MODEL_SIZES", "MODEL_SIZES_QUICK", "SLOW_MODELS", "UPDATE_TARGETS", "Timing", "markdown", "run", "time_world_models"]
+
+
+if __name__ == "__main__":
+    main()
