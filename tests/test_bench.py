@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 
 import pytest
 from typer.testing import CliRunner
 
 from llcps.bench import GROUPS, Figure, figure, judged, run_bench, unsteady
+from llcps.bench import scaling
+from llcps.bench.store import TrialPool
 from llcps.cli.main import app
 from llcps.errors import UnknownNameError
 
@@ -89,3 +93,30 @@ def test_an_unsteady_group_s_targets_are_neither_met_nor_missed() -> None:
     assert judged(steady) == steady
     starved = judged([figure("scaling", "core_share", 0.6, "ratio", subject="workers2"), figure("scaling", "speedup", 1.5, "ratio", at_least=1.7)])
     assert starved[1].met is None
+
+
+def test_naming_the_groups_loads_none_of_them() -> None:
+    """``llcps bench --help`` lists the groups without loading what they measure."""
+    code = "import sys, llcps.bench; print(sorted(m for m in sys.modules if m.startswith('llcps.bench.') and m != 'llcps.bench.core'))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_a_trial_pool_cycles_its_own_trials() -> None:
+    pool = TrialPool(size=5)
+    trials = list(pool.trials(7, "b"))
+    assert [t.seed for t in trials] == list(range(7)) and {t.branch for t in trials} == {"b"}
+    assert len({t.features[0].volume for t in trials}) == 7  # distinct, though the pool holds 5
+    assert trials[5].spec == trials[0].spec
+    assert len({c.bodies[0].lo for c in pool.changes(7)}) == 7
+    assert TrialPool(size=5).records is not pool.records
+
+
+def test_scaling_figures_keep_their_names(monkeypatch: pytest.MonkeyPatch) -> None:
+    def grid(workers: int, *, cache: bool = True) -> scaling.ExperimentRun:
+        return scaling.ExperimentRun(wall=20.0 / workers, task_seconds=30.0, cpu=19.0, status="ok")
+
+    monkeypatch.setattr(scaling, "run_scaling_grid", grid)
+    names = [f.name for f in scaling.run()]
+    per_run = [f"scaling.workers{w}{c}{s}" for c in ("", ".no_cache") for w in (1, 2) for s in ("", ".task_seconds", ".cpu", ".core_share")]
+    assert names == per_run + ["scaling.speedup", "scaling.speedup_no_cache", "scaling.load_average", "scaling.load_average_after"]
