@@ -53,8 +53,8 @@ from llcps.errors import LlcpsError, StoreError
 from llcps.sim import snapshot as snapshots
 from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, StateCheck, StateTrust, decode_result, encode_result
 from llcps.sim.result import TrialResult
-from llcps.store import engine as engines
-from llcps.store.schema import PhysicsCacheEntry
+from llcps.store import backends
+from llcps.store.tables import PhysicsCacheEntry
 
 #: Default bound of the cache's size (result and end-state bytes), 2 GiB: about 50,000 trials.
 DEFAULT_MAX_BYTES = 2 << 30
@@ -280,7 +280,7 @@ class StorePhysicsCache:
         }
         try:
             with self._engine.connect() as conn:
-                conn.execution_options(**{engines.WRITE_OPTION: True})
+                conn.execution_options(**{backends.WRITE_OPTION: True})
                 with conn.begin():
                     if key in self._rejected:  # replace the entry that failed validation
                         conn.execute(delete(PhysicsCacheEntry).where(PhysicsCacheEntry.key == key))
@@ -303,7 +303,7 @@ class StorePhysicsCache:
         now = _now()
         try:
             with self._engine.connect() as conn:
-                conn.execution_options(**{engines.WRITE_OPTION: True})
+                conn.execution_options(**{backends.WRITE_OPTION: True})
                 with conn.begin():
                     for key, n in used.items():
                         conn.execute(

@@ -40,7 +40,7 @@ from llcps.domain import TrialChange, TrialRecord, check_id
 from llcps.provenance import Provenance
 from llcps.provenance import current as provenance_of_process
 from llcps.errors import LlcpsError, StoreError
-from llcps.store import engine as engines
+from llcps.store import backends
 from llcps.store import migrations, visibility
 from llcps.store.records import (
     BranchChange,
@@ -54,7 +54,7 @@ from llcps.store.records import (
     SnapshotRecord,
     StoreStatus,
 )
-from llcps.store.schema import (
+from llcps.store.tables import (
     MAX_BRANCH_NAME,
     Base,
     Branch,
@@ -69,7 +69,7 @@ from llcps.store.schema import (
     WorldModel,
 )
 from llcps.store.visibility import Link
-from llcps.store.changes import CHANGE_COLUMNS, UNKNOWN, ChangeDecoder, change_row
+from llcps.store.trial_changes import CHANGE_COLUMNS, UNKNOWN, ChangeDecoder, change_row
 from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, iso_timestamp, trial_row
 
 #: The root branch every store starts with.
@@ -236,11 +236,11 @@ class Store:
             StoreError: the location cannot hold an llcps store, or its schema is
                 newer than this llcps or (without ``allow_outdated``) older.
         """
-        url = engines.resolve_url(url_or_path)
-        path = engines.sqlite_path(url)
-        if path is not None and not engines.check_sqlite_file(path, create=create):
-            engines.create_sqlite_file(path)
-        engine = engines.make_engine(url)
+        url = backends.resolve_url(url_or_path)
+        path = backends.sqlite_path(url)
+        if path is not None and not backends.check_sqlite_file(path, create=create):
+            backends.create_sqlite_file(path)
+        engine = backends.make_engine(url)
         store = cls(engine, url)
         try:
             store._check_schema(create=create, allow_outdated=allow_outdated)
@@ -255,8 +255,8 @@ class Store:
     def _check_schema(self, *, create: bool, allow_outdated: bool) -> None:
         # Look with a plain connection first: the SQLite engine's connect hook switches
         # the file to WAL, which would rewrite a foreign file's header.
-        file_backed = engines.sqlite_path(self._url) is not None
-        probe = engines.make_engine(self._url, pooled=False, plain=True) if file_backed else self._engine
+        file_backed = backends.sqlite_path(self._url) is not None
+        probe = backends.make_engine(self._url, pooled=False, plain=True) if file_backed else self._engine
         try:
             with probe.connect() as conn:
                 revision = migrations.current_revision(conn)
@@ -337,12 +337,12 @@ class Store:
             return before, head
         known = migrations.known_revisions()
         pending = known[known.index(before) + 1 :] if before in known else [head]
-        file_backed = engines.sqlite_path(self._url) is not None
+        file_backed = backends.sqlite_path(self._url) is not None
         # SQLite needs foreign keys off while batch operations rebuild tables.
-        engine = engines.make_engine(self._url, foreign_keys=False, pooled=False) if file_backed else self._engine
+        engine = backends.make_engine(self._url, foreign_keys=False, pooled=False) if file_backed else self._engine
         try:
             with engine.connect() as conn:
-                conn.execution_options(**{engines.WRITE_OPTION: True})
+                conn.execution_options(**{backends.WRITE_OPTION: True})
                 # The transaction holds the writer lock and Alembic reads the revision
                 # inside it, so a concurrent upgrade finds the work done.
                 with conn.begin():
@@ -390,7 +390,7 @@ class Store:
         """One transaction that takes the write lock up front (SQLite: BEGIN IMMEDIATE)."""
         try:
             with self._engine.connect() as conn:
-                conn.execution_options(**{engines.WRITE_OPTION: True})
+                conn.execution_options(**{backends.WRITE_OPTION: True})
                 with conn.begin():
                     yield conn
         except SQLAlchemyError as exc:
@@ -828,7 +828,7 @@ class Store:
             return found
         try:
             with self._engine.connect() as conn:
-                conn.execution_options(**{engines.WRITE_OPTION: True})
+                conn.execution_options(**{backends.WRITE_OPTION: True})
                 with conn.begin():
                     return conn.execute(
                         insert(Snapshot).values(sha256=sha, scene=dict(scene), state=bytes(state), created_at=_now())
@@ -1311,7 +1311,7 @@ class Store:
     def _size(self) -> int | None:
         """Bytes the store takes on disk: a SQLite file with its write-ahead log, or a
         PostgreSQL database; None in memory."""
-        path = engines.sqlite_path(self._url)
+        path = backends.sqlite_path(self._url)
         if path is not None:
             return sum(os.path.getsize(p) for p in (str(path), f"{path}-wal") if os.path.exists(p))
         if self._engine.dialect.name == "postgresql":
@@ -1345,7 +1345,7 @@ class Store:
                     cursor.execute("VACUUM " + ", ".join(quote(name) for name in sorted(Base.metadata.tables)))
                 else:
                     cursor.execute("VACUUM")
-                if engines.sqlite_path(self._url) is not None:
+                if backends.sqlite_path(self._url) is not None:
                     cursor.execute("PRAGMA wal_checkpoint(TRUNCATE)")
             finally:
                 cursor.close()

@@ -44,7 +44,7 @@ from llcps.domain import (
     TrialSpec,
 )
 from llcps.errors import LlcpsError, StoreError
-from llcps.store.schema import Trial
+from llcps.store.tables import Trial
 
 
 #: Packed features: a layout byte, the entity count, per entity five little-endian doubles

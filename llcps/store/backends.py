@@ -39,7 +39,7 @@ from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 from sqlalchemy.pool import NullPool, StaticPool
 
 from llcps.errors import StoreError
-from llcps.store.schema import SQLITE_APPLICATION_ID
+from llcps.store.tables import SQLITE_APPLICATION_ID
 
 #: How long a SQLite writer waits for another writer's lock, in milliseconds.
 BUSY_TIMEOUT_MS = 30_000
