@@ -12,10 +12,11 @@ from __future__ import annotations
 from typing import Any, Callable, Sequence
 
 from sqlalchemy import ColumnElement, Connection, func, insert, select
+from sqlalchemy.exc import IntegrityError
 
 from llcps.domain import TrialChange, TrialRecord, check_id
 from llcps.errors import LlcpsError, StoreError
-from llcps.store import visibility
+from llcps.store import backends, visibility
 from llcps.store.branches import BranchQueries
 from llcps.store.tables import Trial, TrialChangeRow
 from llcps.store.transactions import utc_now
@@ -67,8 +68,8 @@ class TrialQueries(BranchQueries):
                 if changes is not None:
                     self._insert_changes(conn, [(i, c) for i, c in zip(ids, changes) if c is not None])
                 return ids
-        except StoreError as exc:
-            if "FOREIGN KEY" in exc.message.upper() or "foreign key" in exc.message:
+        except StoreError as exc:  # raised from the database's error, its __cause__
+            if isinstance(exc.__cause__, IntegrityError) and backends.violates_foreign_key(exc.__cause__):
                 stale = {t.branch for t in trials}
                 self._branch_ids.clear()
                 raise StoreError(
