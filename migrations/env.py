@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from alembic import context
 
-from llcps.store.schema import VERSION_TABLE, Base
+from llcps.store.tables import VERSION_TABLE, Base
 
 connection = context.config.attributes.get("connection")
 if connection is None:

@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 from llcps.cli.main import app
 from llcps.domain import OUTCOME_NAMES
 from llcps.store import Store, migrations
-from llcps.store.schema import VERSION_TABLE
+from llcps.store.tables import VERSION_TABLE
 
 
 runner = CliRunner()

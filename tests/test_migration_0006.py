@@ -54,9 +54,9 @@ def test_downgrade_gives_the_features_back_as_json(tmp_path: Path) -> None:
                 migrations.upgrade(conn, "head")  # a no-op at head
     from alembic import command
 
-    from llcps.store import engine as engines
+    from llcps.store import backends
 
-    plain = engines.make_engine(engines.resolve_url(str(db)), foreign_keys=False, pooled=False)
+    plain = backends.make_engine(backends.resolve_url(str(db)), foreign_keys=False, pooled=False)
     with plain.connect() as conn, conn.begin():
         command.downgrade(migrations.alembic_config(conn), BEFORE)
     plain.dispose()

@@ -15,7 +15,7 @@ from make_store_fixtures import make as make_store
 from llcps.domain import Body
 from llcps.errors import LlcpsError
 from llcps.store import Store, migrations
-from llcps.store import engine as engines
+from llcps.store import backends
 
 BEFORE = migrations.known_revisions()[migrations.known_revisions().index("0008") - 1]
 BODIES = [
@@ -67,7 +67,7 @@ def test_downgrade_gives_every_value_back(tmp_path: Path) -> None:
         store.upgrade()
     from alembic import command
 
-    plain = engines.make_engine(engines.resolve_url(str(db)), foreign_keys=False, pooled=False)
+    plain = backends.make_engine(backends.resolve_url(str(db)), foreign_keys=False, pooled=False)
     with plain.connect() as conn, conn.begin():
         command.downgrade(migrations.alembic_config(conn), BEFORE)
     plain.dispose()

@@ -24,7 +24,7 @@ from llcps import provenance
 from llcps.domain import OUTCOME_NAMES
 from llcps.errors import StoreError
 from llcps.store import Store, migrations
-from llcps.store.schema import VERSION_TABLE, Base, Trial
+from llcps.store.tables import VERSION_TABLE, Base, Trial
 
 
 PAST_REVISIONS = migrations.known_revisions()[:-1]

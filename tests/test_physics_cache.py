@@ -21,7 +21,7 @@ from llcps.sim.trial import TrialResult
 from llcps.sim.world import PhysicsSettings
 from llcps.store import Store
 from llcps.store import physics_cache as pc
-from llcps.store.schema import PhysicsCacheEntry
+from llcps.store.tables import PhysicsCacheEntry
 
 SPEC = TrialSpec("push", ("block",), ControllerParams(0.4, 0.15, "left"))
 SETTINGS = PhysicsSettings()

@@ -17,9 +17,9 @@ from pathlib import Path
 from sqlalchemy import insert
 
 from llcps.store import Store
-from llcps.store import engine as engines
+from llcps.store import backends
 from llcps.store import visibility
-from llcps.store.schema import Trial
+from llcps.store.tables import Trial
 from llcps.store.trials import trial_row
 
 WRITER = Path(__file__).parent / "fixtures" / "branch_writer.py"
@@ -32,7 +32,7 @@ def test_a_writer_waits_for_the_open_write_transaction(store: Store, new_trial) 
     first = store.add_trial(new_trial(0))
     done: dict[str, int] = {}
     with store.engine.connect() as conn:
-        conn.execution_options(**{engines.WRITE_OPTION: True})
+        conn.execution_options(**{backends.WRITE_OPTION: True})
         with conn.begin():
             row = trial_row(new_trial(1), branch_id=1, created_at=store.get_trial(first).created_at and _now())
             held = conn.execute(insert(Trial).values(**row)).inserted_primary_key[0]

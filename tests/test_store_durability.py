@@ -16,7 +16,7 @@ from sqlalchemy import select
 from store_writer import sample_trial
 
 from llcps.store import Store
-from llcps.store.schema import Trial
+from llcps.store.tables import Trial
 
 WRITER = Path(__file__).parent / "fixtures" / "store_writer.py"
 

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from llcps.domain import BODY_KINDS, SHAPES, Body, EntityFeatures
 from llcps.errors import LlcpsError
-from llcps.store.changes import pack_atoms, pack_bodies, unpack_atoms, unpack_bodies
+from llcps.store.trial_changes import pack_atoms, pack_bodies, unpack_atoms, unpack_bodies
 from llcps.store.trials import pack_features, unpack_features
 
 names = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x1f"), min_size=1, max_size=12)

@@ -13,7 +13,7 @@ from test_store_branches import BranchMachine, run_machine
 
 from llcps.errors import StoreError
 from llcps.store import Store
-from llcps.store.schema import VERSION_TABLE, Base
+from llcps.store.tables import VERSION_TABLE, Base
 
 pytestmark = [pytest.mark.postgresql, pytest.mark.skipif(POSTGRES_SKIP is not None, reason=POSTGRES_SKIP or "")]
 

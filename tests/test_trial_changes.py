@@ -21,9 +21,9 @@ from llcps.experiments.transfer import export_branches, import_payload
 from llcps.pretrain import random_trial
 from llcps.sim.world import World
 from llcps.store import Store, migrations
-from llcps.store import engine as engines
-from llcps.store.changes import pack_atoms
-from llcps.store.schema import Trial, TrialChangeRow
+from llcps.store import backends
+from llcps.store.trial_changes import pack_atoms
+from llcps.store.tables import Trial, TrialChangeRow
 
 BODIES = (
     Body("cube", "object", "box", (0.37, -0.33, 0.0), (0.43, -0.27, 0.06), (0.4, -0.3, 0.03)),
@@ -126,8 +126,8 @@ def test_payloads_carry_changes_onto_the_new_trial_ids(store: Store, tmp_path: P
 # ------------------------------------------------------------------------------- backfill
 def _store_at(path: Path, revision: str) -> Store:
     """A store built by Alembic up to ``revision`` (the schema before trial changes)."""
-    engines.create_sqlite_file(path)
-    engine = engines.make_engine(engines.resolve_url(str(path)), pooled=False)
+    backends.create_sqlite_file(path)
+    engine = backends.make_engine(backends.resolve_url(str(path)), pooled=False)
     with engine.connect() as conn, conn.begin():
         migrations.upgrade(conn, revision)
     engine.dispose()

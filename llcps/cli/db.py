@@ -27,7 +27,7 @@ from llcps.errors import LlcpsError
 from llcps.outputs import check_output_file
 from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
 from llcps.store.export import BINARY_FORMATS, EXPORT_FORMATS, export_trials
-from llcps.store.schema import MAX_BRANCH_NAME
+from llcps.store.tables import MAX_BRANCH_NAME
 
 app = new_app(
     "Create, inspect, migrate, branch and export the experience store.",

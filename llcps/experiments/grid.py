@@ -25,7 +25,7 @@ from llcps.cps.episode import DEFAULT_MEASURE, DEFAULT_MODEL
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.models.measures import PAPER_MEASURES
 from llcps.models.registry import PAPER_MODELS
-from llcps.store.schema import MAX_BRANCH_NAME
+from llcps.store.tables import MAX_BRANCH_NAME
 
 #: The order a sequence solves the scenarios in (the paper's order).
 SCENARIO_SEQUENCE: tuple[str, ...] = ("scenario1", "scenario2", "scenario3")

@@ -31,9 +31,9 @@ from sqlalchemy import insert, select, update
 from llcps.domain import TrialChange, TrialRecord
 from llcps.errors import StoreError
 from llcps.store import EpisodeRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
-from llcps.store.changes import change_row
-from llcps.store.schema import Branch, Episode, Operator, Run, Snapshot, Trial, TrialChangeRow
-from llcps.store.store import run_provenance_values
+from llcps.store.trial_changes import change_row
+from llcps.store.tables import Branch, Episode, Operator, Run, Snapshot, Trial, TrialChangeRow
+from llcps.store.runs import run_provenance_values
 from llcps.store.trials import trial_row
 
 #: Keys of an episode summary (``SolveResult.as_json()``) that hold store ids.

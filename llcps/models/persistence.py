@@ -36,7 +36,7 @@ from llcps.domain import StoredFeatures, TrialChange, TrialRecord, check_seed
 from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import WorldModelEntry, world_model_entry
-from llcps.store.changes import pack_atoms, pack_bodies
+from llcps.store.trial_changes import pack_atoms, pack_bodies
 
 if TYPE_CHECKING:
     from llcps.store import Store
@@ -70,7 +70,7 @@ def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialC
 
     That is each trial's id, seed, spec, features and outcome, and its known change
     (the state before, the atoms added and deleted, the scene's bodies, in the form the
-    store keeps them: :mod:`llcps.store.changes`); provenance
+    store keeps them: :mod:`llcps.store.trial_changes`); provenance
     (branch, run, timestamps, wall seconds) is left out, since no model reads it.
     """
     digest = hashlib.blake2b(digest_size=20)

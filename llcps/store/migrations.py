@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from sqlalchemy import Connection, inspect
 
-from llcps.store.schema import VERSION_TABLE
+from llcps.store.tables import VERSION_TABLE
 
 if TYPE_CHECKING:
     from alembic.config import Config

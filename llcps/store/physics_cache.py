@@ -10,7 +10,7 @@ to it, and pruning it only means later runs compute some physics again.
 Everything read back is untrusted: an entry's size is capped and its content hash
 checked before anything is decoded, the result is decoded field by field, and the
 end state must pass :func:`validate_state` (a bounded inflate, once per digest and
-process) and the restoring world's structure check
+cache handle) and the restoring world's structure check
 (:meth:`llcps.sim.world.World.check_serialized`, memoized per process) before a
 world restores it. An entry that fails is ignored as a miss and replaced by the
 next simulation of its key.
@@ -53,8 +53,8 @@ from llcps.errors import LlcpsError, StoreError
 from llcps.sim import snapshot as snapshots
 from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, StateCheck, StateTrust, decode_result, encode_result
 from llcps.sim.result import TrialResult
-from llcps.store import engine as engines
-from llcps.store.schema import PhysicsCacheEntry
+from llcps.store import backends
+from llcps.store.tables import PhysicsCacheEntry
 
 #: Default bound of the cache's size (result and end-state bytes), 2 GiB: about 50,000 trials.
 DEFAULT_MAX_BYTES = 2 << 30
@@ -171,10 +171,6 @@ class CacheCounts:
         return {"hits": self.hits, "misses": self.misses, "rejected": self.rejected, "stored": self.stored, "hit_rate": self.hit_rate}
 
 
-#: Digests of end states this process has validated already.
-_validated: set[str] = set()
-
-
 class StorePhysicsCache:
     """The physics cache of one store, as :class:`llcps.sim.cache.PhysicsCache`.
 
@@ -196,6 +192,8 @@ class StorePhysicsCache:
         self._used: dict[str, int] = {}
         self._seals: dict[str, str] = {}
         self._rejected: set[str] = set()
+        #: Digests of end states that passed ``validator`` already.
+        self._validated: set[str] = set()
 
     def get(self, key: str, *, check: StateCheck | None = None, trust: StateTrust | None = None) -> CachedTrial | None:
         """The entry under ``key``, or None when absent or when it fails validation.
@@ -247,9 +245,9 @@ class StorePhysicsCache:
             return None
         try:
             decoded = decode_result(result)
-            if sha not in _validated:
+            if sha not in self._validated:
                 self._validator(state)
-                _validated.add(sha)
+                self._validated.add(sha)
             expected = None if self._secret is None else seal(self._secret, key, sha)
             if expected is not None and _sealed(stored_seal, expected):
                 if trust is not None:
@@ -280,7 +278,7 @@ class StorePhysicsCache:
         }
         try:
             with self._engine.connect() as conn:
-                conn.execution_options(**{engines.WRITE_OPTION: True})
+                conn.execution_options(**{backends.WRITE_OPTION: True})
                 with conn.begin():
                     if key in self._rejected:  # replace the entry that failed validation
                         conn.execute(delete(PhysicsCacheEntry).where(PhysicsCacheEntry.key == key))
@@ -303,7 +301,7 @@ class StorePhysicsCache:
         now = _now()
         try:
             with self._engine.connect() as conn:
-                conn.execution_options(**{engines.WRITE_OPTION: True})
+                conn.execution_options(**{backends.WRITE_OPTION: True})
                 with conn.begin():
                     for key, n in used.items():
                         conn.execute(

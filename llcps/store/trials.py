@@ -18,6 +18,7 @@ a branch's training set.
 
 from __future__ import annotations
 
+import functools
 import gc
 import json
 import math
@@ -44,7 +45,7 @@ from llcps.domain import (
     TrialSpec,
 )
 from llcps.errors import LlcpsError, StoreError
-from llcps.store.schema import Trial
+from llcps.store.tables import Trial
 
 
 #: Packed features: a layout byte, the entity count, per entity five little-endian doubles
@@ -70,12 +71,11 @@ def pack_features(features: Sequence[EntityFeatures]) -> bytes:
     return bytes((FEATURES_LAYOUT, len(features))) + _DOUBLES[len(features)].pack(*numbers) + _SEPARATOR.join(names).encode()
 
 
-#: The text part of packed features, decoded once per process: its names (None if they
-#: are not non-empty UTF-8 text) and whether they are all Table 1's shapes and colours.
-_names: dict[bytes, tuple[tuple[str, ...] | None, bool]] = {}
-
-
+@functools.lru_cache(maxsize=10_000)
 def _decode_names(data: bytes) -> tuple[tuple[str, ...] | None, bool]:
+    """The text part of packed features, decoded once per process (a training set repeats
+    few): its names (None if they are not non-empty UTF-8 text) and whether they are all
+    Table 1's shapes and colours."""
     try:
         names: tuple[str, ...] | None = tuple(data.decode().split(_SEPARATOR)) if data else ()
     except UnicodeDecodeError:
@@ -83,8 +83,6 @@ def _decode_names(data: bytes) -> tuple[tuple[str, ...] | None, bool]:
     if names is not None and not all(names):
         names = None
     in_table1 = names is not None and all(s in SHAPES for s in names[::2]) and all(c in COLORS for c in names[1::2])
-    if len(_names) < 10_000:
-        _names[data] = (names, in_table1)
     return names, in_table1
 
 
@@ -102,7 +100,7 @@ def read_features(data: bytes, *, table1: bool = False) -> StoredFeatures:
     except (IndexError, TypeError, struct.error):
         n, numbers = -1, ()
     tail = data[2 + 40 * n :] if n >= 0 else b""
-    names, in_table1 = _names.get(tail) or _decode_names(tail)
+    names, in_table1 = _decode_names(tail)
     if n < 0 or names is None or len(names) != 2 * n:
         raise LlcpsError("stored trial features are malformed", hint="the store may be damaged; `llcps db status`")
     if table1 and not in_table1:

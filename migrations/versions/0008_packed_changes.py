@@ -1,7 +1,7 @@
 """Packed trial changes.
 
 A change's states (``before``, ``added``, ``deleted``) and its scene (``bodies``) move
-from JSON lists into binary values of fixed layout (``llcps.store.changes.pack_atoms``:
+from JSON lists into binary values of fixed layout (``llcps.store.trial_changes.pack_atoms``:
 the atoms as text with control-character separators; ``pack_bodies``: per body nine
 doubles, then the names, kinds and shapes as text), so a fit, which reads every
 visible trial's change, parses no JSON. A stored value that does not convert (a row
@@ -47,7 +47,7 @@ def _numbers(value: Any) -> list[float]:
 
 
 def _pack(bodies: Any) -> bytes:
-    """The layout of ``llcps.store.changes.pack_bodies`` at this revision (kept here: a
+    """The layout of ``llcps.store.trial_changes.pack_bodies`` at this revision (kept here: a
     revision must not change when the library does)."""
     if not isinstance(bodies, list) or len(bodies) > 0xFFFF:
         raise ValueError("not a list of bodies")
@@ -65,7 +65,7 @@ def _pack(bodies: Any) -> bytes:
 
 
 def _pack_atoms(atoms: Any) -> bytes:
-    """The layout of ``llcps.store.changes.pack_atoms`` at this revision."""
+    """The layout of ``llcps.store.trial_changes.pack_atoms`` at this revision."""
     if not isinstance(atoms, list):
         raise ValueError("not a list of atoms")
     texts = []

@@ -195,7 +195,7 @@ class TrialChangeRow(Base):
 
     trial_id: Mapped[int] = mapped_column(ForeignKey("trials.id", ondelete="CASCADE"), primary_key=True)
     source: Mapped[str] = mapped_column(String(16))
-    # The states, packed (llcps.store.changes.pack_atoms), and the scene's bodies (pack_bodies).
+    # The states, packed (llcps.store.trial_changes.pack_atoms), and the scene's bodies (pack_bodies).
     before: Mapped[bytes] = mapped_column(LargeBinary)
     added: Mapped[bytes] = mapped_column(LargeBinary)
     deleted: Mapped[bytes] = mapped_column(LargeBinary)

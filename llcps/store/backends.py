@@ -35,11 +35,11 @@ from pathlib import Path
 from typing import Any
 
 from sqlalchemy import URL, Engine, create_engine, event, make_url
-from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError
 from sqlalchemy.pool import NullPool, StaticPool
 
 from llcps.errors import StoreError
-from llcps.store.schema import SQLITE_APPLICATION_ID
+from llcps.store.tables import SQLITE_APPLICATION_ID
 
 #: How long a SQLite writer waits for another writer's lock, in milliseconds.
 BUSY_TIMEOUT_MS = 30_000
@@ -51,6 +51,9 @@ WRITE_OPTION = "llcps_write"
 
 #: PostgreSQL advisory lock key that serializes writers ("LLCPSWRT" as a signed 64-bit number).
 WRITER_LOCK = int.from_bytes(b"LLCPSWRT", "big", signed=True)
+
+#: PostgreSQL's SQLSTATE for a foreign key violation.
+_FOREIGN_KEY_VIOLATION = "23503"
 
 
 def resolve_url(url_or_path: str) -> URL:
@@ -210,3 +213,12 @@ def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, pla
     elif url.get_backend_name() == "postgresql":
         event.listen(engine, "begin", _on_postgresql_begin)
     return engine
+
+
+def violates_foreign_key(exc: IntegrityError) -> bool:
+    """Whether the driver reports ``exc`` as a foreign key violation (by its error code,
+    not its message): SQLite's ``SQLITE_CONSTRAINT_FOREIGNKEY``, PostgreSQL's SQLSTATE 23503."""
+    orig = exc.orig
+    if isinstance(orig, sqlite3.Error):
+        return getattr(orig, "sqlite_errorcode", None) == sqlite3.SQLITE_CONSTRAINT_FOREIGNKEY
+    return getattr(orig, "sqlstate", None) == _FOREIGN_KEY_VIOLATION

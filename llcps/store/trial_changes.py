@@ -19,7 +19,7 @@ from typing import Any, Iterable, Sequence
 
 from llcps.domain import BODY_KINDS, CHANGE_SOURCES, SHAPES, Body, Fluent, TrialChange, fluent
 from llcps.errors import LlcpsError
-from llcps.store.schema import TrialChangeRow
+from llcps.store.tables import TrialChangeRow
 
 #: Source of a row that records that a trial's change could not be recovered.
 UNKNOWN = "unknown"
@@ -169,7 +169,7 @@ def unpack_bodies(data: bytes) -> tuple[Body, ...]:
 
 
 if {f.name for f in fields(Body)} != {"name", "kind", "shape", "lo", "hi", "centre"}:  # pragma: no cover
-    raise ImportError("llcps.store.changes packs fields that Body does not have")
+    raise ImportError("llcps.store.trial_changes packs fields that Body does not have")
 
 
 def change_row(trial_id: int, change: TrialChange | None) -> dict[str, Any]:

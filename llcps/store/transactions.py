@@ -1,0 +1,89 @@
+"""The store's engine and the two kinds of transaction every query runs in.
+
+A read is a plain connection; a write is one transaction that holds the store's
+writer lock from its first statement (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: an
+advisory lock, see :mod:`llcps.store.backends`), so trial ids commit in increasing
+order, as :mod:`llcps.store.visibility` needs. Both turn a database error into a
+:class:`~llcps.errors.StoreError` with a hint, as a write rolls back.
+
+:class:`Transactions` is the base of every query class of the store
+(:class:`~llcps.store.store.Store` is their union).
+"""
+
+from __future__ import annotations
+
+import json
+from contextlib import contextmanager
+from datetime import datetime, timezone
+from typing import Iterator
+
+from sqlalchemy import URL, Connection, Engine
+from sqlalchemy.exc import SQLAlchemyError
+
+from llcps.errors import StoreError
+from llcps.store import backends
+
+#: Hint of a row that does not decode: it was not written by llcps.
+CHANGED_HINT = "the row was changed outside llcps; restore the database from a copy (or delete the row)"
+
+
+def utc_now() -> datetime:
+    """Now, as the store keeps times: UTC without a time zone."""
+    return datetime.now(timezone.utc).replace(tzinfo=None)
+
+
+def db_error(exc: SQLAlchemyError) -> StoreError:
+    """A database error as a :class:`StoreError`, with a hint at the likely cause."""
+    detail = str(getattr(exc, "orig", None) or exc).splitlines()[0]
+    lowered = detail.lower()
+    if "locked" in lowered or "busy" in lowered:
+        hint = "another process held the database for longer than the busy timeout; retry when it is done"
+    elif "readonly" in lowered or "read-only" in lowered or "permission" in lowered:
+        hint = "the database file or its directory is not writable"
+    elif "connect" in lowered:
+        hint = "check the --db URL and that the database server is running"
+    else:
+        hint = "check `llcps db status`"
+    return StoreError(f"database error: {detail}", hint=hint)
+
+
+class Transactions:
+    """An engine, the URL it was made from, and read and write scopes on it."""
+
+    def __init__(self, engine: Engine, url: URL) -> None:
+        self._engine = engine
+        self._url = url
+
+    @property
+    def url(self) -> str:
+        """The database URL, password hidden."""
+        return self._url.render_as_string(hide_password=True)
+
+    @property
+    def engine(self) -> Engine:
+        """The SQLAlchemy engine, for tools that need raw access (benchmarks, exports)."""
+        return self._engine
+
+    @contextmanager
+    def _read(self) -> Iterator[Connection]:
+        try:
+            with self._engine.connect() as conn:
+                yield conn
+        except SQLAlchemyError as exc:
+            raise db_error(exc) from exc
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # a JSON column's text, decoded as rows are read
+            raise StoreError(f"a stored JSON value is malformed ({exc})", hint=CHANGED_HINT) from None
+
+    @contextmanager
+    def _write(self) -> Iterator[Connection]:
+        """One transaction that takes the write lock up front (SQLite: BEGIN IMMEDIATE).
+
+        The :class:`StoreError` a database error becomes has that error as its ``__cause__``.
+        """
+        try:
+            with self._engine.connect() as conn:
+                conn.execution_options(**{backends.WRITE_OPTION: True})
+                with conn.begin():
+                    yield conn
+        except SQLAlchemyError as exc:
+            raise db_error(exc) from exc
