@@ -70,7 +70,7 @@ _PRESET_HELP = "Grid to run: " + "; ".join(
 )
 def run_cli(
     ctx: typer.Context,
-    preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = "paper",  # type: ignore[valid-type, assignment]
+    preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = PRESETS.default,  # type: ignore[valid-type, assignment]
     seeds: Annotated[
         Optional[int],
         typer.Option("--seeds", metavar="N", min=1, max=MAX_SEEDS, help="How many seeds (default: the preset's count).", show_default=False),
