@@ -31,7 +31,8 @@ from llcps.store.flat import KINDS, Column, flat_rows, trial_columns
 if TYPE_CHECKING:
     from llcps.cps.episode import SolveResult
     from llcps.cps.replay import ReplayReport
-    from llcps.experiments.runner import RunSummary
+    from llcps.experiments.scheduler import RunSummary
+    from llcps.jobs.experiment import ExperimentReport
     from llcps.models.persistence import FittedModel
     from llcps.pretrain import PretrainSummary
 
@@ -312,18 +313,28 @@ class Workbench:
 
         ``variants`` (e.g. ``range(100, 110)``) takes the place of ``seeds``: seed N solves scene variant N.
         """
-        from llcps.experiments.runner import default_out_dir, results_table, run_experiment, write_report
+        from llcps.jobs.experiment import run_experiment_job  # the runner, scipy and matplotlib load here
 
-        if variants is not None and seeds is not None:
-            raise LlcpsError("give seeds or variants, not both: with variants, seed N solves variant N")
-        paired = variants is not None
-        summary = run_experiment(
-            self.store, preset=preset, seeds=variants if paired else seeds, variants=paired, workers=workers, progress=progress
+        return run_experiment_job(
+            store=self.store, preset=preset, seeds=seeds, variants=variants, workers=workers, out_dir=out_dir, html=html, progress=progress
+        ).summary
+
+    def experiment_report(
+        self,
+        preset: str | None = None,
+        *,
+        baseline_preset: str | None = None,
+        variants: range | None = None,
+        out_dir: str | Path | None = None,
+        html: bool = False,
+    ) -> ExperimentReport:
+        """``llcps experiment report --from-db``: rebuild a preset's report from the store's episodes
+        (default directory ``results/<preset>``); ``.analysis`` holds it as JSON data."""
+        from llcps.jobs.experiment import report_experiment_job  # scipy and matplotlib load here
+
+        return report_experiment_job(
+            source=self.store, preset=preset, baseline_preset=baseline_preset, variants=variants, out_dir=out_dir, html=html
         )
-        table = results_table(self.store, summary.preset, summary.seeds, variants=paired)
-        if len(table):
-            write_report(table, out_dir if out_dir is not None else default_out_dir(summary.preset), store=self.store, html=html)
-        return summary
 
 
 def open(url_or_path: str | Path = "llcps.db", *, create: bool = False) -> Workbench:  # noqa: A001 - llcps.open

@@ -126,8 +126,9 @@ def test_renamed_spellings_are_rewritten_with_a_warning(capsys: pytest.CaptureFi
 
 def _small_results(path: Path) -> Path:
     """Two seeds of one cell, update and reset, written as a results CSV."""
-    from llcps.experiments.grid import SCENARIO_SEQUENCE, Cell, Sequence
-    from llcps.experiments.results import ResultRow, ResultsTable
+    from llcps.experiments.design import SCENARIO_SEQUENCE, Cell, Sequence
+    from llcps.analysis.results import ResultsTable
+    from llcps.experiments.rows import ResultRow
 
     rows = []
     for seed in (0, 1):

@@ -10,10 +10,14 @@ import numpy as np
 import pytest
 
 from llcps.errors import LlcpsError
-from llcps.experiments import grid
-from llcps.experiments.grid import PRESETS, SCENARIO_SEQUENCE, Cell, Preset, Sequence, parse_branch
-from llcps.experiments.report import analyse, build_report, report_json, summary_lines
-from llcps.experiments.results import COLUMNS, ResultRow, ResultsTable, table_from_episodes
+from llcps.experiments import design, presets
+from llcps.experiments.design import SCENARIO_SEQUENCE, Cell, Sequence, parse_branch
+from llcps.experiments.presets import PRESETS, Preset
+from llcps.analysis.analyse import analyse, report_json
+from llcps.report.build import build_report
+from llcps.report.text import summary_lines
+from llcps.analysis.results import ResultsTable, table_from_episodes
+from llcps.experiments.rows import COLUMNS, ResultRow
 
 # -- grid ----------------------------------------------------------------------------------
 
@@ -49,11 +53,11 @@ def test_branch_names_are_valid_unique_and_parse_back(name: str) -> None:
     assert len(set(names)) == len(names)
     episode_branches: set[str] = set()
     for seq in sequences:
-        assert grid.is_valid_branch_name(seq.branch_name) and "/" not in seq.branch_name
-        assert parse_branch(seq.branch_name) == grid.ParsedBranch(seq, None)
+        assert design.is_valid_branch_name(seq.branch_name) and "/" not in seq.branch_name
+        assert parse_branch(seq.branch_name) == design.ParsedBranch(seq, None)
         for scenario in SCENARIO_SEQUENCE:
             branch = seq.episode_branch(scenario)
-            assert grid.is_valid_branch_name(branch)
+            assert design.is_valid_branch_name(branch)
             parsed = parse_branch(branch)
             assert parsed is not None and parsed.sequence == seq
             assert parsed.scenario == (scenario if seq.cell.condition == "reset" else None)
@@ -83,7 +87,7 @@ def test_other_branch_names_do_not_parse(name: str) -> None:
 
 def test_measures_with_separators_parse_back() -> None:
     seq = Sequence("full", Cell("logreg", "least-negative-changes", 200, "reset"), 12)
-    assert parse_branch(seq.episode_branch("scenario3")) == grid.ParsedBranch(seq, "scenario3")
+    assert parse_branch(seq.episode_branch("scenario3")) == design.ParsedBranch(seq, "scenario3")
 
 
 @pytest.mark.parametrize(
@@ -97,7 +101,7 @@ def test_measures_with_separators_parse_back() -> None:
         lambda: Sequence("paper", Cell("nb", "most-changes", 4, "update"), -2),
         lambda: Sequence("paper", Cell("nb", "m" * 80, 4, "reset"), 0),
         lambda: PRESETS["paper"].sequences(0),
-        lambda: grid.get_preset("huge"),
+        lambda: presets.get_preset("huge"),
     ],
 )
 def test_bad_grid_input_is_a_project_error(make) -> None:  # noqa: ANN001
@@ -112,7 +116,7 @@ def test_preset_names_exist_in_the_registries(name: str) -> None:
         from llcps.models.measures import MEASURES  # noqa: F401
     except ImportError as exc:  # the registries arrive with the world models
         pytest.skip(f"model registries not importable yet: {exc}")
-    grid.validate_preset(PRESETS[name])
+    presets.validate_preset(PRESETS[name])
 
 
 # -- results table -------------------------------------------------------------------------
@@ -303,7 +307,7 @@ def test_build_report_writes_every_file(tmp_path) -> None:  # noqa: ANN001
         if (r["model"], r["measure"], r["pretrain_size"], r["scenario"])
         == ("nn", "least-destructive", 200, "scenario2")
     )
-    from llcps.experiments.plots import format_pct
+    from llcps.report.formatting import format_pct
 
     assert f"| nn | least-destructive | {format_pct(row['pct_change'])}" in md
     assert "| +182% |" in md  # the paper's NN / least destructive / scenario 2 with 200 points

@@ -21,17 +21,19 @@ from typer.testing import CliRunner
 from llcps.cli.main import app
 from llcps.domain import ACTIONS
 from llcps.errors import LlcpsError, StoreError
-from llcps.experiments.grid import PRESETS, SCENARIO_SEQUENCE, Cell, Sequence, pretrain_branch_name
-from llcps.experiments.results import COLUMNS, ResultsTable
+from llcps.experiments.design import SCENARIO_SEQUENCE, Cell, Sequence, pretrain_branch_name
+from llcps.experiments.presets import PRESETS
+from llcps.analysis.results import ResultsTable
+from llcps.experiments.rows import COLUMNS
 from llcps.experiments.runner import (
     PretrainTask,
     SequenceTask,
     make_engine,
     plan_tasks,
     pretrain_subset,
-    results_table,
     run_experiment,
 )
+from llcps.analysis.selection import results_table
 from llcps.experiments.transfer import count_rows, export_branches, import_payload, inverse
 from llcps.store import Store
 from llcps.store import physics_cache
@@ -493,7 +495,7 @@ def test_a_local_worker_reports_the_end_of_a_sequences_first_scenario(reference:
     """What the scheduler reads to let a twin start: reported by a real pool worker."""
     from dataclasses import replace
 
-    from llcps.experiments.engines import LocalEngine
+    from llcps.experiments.executors import LocalEngine
 
     ref_store, _ = reference
     task = next(t for t in plan_tasks(SMOKE, 1) if isinstance(t, SequenceTask))
@@ -551,7 +553,7 @@ def test_a_pretraining_being_imported_is_waited_for_rather_than_running_a_twin(
 
 # -- scene variants, paired with seeds ----------------------------------------------------------
 def test_variant_sequences_name_their_variant_and_parse_back() -> None:
-    from llcps.experiments.grid import parse_branch
+    from llcps.experiments.design import parse_branch
 
     sequences = SMOKE.sequences([0, 3], variants=True)
     assert {(s.seed, s.variant) for s in sequences} == {(0, 0), (3, 3)}

@@ -8,9 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from llcps.experiments import stats
-from llcps.experiments.grid import SCENARIO_SEQUENCE, Sequence, Cell
-from llcps.experiments.results import ResultRow, ResultsTable
+from llcps.analysis import cumulative, figure2, paper, stats, versus_random
+from llcps.experiments.design import SCENARIO_SEQUENCE, Sequence, Cell
+from llcps.analysis.results import ResultsTable
+from llcps.experiments.rows import ResultRow
 
 
 def _row(model: str, measure: str, size: int, condition: str, seed: int, scenario: str, trials: int) -> ResultRow:
@@ -67,7 +68,7 @@ def test_pct_change_and_zero_denominator() -> None:
 
 
 def test_figure2_row_matches_hand_computation() -> None:
-    (row,) = stats.figure2_table(_fixed_table(), resamples=10_000, seed=3)
+    (row,) = figure2.figure2_table(_fixed_table(), resamples=10_000, seed=3)
     assert (row.model, row.measure, row.pretrain_size, row.scenario, row.n_seeds) == (
         "nb",
         "most-changes",
@@ -129,9 +130,9 @@ def test_holm_adjustment() -> None:
 
 
 def test_paper_table_and_its_reductions() -> None:
-    assert stats.PAPER_FIGURE2[("nn", "least-destructive", 200, "scenario2")] == 182.0
-    assert stats.PAPER_FIGURE2[("nb", "most-positive-changes", 4, "scenario3")] == -87.0
-    summary = {(r.pretrain_size, r.model): r for r in stats.reduction_summary(stats.paper_cells())}
+    assert paper.PAPER_FIGURE2[("nn", "least-destructive", 200, "scenario2")] == 182.0
+    assert paper.PAPER_FIGURE2[("nb", "most-positive-changes", 4, "scenario3")] == -87.0
+    summary = {(r.pretrain_size, r.model): r for r in figure2.reduction_summary(paper.paper_cells())}
     # Counted by hand from Figure 2: 6 decreases and 3 zeros of 16 with 200 points,
     # 10 decreases and 3 zeros with 4 (the caption's 81% is "reduced or unchanged").
     assert (summary[200, None].n_reduced, summary[200, None].n_unchanged, summary[200, None].n_cells) == (6, 3, 16)
@@ -148,7 +149,7 @@ def test_figure2_pairs_seeds_and_the_report_adjusts_every_comparison_together() 
         rows.append(_row("nb", "most-changes", 4, "reset", seed, "scenario1", r))
     rows.append(_row("nb", "most-changes", 4, "update", 9, "scenario2", 1000))
     table = ResultsTable(rows)
-    by_scenario = {r.scenario: r for r in stats.figure2_table(table, resamples=500)}
+    by_scenario = {r.scenario: r for r in figure2.figure2_table(table, resamples=500)}
     assert by_scenario["scenario2"].n_seeds == 3
     assert by_scenario["scenario2"].mean_update == pytest.approx(67 / 3)
     assert all(math.isnan(r.p_holm) for r in by_scenario.values())  # the report corrects, over all its tests
@@ -161,10 +162,10 @@ def test_figure2_pairs_seeds_and_the_report_adjusts_every_comparison_together() 
     one_seed = ResultsTable(
         [_row("nb", "most-changes", 4, c, 0, "scenario1", 5) for c in ("update", "reset")]
     )  # too few seeds for a test, but identical all the same
-    (control,) = stats.figure2_table(one_seed, resamples=10)
+    (control,) = figure2.figure2_table(one_seed, resamples=10)
     assert control.identical and math.isnan(control.p_value)
-    assert [r.scenario for r in stats.figure2_table(table, resamples=500)] == ["scenario1", "scenario2"]
-    assert stats.figure2_table(table, resamples=500, seed=1) == stats.figure2_table(table, resamples=500, seed=1)
+    assert [r.scenario for r in figure2.figure2_table(table, resamples=500)] == ["scenario1", "scenario2"]
+    assert figure2.figure2_table(table, resamples=500, seed=1) == figure2.figure2_table(table, resamples=500, seed=1)
 
 
 def test_random_comparison_paired_and_pooled() -> None:
@@ -176,7 +177,7 @@ def test_random_comparison_paired_and_pooled() -> None:
     def same_cell(comparisons):  # the others fall back to random's rows of the scenario
         return [c for c in comparisons if (c.pretrain_size, c.condition, c.scenario) == (4, "update", "scenario2")]
 
-    (cmp,) = same_cell(stats.random_comparison(table))
+    (cmp,) = same_cell(versus_random.random_comparison(table))
     assert (cmp.model, cmp.condition, cmp.test, cmp.n_model, cmp.n_random) == ("nb", "update", "wilcoxon", 3, 3)
     assert cmp.median_model == 20 and cmp.median_random == 50
     assert cmp.pct_change_median == pytest.approx(-60.0)
@@ -186,10 +187,10 @@ def test_random_comparison_paired_and_pooled() -> None:
         [r for r in table if r.model != "random"]
         + [_row("random", "least-destructive", 4, "update", s, "scenario2", t) for s, t in enumerate((40, 50, 60))]
     )
-    (pooled,) = same_cell(stats.random_comparison(other))
+    (pooled,) = same_cell(versus_random.random_comparison(other))
     assert pooled.test == "mann-whitney"
     assert pooled.p_value == pytest.approx(0.1)  # 12, 20, 35 all below 40, 50, 60
-    assert stats.random_comparison(_fixed_table()) == ()
+    assert versus_random.random_comparison(_fixed_table()) == ()
 
 
 def test_best_measure_against_random_from_another_pretraining_size() -> None:
@@ -199,14 +200,14 @@ def test_best_measure_against_random_from_another_pretraining_size() -> None:
         rows.append(_row("nb", "least-destructive", 200, "reset", seed, "scenario2", 10 + seed))
         rows.append(_row("nn", "least-destructive", 200, "update", seed, "scenario2", 1 + seed))  # not reset
         rows.append(_row("random", "most-changes", 4, "reset", seed, "scenario2", 40 + 10 * seed))
-    comparisons = stats.random_comparison(ResultsTable(rows))
+    comparisons = versus_random.random_comparison(ResultsTable(rows))
     # random ran with 4 pretraining points only: its rows of the scenario are the baseline
     assert len(comparisons) == 3 and all(c.n_random == 3 and c.test == "mann-whitney" for c in comparisons)
-    (best,) = stats.best_versus_random(comparisons)
+    (best,) = versus_random.best_versus_random(comparisons)
     assert (best.model, best.measure, best.condition, best.median_model) == ("nb", "least-destructive", "reset", 11)
     assert best.median_random == 50 and best.pct_change_median == pytest.approx(-78.0)
     assert best.p_value == pytest.approx(0.1)  # 10, 11, 12 all below 40, 50, 60
-    assert stats.best_versus_random(comparisons, condition="update")[0].model == "nn"
+    assert versus_random.best_versus_random(comparisons, condition="update")[0].model == "nn"
 
 
 def test_cumulative_exploration_sums_along_the_sequence() -> None:
@@ -217,7 +218,7 @@ def test_cumulative_exploration_sums_along_the_sequence() -> None:
     ]
     # An incomplete sequence must not count.
     rows.append(_row("nb", "most-changes", 4, "update", 7, "scenario1", 100))
-    points = stats.cumulative_exploration(ResultsTable(rows), resamples=200)
+    points = cumulative.cumulative_exploration(ResultsTable(rows), resamples=200)
     assert [p.mean for p in points] == pytest.approx([2.0, 5.0, 9.0])
     assert all(p.n_seeds == 2 and p.ci_low <= p.mean <= p.ci_high for p in points)
 
@@ -226,4 +227,4 @@ def test_unknown_metric_is_a_project_error() -> None:
     from llcps.errors import LlcpsError
 
     with pytest.raises(LlcpsError, match="metric"):
-        stats.figure2_table(_fixed_table(), metric="joules")
+        figure2.figure2_table(_fixed_table(), metric="joules")

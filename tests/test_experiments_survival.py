@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from test_experiments_stats import _row
 
-from llcps.experiments import survival
-from llcps.experiments.results import ResultsTable
+from llcps.analysis import survival
+from llcps.analysis.results import ResultsTable
 
 
 def test_kaplan_meier_by_hand() -> None:

@@ -13,9 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from llcps.experiments.grid import SCENARIO_SEQUENCE, Cell, Sequence
-from llcps.experiments.report import build_report
-from llcps.experiments.results import ResultRow, ResultsTable
+from llcps.experiments.design import SCENARIO_SEQUENCE, Cell, Sequence
+from llcps.report.build import build_report
+from llcps.analysis.results import ResultsTable
+from llcps.experiments.rows import ResultRow
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMEDRIVER = shutil.which("chromedriver")

@@ -15,12 +15,12 @@ from llcps.domain import MAX_SEED
 from llcps.errors import LlcpsError
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
-from llcps.experiments.engines import ENGINES
-from llcps.experiments.grid import PRESETS
+from llcps.experiments.executors import ENGINES
+from llcps.experiments.presets import MAX_SEEDS, PRESETS
 from llcps.scenarios.variants import parse_range
 
 if TYPE_CHECKING:
-    from llcps.experiments.runner import RunSummary
+    from llcps.experiments.scheduler import RunSummary
 
 app = new_app(
     "Run the experiment grid (Figure 2 over many seeds) and report on it.",
@@ -46,8 +46,7 @@ HtmlFlag = Annotated[
 PresetName = choice_enum("PresetName", tuple(PRESETS))
 EngineName = choice_enum("EngineName", ENGINES)
 
-#: Most seeds and workers one run may ask for.
-MAX_SEEDS = 10_000
+#: Most workers one run may ask for.
 MAX_WORKERS = 1024
 
 #: Exit codes of ``llcps experiment run``.
@@ -71,7 +70,7 @@ _PRESET_HELP = "Grid to run: " + "; ".join(
 )
 def run_cli(
     ctx: typer.Context,
-    preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = "paper",  # type: ignore[valid-type, assignment]
+    preset: Annotated[PresetName, typer.Option("--preset", help=_PRESET_HELP)] = PRESETS.default,  # type: ignore[valid-type, assignment]
     seeds: Annotated[
         Optional[int],
         typer.Option("--seeds", metavar="N", min=1, max=MAX_SEEDS, help="How many seeds (default: the preset's count).", show_default=False),
@@ -116,16 +115,11 @@ def run_cli(
     kill, run the same command again. Results are identical for any --workers and
     either engine. Exit code 1 when a task failed.
     """
-    from llcps.experiments.runner import default_out_dir, results_table, run_experiment, write_report
+    from llcps.jobs.experiment import run_experiment_job  # the runner and the report load here, not at start
+    from llcps.report.build import default_out_dir
 
     name = str(preset.value)  # type: ignore[attr-defined]
-    n_workers = workers if workers is not None else cpu_count()
-    if variants is not None and (seeds is not None or first_seed):
-        raise LlcpsError(
-            "--variants chooses the seeds itself (seed N solves variant N): drop --seeds and --first-seed",
-            hint=f"e.g. `llcps experiment run --preset {name} --variants 100:110`",
-        )
-    seed_range = _seeds(name, seeds, first_seed) if variants is None else _variant_seeds(variants)
+    scenes = None if variants is None else parse_range(variants)
     target = check_output_dir(out_dir if out_dir is not None else default_out_dir(name), what="--out-dir")
     try:
         with open_store(ctx, create=create) as store:
@@ -134,32 +128,35 @@ def run_cli(
                 def report(done: int, total: int, label: str) -> None:
                     bar(f"tasks (last: {label})" if label else "tasks", done, total)
 
-                summary = run_experiment(
-                    store,
+                result = run_experiment_job(
+                    store=store,
                     preset=name,
-                    seeds=seed_range,
-                    variants=variants is not None,
-                    workers=n_workers,
+                    seeds=seeds,
+                    first_seed=first_seed,
+                    variants=scenes,
+                    workers=workers if workers is not None else cpu_count(),
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
-                    progress=report,
                     cache=cache,
+                    out_dir=target,
+                    html=html,
+                    progress=report,
+                    report_progress=bar,
                 )
-            if summary.status == "interrupted":
-                message(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
-                raise typer.Exit(EXIT_INTERRUPTED)
-            table = results_table(store, name, summary.seeds, variants=variants is not None)
-            for label, error in summary.failed:
-                message(f"task {label} failed: {error}")
-            if summary.blocked:
-                message(f"{summary.blocked} sequence(s) not run: their pretraining failed")
-            if len(table) == 0:
-                raise LlcpsError("no results to report", hint="see the failed tasks above")
-            with progress_display("report") as bar:
-                out_dir, analysis = write_report(table, target, store=store, html=html, progress=bar)
     except KeyboardInterrupt:
         message("interrupted: every task imported so far is kept; run the same command to resume")
         raise typer.Exit(EXIT_INTERRUPTED) from None
+    summary = result.summary
+    if summary.status == "interrupted":
+        message(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
+        raise typer.Exit(EXIT_INTERRUPTED)
+    for label, error in summary.failed:
+        message(f"task {label} failed: {error}")
+    if summary.blocked:
+        message(f"{summary.blocked} sequence(s) not run: their pretraining failed")
+    if result.report_dir is None or result.analysis is None:
+        raise LlcpsError("no results to report", hint="see the failed tasks above")
+    out_dir, analysis = result.report_dir, dict(result.analysis)
     if as_json:
         print_json({"run": summary.as_json(), "report_dir": str(out_dir), **analysis})
     else:
@@ -221,40 +218,29 @@ def report_cli(
 
     From a results directory, the provenance and films it already holds are used; with
     --from-db they are read (and filmed) from the store."""
-    from llcps.experiments.reporting import select_scenes
-    from llcps.experiments.results import ResultsTable, table_from_episodes
-    from llcps.experiments.runner import default_out_dir, one_preset, with_baseline, write_report
+    from llcps.jobs.experiment import report_experiment_job  # the analysis and the plots load here, not at start
 
     if (source is None) == (not from_db):
         raise LlcpsError("give a results directory or --from-db (one of them)", hint="e.g. `llcps experiment report results/paper`")
-
     scenes = None if variants is None else parse_range(variants)
 
-    def chosen(table: "ResultsTable") -> tuple[str, "ResultsTable", Path]:
-        name, mine = one_preset(table, preset)
-        if baseline_preset is not None:
-            mine = with_baseline(mine, table, baseline_preset)
-        mine, left_out = select_scenes(mine, scenes)
-        if left_out:
-            message(
-                f"{left_out} episode(s) on other scenes left out: a report pairs seeds over one set of scenes"
-                + ("" if scenes is not None else " (report scene variants with --variants A:B)")
-            )
-        target = out_dir
-        if target is None:
-            target = default_out_dir(name) if source is None else (source if source.is_dir() else source.parent)
-        return name, mine, check_output_dir(target, what="--out-dir")
+    def build(results: Any, bar: Any) -> Any:
+        return report_experiment_job(
+            source=results, preset=preset, baseline_preset=baseline_preset, variants=scenes, out_dir=out_dir, html=html, progress=bar
+        )
 
     with progress_display("report", "reading the results") as bar:
         if source is not None:
-            _, table, target = chosen(ResultsTable.read(source))
-            written, analysis = write_report(
-                table, target, source_dir=source if source.is_dir() else source.parent, html=html, progress=bar
-            )
+            result = build(source, bar)
         else:
             with open_store(ctx) as store:
-                _, table, target = chosen(table_from_episodes(store.list_episodes()).table)
-                written, analysis = write_report(table, target, store=store, html=html, progress=bar)
+                result = build(store, bar)
+    if result.left_out:
+        message(
+            f"{result.left_out} episode(s) on other scenes left out: a report pairs seeds over one set of scenes"
+            + ("" if scenes is not None else " (report scene variants with --variants A:B)")
+        )
+    written, analysis = result.report_dir, dict(result.analysis)
     if as_json:
         print_json({"report_dir": str(written), **analysis})
     else:
@@ -263,26 +249,9 @@ def report_cli(
         show_results(analysis)
 
 
-def _variant_seeds(text: str) -> range:
-    chosen = parse_range(text)
-    if chosen.stop - 1 > MAX_SEED or len(chosen) > MAX_SEEDS:
-        raise LlcpsError(
-            f"variants {chosen.start}..{chosen.stop - 1} cannot pair with seeds: at most {MAX_SEEDS} seeds up to {MAX_SEED}",
-            hint="choose a smaller range",
-        )
-    return chosen
-
-
-def _seeds(preset: str, count: int | None, first: int) -> range:
-    n = PRESETS[preset].default_seeds if count is None else count
-    if first + n - 1 > MAX_SEED:
-        raise LlcpsError(f"seeds {first}..{first + n - 1} go beyond the largest seed {MAX_SEED}", hint="lower --first-seed or --seeds")
-    return range(first, first + n)
-
-
 def show_provenance(analysis: dict[str, Any]) -> None:
     """Where the results' runs ran, one line per distinct environment (stderr)."""
-    from llcps.experiments.artifacts import provenance_line
+    from llcps.report.artifacts import provenance_line  # the report package loads here, not at start
 
     environments = analysis.get("provenance") or []
     if not environments:

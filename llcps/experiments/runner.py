@@ -1,7 +1,7 @@
 """The experiment runner: a preset's grid, run as tasks on an engine, into one store.
 
 A run plans its tasks (:mod:`llcps.experiments.tasks`), leaves out those the store
-already holds, and schedules the rest on an engine (:mod:`llcps.experiments.engines`:
+already holds, and schedules the rest on an engine (:mod:`llcps.experiments.executors`:
 a local process pool or Ray) that runs :func:`llcps.experiments.worker.execute_task`;
 the scheduler (:mod:`llcps.experiments.scheduler`) imports each result as it
 arrives. Results are identical for any number of workers, either engine, with or
@@ -14,9 +14,8 @@ import time
 from typing import Any, Iterable
 
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.experiments.engines import ENGINES, EngineError, LocalEngine, RayEngine, make_engine
-from llcps.experiments.grid import Preset, get_preset, validate_preset
-from llcps.experiments.reporting import default_out_dir, one_preset, results_table, with_baseline, write_report
+from llcps.experiments.executors import ENGINES, EngineError, LocalEngine, RayEngine, make_engine
+from llcps.experiments.presets import Preset, get_preset, validate_preset
 from llcps.experiments.scheduler import ProgressCallback, RunSummary, check_partial, existing_branches, schedule
 from llcps.experiments.tasks import PretrainTask, SequenceTask, Task, TaskOutput, plan_tasks, pretrain_subset, task_seed
 from llcps.experiments.worker import COMMAND, execute_task
@@ -52,7 +51,7 @@ def run_experiment(
 
     Args:
         store: the experience store; the only writer of this run.
-        preset: a :class:`Preset` or a name in :data:`~llcps.experiments.grid.PRESETS`.
+        preset: a :class:`Preset` or a name in :data:`~llcps.experiments.presets.PRESETS`.
         seeds: a count (seeds ``0..n-1``), explicit seeds, or None for the preset's default.
         variants: seed N solves its scenarios in scene variant N (paired with the seeds,
             not crossed); otherwise every seed solves the canonical scenes (variant 0).
@@ -135,14 +134,9 @@ __all__ = [
     "Task",
     "TaskOutput",
     "cache_url",
-    "default_out_dir",
     "execute_task",
     "make_engine",
-    "one_preset",
     "plan_tasks",
     "pretrain_subset",
-    "results_table",
     "run_experiment",
-    "with_baseline",
-    "write_report",
 ]

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable
 
 from llcps.errors import LlcpsError, StoreError, UnknownNameError
-from llcps.experiments.engines import Engine, EngineError
+from llcps.experiments.executors import Engine, EngineError
 from llcps.experiments.tasks import PretrainTask, SequenceTask, Task
 from llcps.experiments.transfer import Payload, export_branches, import_payload
 from llcps.store import Store

@@ -18,7 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Iterable
 
-from llcps.experiments.grid import SCENARIO_SEQUENCE, Preset, Sequence, _seed_list, pretrain_branch_name
+from llcps.domain import ACTIONS
+from llcps.experiments.design import SCENARIO_SEQUENCE, Sequence, pretrain_branch_name
+from llcps.experiments.presets import Preset, seed_list
 from llcps.experiments.transfer import Payload
 
 #: Stream tag of :func:`pretrain_subset` (kept apart from every other use of the seed).
@@ -99,7 +101,7 @@ def plan_tasks(
 
     ``variants``: seed N solves scene variant N (see :meth:`Preset.sequences`).
     """
-    chosen = _seed_list(preset.default_seeds if seeds is None else seeds)
+    chosen = seed_list(preset.default_seeds if seeds is None else seeds)
     sequences = preset.sequences(chosen, variants=variants)
     tasks: list[Task] = []
     budget = preset.exploration_budget()
@@ -120,9 +122,7 @@ def pretrain_subset(pool: Iterable[Any], size: int, *, seed: int) -> list[Any]:
     one of its remaining trials, so 4 points are one per action when the pool has
     every action. The result keeps the pool's order.
     """
-    import numpy as np
-
-    from llcps.domain import ACTIONS
+    import numpy as np  # not at import: the CLI loads this module to start
 
     trials = list(pool)
     if size >= len(trials):

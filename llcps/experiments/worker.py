@@ -24,11 +24,13 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from llcps.errors import LlcpsError
-from llcps.experiments.grid import SCENARIO_SEQUENCE
+from llcps.cps.episode import SolveConfig
+from llcps.experiments.design import SCENARIO_SEQUENCE
 from llcps.experiments.tasks import PretrainTask, SequenceTask, Task, TaskOutput, pretrain_subset
 from llcps.experiments.transfer import Payload, export_branches, import_payload, inverse
 from llcps.store import MAIN_BRANCH, PRETRAIN, Store
@@ -117,7 +119,7 @@ def worker_cache(url: str) -> Any:
     """This worker's handle on the physics cache of the store at ``url``, kept across tasks."""
     cache = _caches.get(url)
     if cache is None:
-        from llcps.store.physics_cache import StorePhysicsCache
+        from llcps.store.physics_cache import StorePhysicsCache  # loads llcps.sim: not where the CLI starts
 
         store = Store.open(url)
         cache = StorePhysicsCache(store.engine)
@@ -147,9 +149,7 @@ def execute_task(task: Task) -> TaskOutput:
 
 
 def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
-    from dataclasses import replace
-
-    from llcps.pretrain import pretrain
+    from llcps.pretrain import pretrain  # the simulator: not loaded where the CLI starts
 
     own = {size: name for size, name in zip(task.sizes, task.branches)}
     pool_branch = own.get(task.pool, POOL_BRANCH)
@@ -176,8 +176,7 @@ def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
 
 
 def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str, ...], dict[str, Any] | None]:
-    from llcps.cps.agent import solve
-    from llcps.cps.episode import SolveConfig
+    from llcps.cps.agent import solve  # the simulator: not loaded where the CLI starts
 
     if task.base is None:
         raise LlcpsError(f"task {task.label} was sent without its pretraining trials")

@@ -11,8 +11,10 @@ import json
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from llcps.experiments.grid import SCENARIO_SEQUENCE
-from llcps.experiments.results import ResultRow, ResultsTable
+from llcps.analysis.results import ResultsTable
+from llcps.cps.film import episode_shots, reenact
+from llcps.experiments.design import SCENARIO_SEQUENCE
+from llcps.experiments.rows import ResultRow
 from llcps.provenance import Provenance
 from llcps.store import Store
 
@@ -73,8 +75,6 @@ def film_resolutions(
     Returns:
         scenario -> GIF path, for the scenarios with a solved episode.
     """
-    from llcps.cps.film import episode_shots, reenact
-
     films: dict[str, Path] = {}
     target = out_dir / FILMS_DIR
     for scenario in [s for s in SCENARIO_SEQUENCE if any(r.scenario == s for r in table)]:

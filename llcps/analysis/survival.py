@@ -15,7 +15,7 @@ Here each cell's episodes are a right-censored sample of trials-to-resolution:
   difference of restricted means with a 95% interval from a bootstrap over seeds
   resampled as pairs (``scipy.stats.bootstrap``, ``paired=True``).
 
-Every p-value the report makes is corrected together (:func:`llcps.experiments.stats.adjust`).
+Every p-value the report makes is corrected together (:func:`llcps.analysis.stats.adjust`).
 """
 
 from __future__ import annotations
@@ -28,9 +28,12 @@ from typing import Iterable, Sequence
 import numpy as np
 from scipy import stats as sps
 
-from llcps.experiments.grid import PRESETS, WHOLE_SPACE, condition_rank
-from llcps.experiments.results import ResultRow, ResultsTable
-from llcps.experiments.stats import DEFAULT_RESAMPLES, _group, _check_metric, cell_rng, figure2_order, pct_change
+from llcps.analysis.figure2 import figure2_order
+from llcps.analysis.results import ResultsTable, group_rows
+from llcps.analysis.stats import DEFAULT_RESAMPLES, cell_rng, pct_change
+from llcps.experiments.design import condition_rank
+from llcps.experiments.presets import PRESETS, WHOLE_SPACE
+from llcps.experiments.rows import ResultRow, check_metric
 
 #: The time scale of survival: exploration trials until the novelty was resolved.
 SURVIVAL_METRIC = "exploration_trials"
@@ -152,7 +155,7 @@ class SurvivalCurve:
 def survival_curves(table: ResultsTable) -> tuple[SurvivalCurve, ...]:
     """One Kaplan–Meier curve per (model, measure, pretraining size, condition, scenario)."""
     out = []
-    groups = _group(table, lambda r: (r.model, r.measure, r.pretrain_size, r.condition, r.scenario))
+    groups = group_rows(table, lambda r: (r.model, r.measure, r.pretrain_size, r.condition, r.scenario))
     for (model, measure, size, condition, scenario), part in sorted(
         groups.items(), key=lambda kv: (*figure2_order(*kv[0][:3], kv[0][4]), condition_rank(kv[0][3]))
     ):
@@ -238,9 +241,9 @@ def survival_table(
     a restricted mean refits two Kaplan–Meier curves per resample, so it defaults to
     a fifth of the Figure-2 intervals' resamples.
     """
-    _check_metric(SURVIVAL_METRIC)
+    check_metric(SURVIVAL_METRIC)
     out: list[SurvivalComparison] = []
-    groups = _group(table, lambda r: (r.model, r.measure, r.pretrain_size, r.scenario))
+    groups = group_rows(table, lambda r: (r.model, r.measure, r.pretrain_size, r.scenario))
     for (model, measure, size, scenario), part in sorted(groups.items(), key=lambda kv: figure2_order(*kv[0])):
         upd = {r.seed: r for r in part if r.condition == "update"}
         res = {r.seed: r for r in part if r.condition == "reset"}

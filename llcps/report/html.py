@@ -3,7 +3,7 @@
 Everything is inside the file: styles inline, plots and films as data URIs, so the
 page can be mailed, attached or opened offline. It holds the overview, where the
 runs ran, the generated summary, our Figure 2 beside the paper's, every plot the
-report made (whatever :func:`~llcps.experiments.report.build_report` drew, survival
+report made (whatever :func:`~llcps.report.build.build_report` drew, survival
 curves included when the statistics offer them) and a film of a resolving trial
 per scenario.
 """
@@ -13,10 +13,10 @@ from __future__ import annotations
 import base64
 import html
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
-if TYPE_CHECKING:
-    from llcps.experiments.report import Analysis, TableBlock
+from llcps.analysis.analyse import Analysis
+from llcps.report.tables import TableBlock
 
 _MIME = {".png": "image/png", ".gif": "image/gif", ".svg": "image/svg+xml", ".jpg": "image/jpeg"}
 
@@ -44,7 +44,7 @@ def _e(text: Any) -> str:
     return html.escape(str(text), quote=True)
 
 
-def _table(block: "TableBlock", *, table_id: str, paper_columns: Sequence[int] = ()) -> str:
+def _table(block: TableBlock, *, table_id: str, paper_columns: Sequence[int] = ()) -> str:
     paper_class = ' class="paper"'
     head = "".join(f"<th{paper_class if i in paper_columns else ''}>{_e(h)}</th>" for i, h in enumerate(block.header))
     rows = []
@@ -62,12 +62,12 @@ def _figure(path: Path, caption: str, alt: str) -> str:
 
 
 def render_html(
-    analysis: "Analysis",
+    analysis: Analysis,
     *,
     overview: str,
     method: str,
     summary: Sequence[str],
-    figure2: Sequence["TableBlock"],
+    figure2: Sequence[TableBlock],
     plots: Mapping[str, tuple[str, Path]],
     films: Mapping[str, Path],
     provenance: Sequence[str],

@@ -1,4 +1,4 @@
-"""Engines that run experiment tasks: a local process pool, or Ray.
+"""Executors of experiment tasks: a local process pool, or Ray (the run's ``--engine``).
 
 Both offer the same operations to the scheduler: submit a task, wait for some to
 finish, collect one's result, tell which running sequences have finished their
@@ -8,6 +8,7 @@ aborting). The task function is :func:`llcps.experiments.worker.execute_task`.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor
@@ -57,8 +58,6 @@ class LocalEngine:
     name = "local"
 
     def __init__(self, workers: int) -> None:
-        import multiprocessing
-
         context = multiprocessing.get_context("spawn")
         self.workers = workers
         self._events = context.SimpleQueue()

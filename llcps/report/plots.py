@@ -21,22 +21,15 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from llcps.cps.candidates import candidate_space_size
-from llcps.experiments.grid import (
-    SCENARIO_SEQUENCE,
-    cell_title,
-    condition_rank,
-    measure_rank,
-    model_rank,
-)
-from llcps.experiments.results import ResultsTable
-from llcps.experiments.stats import (
-    ALPHA,
-    FIGURE2_SCENARIOS,
-    PAPER_FIGURE2,
-    CumulativePoint,
-    Figure2Row,
-)
-from llcps.experiments.survival import SurvivalCurve
+from llcps.analysis.cumulative import CumulativePoint
+from llcps.analysis.figure2 import Figure2Row
+from llcps.analysis.paper import FIGURE2_SCENARIOS, PAPER_FIGURE2
+from llcps.analysis.results import ResultsTable
+from llcps.analysis.stats import ALPHA
+from llcps.analysis.survival import SurvivalCurve
+from llcps.experiments.design import SCENARIO_SEQUENCE, cell_title, condition_rank
+from llcps.experiments.presets import measure_rank, model_rank
+from llcps.report.formatting import format_pct
 
 #: What the stars of Figure 2 mean, printed under the heatmap.
 STAR_NOTE = (
@@ -69,15 +62,6 @@ def save(fig: Figure, stem: str | Path) -> tuple[Path, ...]:
             fig.savefig(path, format=fmt, dpi=120, bbox_inches="tight", metadata=metadata)
             paths.append(path)
     return tuple(paths)
-
-
-def format_pct(value: float | None) -> str:
-    """A percent change as the paper prints it: ``-17%``, ``+inf%``, ``n/a``."""
-    if value is None or math.isnan(value):
-        return "n/a"
-    if math.isinf(value):
-        return "+inf%" if value > 0 else "-inf%"
-    return f"{value:+.0f}%" if round(value) != 0 else "0%"
 
 
 def _log2_ratio(pct: float | None) -> float:

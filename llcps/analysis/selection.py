@@ -1,16 +1,14 @@
-"""Which results a report covers, and where it is written: the glue between a run and its report."""
+"""Which results one report covers: a preset's rows from the store, one set of scenes,
+one preset, and the random-order baseline run beside it."""
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Iterable
 
+from llcps.analysis.results import ResultsTable, table_from_episodes
+from llcps.analysis.versus_random import BASELINE_MODEL
 from llcps.errors import LlcpsError
-from llcps.experiments.results import ResultsTable, table_from_episodes
 from llcps.store import Store
-
-#: Where ``llcps experiment run`` writes a preset's report unless told otherwise.
-RESULTS_DIR = Path("results")
 
 
 def results_table(
@@ -90,8 +88,6 @@ def with_baseline(table: ResultsTable, source: ResultsTable, baseline_preset: st
     beside it in the same store (``random``); the random order uses no training data,
     so its rows stand for any pretraining size.
     """
-    from llcps.experiments.stats import BASELINE_MODEL
-
     extra = source.filter(preset=baseline_preset, model=BASELINE_MODEL)
     if len(extra) == 0:
         raise LlcpsError(
@@ -101,46 +97,4 @@ def with_baseline(table: ResultsTable, source: ResultsTable, baseline_preset: st
     return ResultsTable([*table, *extra])
 
 
-def default_out_dir(preset: str) -> Path:
-    """``results/<preset>``."""
-    return RESULTS_DIR / preset
-
-
-def write_report(
-    table: ResultsTable,
-    out_dir: str | Path,
-    *,
-    store: Store | None = None,
-    source_dir: Path | None = None,
-    html: bool = False,
-    progress: Callable[[str, int, int], None] | None = None,
-) -> tuple[Path, dict[str, Any]]:
-    """Build every report file into ``out_dir``; returns it and the analysis as JSON data.
-
-    With the ``store`` the results came from, the report records where their runs ran
-    and, with ``html``, films a resolving trial per scenario for report.html. Without a
-    store, where the runs ran comes from the report directory the results were read
-    from (``source_dir``), else from what ``out_dir`` holds.
-    """
-    import json
-
-    from llcps.experiments import artifacts
-    from llcps.experiments.report import build_report
-
-    provenance = films = None
-    if store is None and source_dir is not None and Path(source_dir).resolve() != Path(out_dir).resolve():
-        provenance = artifacts.read_provenance(Path(source_dir)) or None
-    if store is not None:
-        provenance = artifacts.table_provenance(store, table)
-        if html:
-            films = artifacts.film_resolutions(store, table, Path(out_dir), progress=progress)
-    if progress is not None:
-        progress("statistics and plots", 0, 0)
-    paths = build_report(table, out_dir, provenance=provenance, films=films, html=html)
-    analysis = json.loads(paths.figure2_json.read_text(encoding="utf-8"))
-    analysis["provenance"] = provenance if provenance is not None else artifacts.read_provenance(paths.out_dir)
-    analysis["report_html"] = None if paths.report_html is None else str(paths.report_html)
-    return paths.out_dir, analysis
-
-
-__all__ = ["RESULTS_DIR", "default_out_dir", "one_preset", "results_table", "select_scenes", "with_baseline", "write_report"]
+__all__ = ["one_preset", "results_table", "select_scenes", "with_baseline"]

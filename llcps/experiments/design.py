@@ -1,4 +1,4 @@
-"""The experiment grid: which sequences of scenarios an experiment runs, and their branches.
+"""The experimental design: cells, sequences and the branch names they run on.
 
 The paper's evaluation (Figure 2) crosses world model x measure x pretraining size x
 condition, each *sequence* solving scenario1 -> scenario2 -> scenario3 in the novelty
@@ -7,24 +7,16 @@ condition. ``update`` lets the world model keep every trial across the sequence;
 
 Every sequence gets a deterministic branch name, so its trials stay inspectable and a
 re-run can tell which sequences are complete. The name encodes the whole cell, and
-:func:`parse_branch` reads it back: results are rebuilt from the store alone.
-
-Names of world models and measures are plain strings here; :func:`validate_preset`
-checks them against the registries in :mod:`llcps.models`. The paper's models and
-measures, the longest branch name and the size of the candidate space each come from
-the one place that defines them.
+:func:`parse_branch` reads it back: results are rebuilt from the store alone. Which
+cells a run crosses is a preset's choice (:mod:`llcps.experiments.presets`).
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Iterable
 
-from llcps.cps.episode import DEFAULT_MEASURE, DEFAULT_MODEL
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.models.measures import PAPER_MEASURES
-from llcps.models.registry import PAPER_MODELS
 from llcps.store.tables import MAX_BRANCH_NAME
 
 #: The order a sequence solves the scenarios in (the paper's order).
@@ -32,8 +24,6 @@ SCENARIO_SEQUENCE: tuple[str, ...] = ("scenario1", "scenario2", "scenario3")
 #: ``update``: the world model keeps training across scenarios; ``reset``: the training
 #: data goes back to the pretraining set before each scenario (a branch from that point).
 EXPERIMENT_CONDITIONS: tuple[str, ...] = ("update", "reset")
-#: 200 pretraining points ("Apriori Training") and 4 ("No Apriori Training").
-PAPER_PRETRAIN_SIZES: tuple[int, ...] = (200, 4)
 
 #: Prefix of every experiment branch; nothing else in a store starts with it.
 BRANCH_PREFIX = "exp"
@@ -102,7 +92,7 @@ class Sequence:
 
     ``variant`` is the scene variant every scenario of the sequence is solved in (0: the
     canonical scenes). A run over scene variants pairs them with seeds: seed N solves
-    variant N (:meth:`Preset.sequences`), so each seed draws both its pretraining and its
+    variant N (:meth:`~llcps.experiments.presets.Preset.sequences`), so each seed draws both its pretraining and its
     scenes, and update/reset or model/random stay paired by seed.
     """
 
@@ -221,196 +211,16 @@ def is_valid_branch_name(name: str) -> bool:
     return bool(_BRANCH_CHARS.match(name)) and ".." not in name and 0 < len(name) <= MAX_BRANCH_NAME
 
 
-@dataclass(frozen=True)
-class Preset:
-    """A named grid: models x measures x pretraining sizes x conditions, and a default seed count."""
-
-    name: str
-    models: tuple[str, ...]
-    measures: tuple[str, ...]
-    pretrain_sizes: tuple[int, ...]
-    conditions: tuple[str, ...] = EXPERIMENT_CONDITIONS
-    default_seeds: int = 20
-    #: Most exploration trials per episode (an unsolved episode records this many);
-    #: None: the whole candidate space (:func:`llcps.cps.candidates.candidate_space_size`).
-    budget: int | None = 150
-    #: Random interactions drawn per seed; every pretraining set of the seed is this pool
-    #: or a subset of it (the paper's 4 points are one per action from its 200).
-    pretrain_pool: int = 200
-    #: Exploration trials between refits of the world model within an episode.
-    refit_every: int = 1
-
-    def __post_init__(self) -> None:
-        if isinstance(self.refit_every, bool) or not isinstance(self.refit_every, int) or self.refit_every < 1:
-            raise LlcpsError(f"preset {self.name!r}: refit_every must be a positive integer, not {self.refit_every!r}")
-        if self.budget is not None and (isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 0):
-            raise LlcpsError(f"preset {self.name!r}: the budget must be a non-negative integer, not {self.budget!r}")
-        if self.pretrain_sizes and self.pretrain_pool < max(self.pretrain_sizes):
-            raise LlcpsError(
-                f"preset {self.name!r}: a pool of {self.pretrain_pool} random interactions cannot give "
-                f"a pretraining set of {max(self.pretrain_sizes)}",
-                hint="make pretrain_pool at least the largest pretraining size",
-            )
-
-    def exploration_budget(self) -> int:
-        """The budget as a number (None resolves to the size of the candidate space)."""
-        if self.budget is not None:
-            return self.budget
-        from llcps.cps.candidates import candidate_space_size  # builds the scenarios' scenes
-
-        return candidate_space_size()
-
-    def cells(self) -> tuple[Cell, ...]:
-        """Every cell, in a fixed order (model, measure, pretraining size, condition)."""
-        return tuple(
-            Cell(model, measure, size, condition)
-            for model in self.models
-            for measure in self.measures
-            for size in self.pretrain_sizes
-            for condition in self.conditions
-        )
-
-    def sequences(self, seeds: int | Iterable[int] | None = None, *, variants: bool = False) -> tuple[Sequence, ...]:
-        """Every sequence of the grid; seeds grouped outermost so a partial run covers all cells.
-
-        Args:
-            seeds: a count ``n`` (seeds ``0..n-1``), explicit seeds, or ``None`` for the default count.
-            variants: solve seed N's scenarios in scene variant N (paired, not crossed:
-                one variant per seed); otherwise every seed uses the canonical scenes.
-        """
-        chosen = _seed_list(self.default_seeds if seeds is None else seeds)
-        return tuple(
-            Sequence(self.name, cell, seed, seed if variants else 0) for seed in chosen for cell in self.cells()
-        )
-
-
-def _seed_list(seeds: int | Iterable[int]) -> tuple[int, ...]:
-    if isinstance(seeds, bool):
-        raise LlcpsError(f"seeds must be a count or a list of integers, not {seeds!r}")
-    if isinstance(seeds, int):
-        if seeds < 1:
-            raise LlcpsError(f"the number of seeds must be at least 1, not {seeds}", hint="pass --seeds 1 or more")
-        return tuple(range(seeds))
-    chosen = tuple(seeds)
-    if not chosen or len(set(chosen)) != len(chosen):
-        raise LlcpsError("seeds must be a non-empty list without repeats")
-    return chosen
-
-
-_EXTRA_MODELS = ("random", "logreg", "forest")
-
-#: A budget larger than any scenario's candidate space: the episode ends when every
-#: candidate was tried (an unsolved episode records how many there were).
-WHOLE_SPACE = 100_000
-
-#: Exploration trials between world-model refits in the paper's grids. The paper updates
-#: its models during exploration without saying how often; refitting the network after
-#: every trial would make it 80 % of a grid's cost (0.6 s a refit at 200-500 trials).
-GRID_REFIT_EVERY = 10
-
-PRESETS: dict[str, Preset] = {
-    "paper": Preset(
-        "paper", PAPER_MODELS, PAPER_MEASURES, PAPER_PRETRAIN_SIZES, default_seeds=20, refit_every=GRID_REFIT_EVERY
-    ),
-    "full": Preset(
-        "full",
-        PAPER_MODELS + _EXTRA_MODELS,
-        PAPER_MEASURES + ("goal-directed",),
-        PAPER_PRETRAIN_SIZES,
-        default_seeds=20,
-        refit_every=GRID_REFIT_EVERY,
-    ),
-    # Model-guided exploration against no model, scenario by scenario: each episode starts
-    # from the seed's 200 random pretraining interactions (condition reset), with the
-    # whole candidate space as budget so that every episode that can be solved is.
-    "vs_random": Preset(
-        "vs_random",
-        (DEFAULT_MODEL, "random"),
-        (DEFAULT_MEASURE,),
-        (200,),
-        conditions=("reset",),
-        default_seeds=20,
-        budget=WHOLE_SPACE,
-        pretrain_pool=200,
-    ),
-    # Lifelong learning with the default model and measure: does the exploration of the
-    # earlier scenarios (update) shorten the later ones against the pretraining set alone
-    # (reset)? The whole candidate space as budget, 200 pretraining interactions.
-    "lifelong": Preset(
-        "lifelong",
-        (DEFAULT_MODEL,),
-        (DEFAULT_MEASURE,),
-        (200,),
-        default_seeds=20,
-        budget=WHOLE_SPACE,
-        pretrain_pool=200,
-    ),
-    # Every world model under goal-directed from 200 pretraining interactions (reset), the
-    # whole candidate space as budget: the evidence for the default model.
-    "models": Preset(
-        "models",
-        PAPER_MODELS + _EXTRA_MODELS,
-        (DEFAULT_MEASURE,),
-        (200,),
-        conditions=("reset",),
-        default_seeds=5,
-        budget=WHOLE_SPACE,
-        pretrain_pool=200,
-    ),
-    # The no-model baseline of the paper grid, at its budget: the random order uses no
-    # training data, so 4 pretraining points stand for any number (`experiment report
-    # --baseline-preset random` adds it to the paper grid's comparison).
-    "random": Preset(
-        "random", ("random",), ("most-changes",), (4,), conditions=("reset",), default_seeds=20, budget=150, pretrain_pool=4
-    ),
-    # Small enough for the test suite: 8 random interactions per seed, 5 exploration trials per episode.
-    "smoke": Preset("smoke", ("nb",), ("most-changes",), (4,), default_seeds=2, budget=5, pretrain_pool=8),
-}
-
-
-def _rank(order: tuple[str, ...], name: str) -> tuple[int, str]:
+def rank_by(order: tuple[str, ...], name: str) -> tuple[int, str]:
+    """Sort key: the position of ``name`` in ``order``; names not in it come after, by name."""
     return (order.index(name), "") if name in order else (len(order), name)
-
-
-def model_rank(model: str) -> tuple[int, str]:
-    """Sort key putting models in the ``full`` preset's order, unknown ones after by name."""
-    return _rank(PRESETS["full"].models, model)
-
-
-def measure_rank(measure: str) -> tuple[int, str]:
-    """Sort key putting measures in the ``full`` preset's order (the paper's first)."""
-    return _rank(PRESETS["full"].measures, measure)
 
 
 def scenario_rank(scenario: str) -> tuple[int, str]:
     """Sort key following :data:`SCENARIO_SEQUENCE`."""
-    return _rank(SCENARIO_SEQUENCE, scenario)
+    return rank_by(SCENARIO_SEQUENCE, scenario)
 
 
 def condition_rank(condition: str) -> tuple[int, str]:
     """Sort key putting ``update`` before ``reset``."""
-    return _rank(EXPERIMENT_CONDITIONS, condition)
-
-
-def get_preset(name: str) -> Preset:
-    """The preset called ``name``, or an error listing the known ones."""
-    try:
-        return PRESETS[name]
-    except KeyError:
-        raise UnknownNameError("preset", name, tuple(PRESETS)) from None
-
-
-def validate_preset(preset: Preset) -> None:
-    """Check a preset's model and measure names against the registries.
-
-    Imports :mod:`llcps.models` only here, so reading results never pays for torch.
-    """
-    from llcps.models import WORLD_MODELS
-    from llcps.models.measures import MEASURES
-
-    for model in preset.models:
-        if model not in WORLD_MODELS:
-            raise UnknownNameError("world model", model, tuple(WORLD_MODELS))
-    for measure in preset.measures:
-        if measure not in MEASURES:
-            raise UnknownNameError("measure", measure, tuple(MEASURES))
+    return rank_by(EXPERIMENT_CONDITIONS, condition)

@@ -1,77 +1,37 @@
-"""The long-format results table: one row per (sequence, scenario).
+"""The results table: every result row of an experiment, read back and checked.
 
 Everything downstream (statistics, plots, report) reads this table and nothing else,
 so a report can be rebuilt from a CSV, a JSON file or the experience store without
-re-running a single trial. The table is a tuple of frozen rows; numpy arrays are
-made on demand (no pandas: the table is small and its columns are fixed).
+re-running a single trial. The table is a tuple of frozen rows
+(:class:`~llcps.experiments.rows.ResultRow`); numpy arrays are made on demand (no
+pandas: the table is small and its columns are fixed). Reading validates every
+field, with one clear error per bad value; writing is the rows' own format.
 """
 
 from __future__ import annotations
 
 import csv
 import json
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping
+from typing import Any, Callable, Iterable, Iterator, Mapping, TypeVar
 
 import numpy as np
 
 from llcps.errors import LlcpsError
-from llcps.tabular import csv_value
-from llcps.experiments.grid import SCENARIO_SEQUENCE, Cell, Sequence, parse_branch
+from llcps.experiments.design import SCENARIO_SEQUENCE, Sequence, parse_branch
+from llcps.experiments.presets import PRESETS
+from llcps.experiments.rows import (
+    COLUMNS,
+    METRICS,
+    NOVELTY,
+    ResultRow,
+    row_records,
+    write_rows_csv,
+    write_rows_json,
+)
 
-#: Columns that can be analysed as "exploration" (the paper's Figure 2 uses time).
-METRICS: tuple[str, ...] = ("exploration_trials", "sim_seconds", "wall_seconds")
-#: The scenario condition experiment episodes run in.
-NOVELTY = "novelty"
-
-
-@dataclass(frozen=True)
-class ResultRow:
-    """One scenario of one sequence: how much exploration it took and whether it solved."""
-
-    preset: str
-    model: str
-    measure: str
-    pretrain_size: int
-    condition: str
-    seed: int
-    scenario: str
-    solved: bool
-    exploration_trials: int
-    sim_seconds: float
-    wall_seconds: float
-    episode_id: int | None
-    branch: str
-    #: The scene variant (0: the canonical scene).
-    variant: int = 0
-
-    @property
-    def cell(self) -> Cell:
-        return Cell(self.model, self.measure, self.pretrain_size, self.condition)
-
-    @property
-    def sequence(self) -> Sequence:
-        return Sequence(self.preset, self.cell, self.seed, self.variant)
-
-    @property
-    def key(self) -> tuple[Sequence, str]:
-        """What identifies a row: at most one row per (sequence, scenario)."""
-        return (self.sequence, self.scenario)
-
-    def on_scenes(self, paired: bool) -> bool:
-        """Whether the row ran on the canonical scenes (variant 0) or, ``paired``, on its
-        seed's own variant (``experiment run --variants``); seed 0 is both."""
-        return self.variant == (self.seed if paired else 0)
-
-    def metric(self, name: str) -> float:
-        """The value of one of :data:`METRICS`."""
-        if name not in METRICS:
-            raise LlcpsError(f"unknown metric {name!r}", hint=f"choose one of: {', '.join(METRICS)}")
-        return float(getattr(self, name))
-
-
-COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(ResultRow))
+K = TypeVar("K")
 
 _PARSERS: dict[str, Callable[[str], Any]] = {
     "pretrain_size": int,
@@ -192,20 +152,10 @@ class ResultsTable:
 
     # -- serialisation ---------------------------------------------------------
     def to_records(self) -> list[dict[str, Any]]:
-        return [asdict(r) for r in self._rows]
+        return row_records(self._rows)
 
     def write_csv(self, path: str | Path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("w", newline="", encoding="utf-8") as fh:
-            writer = csv.DictWriter(fh, fieldnames=COLUMNS, lineterminator="\n")
-            writer.writeheader()
-            for record in self.to_records():
-                record["episode_id"] = "" if record["episode_id"] is None else record["episode_id"]
-                record["sim_seconds"] = repr(record["sim_seconds"])
-                record["wall_seconds"] = repr(record["wall_seconds"])
-                writer.writerow({k: csv_value(v) for k, v in record.items()})  # booleans as every export writes them
-        return path
+        return write_rows_csv(self._rows, path)
 
     @classmethod
     def read_csv(cls, path: str | Path) -> ResultsTable:
@@ -220,12 +170,7 @@ class ResultsTable:
             ) from None
 
     def write_json(self, path: str | Path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(
-            json.dumps({"columns": list(COLUMNS), "rows": self.to_records()}, indent=1) + "\n", encoding="utf-8"
-        )
-        return path
+        return write_rows_json(self._rows, path)
 
     @classmethod
     def read_json(cls, path: str | Path) -> ResultsTable:
@@ -348,3 +293,32 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
                 continue
         chosen[row.key] = (rank, row)
     return EpisodeImport(ResultsTable(row for _, row in chosen.values()), skipped)
+
+
+def group_rows(rows: Iterable[ResultRow], key: Callable[[ResultRow], K]) -> dict[K, list[ResultRow]]:
+    """Rows grouped by ``key``, each group in the rows' order."""
+    groups: dict[K, list[ResultRow]] = {}
+    for row in rows:
+        groups.setdefault(key(row), []).append(row)
+    return groups
+
+
+def by_seed(rows: Iterable[ResultRow], metric: str) -> dict[int, float]:
+    """seed -> the metric's value (one row per seed)."""
+    return {row.seed: row.metric(metric) for row in rows}
+
+
+def table_budget(table: ResultsTable) -> int | None:
+    """The exploration budget of the table's episodes, when its presets share one."""
+    budgets = {PRESETS[p].exploration_budget() if p in PRESETS else None for p in table.unique("preset")}
+    return budgets.pop() if len(budgets) == 1 else None
+
+
+__all__ = [
+    "EpisodeImport",
+    "ResultsTable",
+    "by_seed",
+    "group_rows",
+    "table_budget",
+    "table_from_episodes",
+]
