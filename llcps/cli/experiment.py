@@ -116,11 +116,14 @@ def run_cli(
     either engine. Exit code 1 when a task failed.
     """
     from llcps.jobs.experiment import run_experiment_job  # the runner and the report load here, not at start
+    from llcps.experiments.presets import get_preset, run_seeds
     from llcps.report.build import default_out_dir
 
     name = str(preset.value)  # type: ignore[attr-defined]
     scenes = None if variants is None else parse_range(variants)
     target = check_output_dir(out_dir if out_dir is not None else default_out_dir(name), what="--out-dir")
+    # The seeds are checked before the store opens, so bad options create no store file.
+    run_seeds(get_preset(name), seeds=seeds, first_seed=first_seed, variants=scenes)
     try:
         with open_store(ctx, create=create) as store:
             with progress_display(f"experiment {name}", "planning the tasks") as bar:
