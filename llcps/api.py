@@ -263,13 +263,16 @@ class Workbench:
         progress: Callable[[int, int], None] | None = None,
     ) -> tuple[PretrainSummary, list[FittedModel]]:
         """``llcps pretrain``: random interactions stored as trials, then world models fitted."""
-        from llcps.models import PAPER_MODELS
-        from llcps.models.persistence import fit_models
-        from llcps.pretrain import pretrain
+        from llcps.jobs.pretrain import INTERACTIONS, pretrain
 
-        summary = pretrain(self.store, branch=branch, n=trials, seed=seed, progress=progress)
-        fitted = fit_models(self.store, summary.branch, list(models or PAPER_MODELS), model_seed)
-        return summary, fitted
+        def report(phase: str, done: int = 0, total: int | None = None) -> None:
+            if progress is not None and phase == INTERACTIONS:
+                progress(done, total or 0)
+
+        result = pretrain(
+            store=self.store, branch=branch, trials=trials, seed=seed, models=models, model_seed=model_seed, progress=report
+        )
+        return result.summary, list(result.models)
 
     def solve(
         self,
