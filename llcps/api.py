@@ -238,9 +238,9 @@ class Workbench:
 
     def compare_runs(self, a: int, b: int) -> pd.DataFrame:
         """Runs ``a`` and ``b`` side by side: one row per field, with whether they agree."""
-        from llcps.store.runs import compare_runs
+        from llcps.jobs.inspect import compare_runs
 
-        comparison = compare_runs(self.store, a, b)
+        comparison = compare_runs(store=self.store, a=a, b=b)
         return pd.DataFrame(
             {
                 "field": [f.name for f in comparison.fields],
