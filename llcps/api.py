@@ -296,9 +296,9 @@ class Workbench:
 
     def replay(self, trial_id: int, *, gif: str | Path | None = None) -> ReplayReport:
         """``llcps replay``: re-execute a stored trial; ``.matches`` says whether it reproduced."""
-        from llcps.cps.replay import replay
+        from llcps.jobs.replay import replay
 
-        return replay(self.store, trial_id, gif=gif)
+        return replay(store=self.store, trial_id=trial_id, gif=gif)
 
     def experiment(
         self,
