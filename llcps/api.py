@@ -239,9 +239,9 @@ class Workbench:
 
     def compare_runs(self, a: int, b: int) -> pd.DataFrame:
         """Runs ``a`` and ``b`` side by side: one row per field, with whether they agree."""
-        from llcps.store.runs import compare_runs
+        from llcps.jobs.inspect import compare_runs
 
-        comparison = compare_runs(self.store, a, b)
+        comparison = compare_runs(store=self.store, a=a, b=b)
         return pd.DataFrame(
             {
                 "field": [f.name for f in comparison.fields],
@@ -264,13 +264,16 @@ class Workbench:
         progress: Callable[[int, int], None] | None = None,
     ) -> tuple[PretrainSummary, list[FittedModel]]:
         """``llcps pretrain``: random interactions stored as trials, then world models fitted."""
-        from llcps.models import PAPER_MODELS
-        from llcps.models.persistence import fit_models
-        from llcps.pretrain import pretrain
+        from llcps.jobs.pretrain import INTERACTIONS, pretrain
 
-        summary = pretrain(self.store, branch=branch, n=trials, seed=seed, progress=progress)
-        fitted = fit_models(self.store, summary.branch, list(models or PAPER_MODELS), model_seed)
-        return summary, fitted
+        def report(phase: str, done: int = 0, total: int | None = None) -> None:
+            if progress is not None and phase == INTERACTIONS:
+                progress(done, total or 0)
+
+        result = pretrain(
+            store=self.store, branch=branch, trials=trials, seed=seed, models=models, model_seed=model_seed, progress=report
+        )
+        return result.summary, list(result.models)
 
     def solve(
         self,
@@ -294,9 +297,9 @@ class Workbench:
 
     def replay(self, trial_id: int, *, gif: str | Path | None = None) -> ReplayReport:
         """``llcps replay``: re-execute a stored trial; ``.matches`` says whether it reproduced."""
-        from llcps.cps.replay import replay
+        from llcps.jobs.replay import replay
 
-        return replay(self.store, trial_id, gif=gif)
+        return replay(store=self.store, trial_id=trial_id, gif=gif)
 
     def experiment(
         self,

@@ -189,6 +189,11 @@ def cli_context(ctx: typer.Context) -> CliContext:
     return obj if obj is not None else CliContext()
 
 
+def db_location(ctx: typer.Context) -> str:
+    """The ``--db`` option: the store a job opens (a SQLite path or an SQLAlchemy URL)."""
+    return cli_context(ctx).db
+
+
 def open_store(ctx: typer.Context, *, create: bool = False, allow_outdated: bool = False) -> Store:
     """Open the store named by ``--db`` (see :meth:`Store.open`)."""
     return Store.open(cli_context(ctx).db, create=create, allow_outdated=allow_outdated)

@@ -7,9 +7,10 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, human_bytes, message, new_app, open_store, print_json, print_table
+from llcps.cli._common import JsonFlag, db_location, human_bytes, message, new_app, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.errors import LlcpsError
+from llcps.jobs import cache as jobs
 
 app = new_app(
     "The physics cache: simulated trials kept in the store, answered again instead of simulated "
@@ -33,10 +34,7 @@ def parse_size(text: str) -> int:
 @app.command("status", epilog=examples("llcps cache status", "llcps cache status --json"))
 def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Entries, bytes and the size bound of the physics cache."""
-    from llcps.store import physics_cache
-
-    with open_store(ctx) as store:
-        status = physics_cache.status(store)
+    status = jobs.cache_status(store=db_location(ctx))
     if as_json:
         print_json(status.as_json())
         return
@@ -72,11 +70,8 @@ def prune_cli(
     An experiment run does this when it ends; no branch loses anything, later runs
     simulate the removed trials again.
     """
-    from llcps.store import physics_cache
-
     limit = parse_size(to) if to is not None else None
-    with open_store(ctx) as store:
-        result = physics_cache.prune(store, limit=limit, dry_run=dry_run)
+    result = jobs.prune_cache(store=db_location(ctx), limit=limit, dry_run=dry_run)
     if as_json:
         print_json(result.as_json())
     verb = "would remove" if dry_run else "removed"
@@ -90,12 +85,8 @@ def limit_cli(
     as_json: JsonFlag = False,
 ) -> None:
     """Set the size bound the cache is pruned to (stored in the store; default 2 GiB)."""
-    from llcps.store import physics_cache
-
     limit = parse_size(size)
-    with open_store(ctx) as store:
-        physics_cache.set_max_bytes(store, limit)
-        status = physics_cache.status(store)
+    status = jobs.limit_cache(store=db_location(ctx), max_bytes=limit)
     if as_json:
         print_json(status.as_json())
     message(f"physics cache bound: {human_bytes(limit)} (holds {human_bytes(status.bytes)}; `llcps cache prune` trims it now)")

@@ -12,10 +12,10 @@ from llcps.cli._common import (
     JsonFlag,
     YesFlag,
     choice_enum,
+    db_location,
     human_bytes,
     message,
     new_app,
-    open_store,
     print_json,
     print_table,
     selected_branch,
@@ -23,10 +23,9 @@ from llcps.cli._common import (
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_ID, TRIAL_SOURCES
-from llcps.errors import LlcpsError
-from llcps.outputs import check_output_file
-from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, Store
-from llcps.store.export import BINARY_FORMATS, EXPORT_FORMATS, export_trials
+from llcps.jobs import db as jobs
+from llcps.store import PRETRAIN, RESET_TARGETS, BranchChange, BranchInfo, StoreStatus
+from llcps.store.export import EXPORT_FORMATS
 from llcps.store.tables import MAX_BRANCH_NAME
 
 app = new_app(
@@ -49,8 +48,7 @@ BranchName = Annotated[
 ]
 
 
-def _print_status(store: Store, branch: str | None, as_json: bool) -> None:
-    status = store.status(branch)
+def _print_status(status: StoreStatus, as_json: bool) -> None:
     if as_json:
         print_json(status.as_json())
         return
@@ -110,14 +108,12 @@ def _fork_point(value: Optional[str]) -> Optional[str]:
 )
 def init_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Create the store with a `main` branch, or migrate an existing one to the newest schema."""
-    with open_store(ctx, create=True, allow_outdated=True) as store:
-        before = store.revision
-        after = store.init()
-        if before not in (None, after):
-            message(f"upgraded {store.url} from schema {before} to {after}")
-        message(f"llcps store ready at {store.url} (schema {after}, current branch {store.current_branch()})")
-        if as_json:
-            _print_status(store, selected_branch(ctx), True)
+    result = jobs.init_store(store=db_location(ctx))
+    if result.upgraded:
+        message(f"upgraded {result.url} from schema {result.before} to {result.after}")
+    message(f"llcps store ready at {result.url} (schema {result.after}, current branch {result.current_branch})")
+    if as_json:
+        _print_status(jobs.store_status(store=db_location(ctx), branch=selected_branch(ctx)), True)
 
 
 @app.command(
@@ -129,8 +125,7 @@ def init_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
 )
 def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """Show the database URL, schema revision, current branch and trial counts."""
-    with open_store(ctx, allow_outdated=True) as store:
-        _print_status(store, selected_branch(ctx), as_json)
+    _print_status(jobs.store_status(store=db_location(ctx), branch=selected_branch(ctx)), as_json)
 
 
 @app.command(
@@ -142,8 +137,7 @@ def status_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
 )
 def list_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     """List branches with parent, fork point, own and visible trial counts."""
-    with open_store(ctx) as store:
-        branches = store.list_branches()
+    branches = jobs.list_branches(store=db_location(ctx))
     if as_json:
         print_json([b.as_json() for b in branches])
         return
@@ -186,8 +180,7 @@ def branch_cli(
 ) -> None:
     """Create a branch that sees its parent's trials up to the fork point (it is not checked out)."""
     fork: int | str | None = int(at) if at is not None and at != PRETRAIN else at
-    with open_store(ctx) as store:
-        info = store.create_branch(name, from_branch=from_branch or selected_branch(ctx), at=fork)
+    info = jobs.create_branch(store=db_location(ctx), name=name, parent=from_branch or selected_branch(ctx), at=fork)
     _print_branch(
         info,
         as_json,
@@ -205,8 +198,7 @@ def branch_cli(
 )
 def checkout_cli(ctx: typer.Context, name: BranchName, as_json: JsonFlag = False) -> None:
     """Make a branch the current one (the default of --branch)."""
-    with open_store(ctx) as store:
-        info = store.checkout(name)
+    info = jobs.checkout_branch(store=db_location(ctx), name=name)
     _print_branch(info, as_json, f"switched to branch {info.name} ({info.visible_trials} visible trials)")
 
 
@@ -228,10 +220,8 @@ def reset_cli(
     as_json: JsonFlag = False,
 ) -> None:
     """Drop the own experience of --branch (default: the current branch) after a point."""
-    with open_store(ctx) as store:
-        name = store.resolve_branch(selected_branch(ctx)).name
-        target = str(to.value)  # type: ignore[attr-defined]
-        change = store.reset_branch(name, to=target, dry_run=not yes)
+    target = str(to.value)  # type: ignore[attr-defined]
+    change = jobs.reset_branch(store=db_location(ctx), branch=selected_branch(ctx), to=target, dry_run=not yes)
     _report_removal(change, as_json)
 
 
@@ -244,8 +234,7 @@ def reset_cli(
 )
 def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_json: JsonFlag = False) -> None:
     """Delete a branch and everything it owns (not main, the current branch, or a parent)."""
-    with open_store(ctx) as store:
-        change = store.delete_branch(name, dry_run=not yes)
+    change = jobs.delete_branch(store=db_location(ctx), name=name, dry_run=not yes)
     _report_removal(change, as_json)
 
 
@@ -277,23 +266,17 @@ def upgrade_cli(
     replay disagrees with what was stored is marked unknown. `llcps db status` shows the
     counts.
     """
-    from llcps.cps.changes import backfill_changes  # PyBullet loads only when there is work
-
-    with open_store(ctx, allow_outdated=True) as store, progress_display("db upgrade", "checking the schema") as progress:
-        before, after = store.upgrade(progress=lambda revision, done, total: progress(f"migrating to schema {revision}", done, total))
-        report = backfill_changes(
-            store,
-            replay=replay_changes,
-            progress=lambda done, total: progress("replaying trials for their changes", done, total),
-        )
+    with progress_display("db upgrade", "checking the schema") as progress:
+        result = jobs.upgrade_store(store=db_location(ctx), replay_changes=replay_changes, progress=progress)
     if as_json:
-        print_json({"from": before, "to": after, "changed": before != after, "changes": report.as_json()})
+        print_json(result.as_json())
     from llcps.store.migrations import revision_label
 
+    report = result.changes
     message(
-        f"upgraded from schema {revision_label(before)} to {revision_label(after)}"
-        if before != after
-        else f"already at schema {revision_label(after)}"
+        f"upgraded from schema {revision_label(result.before)} to {revision_label(result.after)}"
+        if result.changed
+        else f"already at schema {revision_label(result.after)}"
     )
     if report.total:
         message(
@@ -319,8 +302,8 @@ def compact_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     rebuild a table leave free pages that a SQLite file keeps until it is compacted.
     SQLite needs as much free disk again as the file takes while it runs.
     """
-    with open_store(ctx) as store, progress_display("db compact", "compacting the store"):
-        result = store.compact()
+    with progress_display("db compact", "compacting the store"):
+        result = jobs.compact_store(store=db_location(ctx))
     if as_json:
         print_json(result.as_json())
         return
@@ -360,25 +343,13 @@ def export_cli(
     episode: Annotated[Optional[int], typer.Option("--episode", metavar="ID", min=1, max=MAX_ID, help="Only trials of this episode.", show_default=False)] = None,
 ) -> None:
     """Export the trials --branch (default: the current branch) sees, in id order, one flat row per trial."""
-    fmt_name = str(fmt.value)  # type: ignore[attr-defined]
-    if fmt_name in BINARY_FORMATS and out is None:
-        raise LlcpsError(f"--format {fmt_name} writes a binary file", hint="pass --out FILE")
-    if scenario is not None:
-        from llcps.scenarios import get_scenario
-
-        scenario = get_scenario(scenario).name
-    if out is not None:
-        check_output_file(out, what="--out")
-    with open_store(ctx) as store:
-        branch = store.resolve_branch(selected_branch(ctx)).name
-        count = export_trials(
-            store,
-            branch=branch,
-            fmt=fmt_name,
-            out=sys.stdout if out is None else out,
-            source=None if source is None else str(source.value),  # type: ignore[attr-defined]
-            scenario=scenario,
-            episode=episode,
-            what="--out",
-        )
-    message(f"exported {count} trial(s) of branch {branch}" + (f" to {out}" if out else ""))
+    result = jobs.export_trials(
+        store=db_location(ctx),
+        branch=selected_branch(ctx),
+        fmt=str(fmt.value),  # type: ignore[attr-defined]
+        out=sys.stdout if out is None else out,
+        source=None if source is None else str(source.value),  # type: ignore[attr-defined]
+        scenario=scenario,
+        episode=episode,
+    )
+    message(f"exported {result.count} trial(s) of branch {result.branch}" + (f" to {out}" if out else ""))

@@ -6,10 +6,10 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, choice_enum, new_app, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import JsonFlag, choice_enum, db_location, new_app, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.domain import MAX_ID, OUTCOME_NAMES, TRIAL_SOURCES, TrialRecord
-from llcps.scenarios import get_scenario
+from llcps.jobs.inspect import list_trials
 
 app = new_app(
     "Inspect the experience store: trials, runs, episodes and what was learned from them.",
@@ -59,19 +59,16 @@ def trials_cli(
     as_json: JsonFlag = False,
 ) -> None:
     """List the trials --branch (default: the current branch) sees, oldest of the selection first."""
-    scenario = None if scenario is None else get_scenario(scenario).name
-    with open_store(ctx) as store:
-        branch = store.resolve_branch(selected_branch(ctx)).name
-        records = store.visible_trials(
-            branch,
-            source=None if source is None else str(source.value),  # type: ignore[attr-defined]
-            scenario=scenario,
-            solved=solved,
-            episode=episode,
-            limit=limit or None,
-            newest_first=True,
-        )
-    records.reverse()
+    result = list_trials(
+        store=db_location(ctx),
+        branch=selected_branch(ctx),
+        source=None if source is None else str(source.value),  # type: ignore[attr-defined]
+        scenario=scenario,
+        solved=solved,
+        episode=episode,
+        limit=limit or None,
+    )
+    branch, records = result.branch, result.trials
     if as_json:
         print_json([r.as_json() for r in records])
         return

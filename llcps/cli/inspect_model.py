@@ -7,14 +7,13 @@ from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, choice_enum, message, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import JsonFlag, choice_enum, db_location, message, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.cli.inspect import app
 from llcps.domain import MAX_SEED, OUTCOME_NAMES
-from llcps.errors import LlcpsError
-from llcps.models import PAPER_MODELS, WORLD_MODELS
-from llcps.scenarios import get_scenario
+from llcps.jobs.inspect import inspect_model
+from llcps.models import WORLD_MODELS
 from llcps.scenarios.variants import MAX_VARIANT
 
 if TYPE_CHECKING:
@@ -67,27 +66,19 @@ def model_cli(
     as_json: JsonFlag = False,
 ) -> None:
     """Evaluate world models on the branch's trials (held-out split) next to the majority baseline."""
-    names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
-    if variant and scenario is None:
-        raise LlcpsError("--variant needs --scenario", hint="e.g. `llcps inspect model --scenario scenario3 --variant 7`")
-    scenario = None if scenario is None else get_scenario(scenario).name
     with progress_display("inspect model", "loading the world models") as progress:
-        from llcps.cps.inspection import inspect_models  # sklearn loads only when used
-
-        with open_store(ctx) as store:
-            branch = store.resolve_branch(selected_branch(ctx)).name
-            report = inspect_models(
-                store,
-                branch=branch,
-                models=names,
-                seed=seed,
-                model_seed=model_seed,
-                test_fraction=test_fraction,
-                scenario=scenario,
-                top=limit,
-                variant=variant,
-                progress=progress,
-            )
+        report = inspect_model(
+            store=db_location(ctx),
+            branch=selected_branch(ctx),
+            models=[str(m.value) for m in model] if model else None,  # type: ignore[attr-defined]
+            scenario=scenario,
+            variant=variant,
+            limit=limit,
+            seed=seed,
+            model_seed=model_seed,
+            test_fraction=test_fraction,
+            progress=progress,
+        )
     if as_json:
         print_json(report.as_json())
     else:

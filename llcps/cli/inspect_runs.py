@@ -7,11 +7,12 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import JsonFlag, db_location, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli.inspect import app
 from llcps.domain import MAX_ID
-from llcps.scenarios import get_scenario
+from llcps.jobs import inspect as jobs
+from llcps.jobs.inspect import RunRow
 
 LimitOption = Annotated[int, typer.Option("--limit", min=0, max=MAX_ID, metavar="N", help="Show the newest N; 0 shows all.")]
 AllBranches = Annotated[bool, typer.Option("--all", help="Every branch, not just --branch.")]
@@ -41,44 +42,38 @@ def runs_cli(
     if compare is not None:
         _compare(ctx, compare[0], compare[1], as_json)
         return
-    from llcps.store.runs import run_seconds
-
-    with open_store(ctx) as store:
-        branch = None if all_branches else store.resolve_branch(selected_branch(ctx)).name
-        runs = store.list_runs(branch=branch, limit=limit or None)
-        activity = store.run_activity([r.id for r in runs])
-    runs.reverse()
+    result = jobs.list_runs(store=db_location(ctx), branch=selected_branch(ctx), all_branches=all_branches, limit=limit or None)
+    branch, runs = result.branch, result.runs
     if as_json:
-        print_json([{**r.as_json(), "seconds": run_seconds(r), "activity": activity[r.id]} for r in runs])
+        print_json([row.as_json() for row in runs])
         return
     print_table(
         f"runs on {branch or 'every branch'} ({len(runs)} shown)",
         ("run", "command", "branch", "seed", "status", "started (UTC)", "s", "episodes", "trials", "llcps", "commit", "host"),
-        [
-            (
-                r.id,
-                r.command,
-                r.branch,
-                "-" if r.seed is None else r.seed,
-                r.status,
-                r.started_at[:19],
-                _seconds(run_seconds(r)),
-                activity[r.id]["episodes"],
-                activity[r.id]["trials"],
-                r.provenance.llcps_version or "-",
-                r.provenance.commit_text,
-                r.provenance.host or "-",
-            )
-            for r in runs
-        ],
+        [_run_cells(row) for row in runs],
+    )
+
+
+def _run_cells(row: RunRow) -> tuple[Any, ...]:
+    r = row.run
+    return (
+        r.id,
+        r.command,
+        r.branch,
+        "-" if r.seed is None else r.seed,
+        r.status,
+        r.started_at[:19],
+        _seconds(row.seconds),
+        row.activity["episodes"],
+        row.activity["trials"],
+        r.provenance.llcps_version or "-",
+        r.provenance.commit_text,
+        r.provenance.host or "-",
     )
 
 
 def _compare(ctx: typer.Context, a: int, b: int, as_json: bool) -> None:
-    from llcps.store.runs import compare_runs
-
-    with open_store(ctx) as store:
-        comparison = compare_runs(store, a, b)
+    comparison = jobs.compare_runs(store=db_location(ctx), a=a, b=b)
     if as_json:
         print_json(comparison.as_json())
         return
@@ -108,11 +103,10 @@ def episodes_cli(
     as_json: JsonFlag = False,
 ) -> None:
     """Episodes (scenario solves), oldest first: status and exploration per scenario."""
-    scenario = None if scenario is None else get_scenario(scenario).name
-    with open_store(ctx) as store:
-        branch = None if all_branches else store.resolve_branch(selected_branch(ctx)).name
-        episodes = store.list_episodes(branch=branch, scenario=scenario, run_id=run, limit=limit or None)
-    episodes.reverse()
+    result = jobs.list_episodes(
+        store=db_location(ctx), branch=selected_branch(ctx), all_branches=all_branches, scenario=scenario, run=run, limit=limit or None
+    )
+    branch, episodes = result.branch, result.episodes
     if as_json:
         print_json([e.as_json() for e in episodes])
         return
@@ -153,41 +147,17 @@ def knowledge_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     which its executions as plan steps on the branch achieved their effects, relative to
     the rate 1/2 of an operator never executed (docs/knowledge.md). The PDDL shows these costs.
     """
-    from llcps.cps.knowledge import load_knowledge
-
-    with open_store(ctx) as store:
-        branch = store.resolve_branch(selected_branch(ctx)).name
-        kb = load_knowledge(store, branch)
-        operators = store.visible_operators(branch)
-    learned = {op.name for op in kb.learned}
-    rows = [
-        {
-            "operator": op.name,
-            "learned": op.name in learned,
-            "successes": kb.counts(op.name)[0],
-            "failures": kb.counts(op.name)[1],
-            "nominal_cost": kb.nominal_cost(op.name),
-            "cost": round(kb.cost(op.name), 4),
-        }
-        for op in kb.operators()
-    ]
+    result = jobs.knowledge(store=db_location(ctx), branch=selected_branch(ctx))
     if as_json:
-        print_json(
-            {
-                "branch": branch,
-                "domain": kb.to_pddl(),
-                "operators": rows,
-                "learned_operators": [op.as_json() for op in operators],
-            }
-        )
+        print_json(result.as_json())
         return
-    typer.echo(kb.to_pddl())
+    typer.echo(result.domain)
     print_table(
-        f"operators of {branch}: executions as plan steps and plan cost",
+        f"operators of {result.branch}: executions as plan steps and plan cost",
         ("operator", "learned", "successes", "failures", "nominal cost", "cost"),
         [
-            (r["operator"], "yes" if r["learned"] else "no", r["successes"], r["failures"], f"{r['nominal_cost']:g}", f"{r['cost']:.3g}")
-            for r in rows
+            (r.operator, "yes" if r.learned else "no", r.successes, r.failures, f"{r.nominal_cost:g}", f"{r.cost:.3g}")
+            for r in result.operators
         ],
     )
 

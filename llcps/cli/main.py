@@ -1,8 +1,8 @@
 """The ``llcps`` command: global options and the registry of command modules.
 
-Each command module is option parsing and presentation over a library function
-(see llcps/cli/_common.py for the shared helpers). To add commands, write a
-module and register it below with ONE line:
+Each command module is option parsing and presentation over a job, a plain function
+in llcps/jobs/ that llcps.api calls too (see llcps/cli/_common.py for the shared
+helpers). To add commands, write a job and a module and register it below with ONE line:
 
 * a command group (``llcps db ...``): ``app.add_typer(module.app, name="db")``
 * a single command (``llcps solve``): ``app.command("solve")(module.solve_cli)``

@@ -6,10 +6,11 @@ from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, db_location, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_PRETRAIN_TRIALS, MAX_SEED, OUTCOME_NAMES
+from llcps.jobs.pretrain import pretrain
 from llcps.models import PAPER_MODELS, WORLD_MODELS
 
 if TYPE_CHECKING:
@@ -49,27 +50,19 @@ def pretrain_cli(
     """
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
     with progress_display("pretrain", "loading the simulator") as progress:
-        from llcps.pretrain import pretrain  # the simulator loads only when a command needs it
-
-        with open_store(ctx, create=create) as store:
-            summary = pretrain(
-                store,
-                branch=selected_branch(ctx),
-                n=trials,
-                seed=seed,
-                progress=lambda done, total: progress("random interactions", done, total),
-            )
-            from llcps.models.persistence import fit_models  # torch / sklearn load only here
-
-            fitted = fit_models(
-                store,
-                summary.branch,
-                names,
-                model_seed,
-                progress=lambda name, done, total: progress(f"fitting world model {name}", done, total),
-            )
+        result = pretrain(
+            store=db_location(ctx),
+            branch=selected_branch(ctx),
+            trials=trials,
+            seed=seed,
+            models=names,
+            model_seed=model_seed,
+            create=create,
+            progress=progress,
+        )
+    summary, fitted = result.summary, result.models
     if as_json:
-        print_json({**summary.as_json(), "models": [f.as_json() for f in fitted]})
+        print_json(result.as_json())
     else:
         show(summary)
         print_table("world models fitted", ("model", "seed", "trials", "fit seconds"), [(f.name, f.seed, f.trials, f"{f.fit_seconds:.2f}") for f in fitted])

@@ -7,11 +7,11 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, message, open_store, print_json, print_table
+from llcps.cli._common import JsonFlag, db_location, message, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_ID
-from llcps.outputs import GIF_SUFFIXES, check_output_file
+from llcps.jobs.replay import replay
 
 EXAMPLES = examples(
     "llcps replay 42                       # must match what was recorded",
@@ -43,13 +43,8 @@ def replay_cli(
     Exit code 0 when everything matches what was recorded, 1 when it does not, 2 for
     bad input (a stored trial or physics state that fails its checks included).
     """
-    if gif is not None:
-        check_output_file(gif, what="--gif", suffixes=GIF_SUFFIXES)
     with progress_display("replay", "loading the simulator") as progress:
-        from llcps.cps.replay import replay  # the simulator loads only when needed
-
-        with open_store(ctx) as store:
-            report = replay(store, trial_id, gif=gif, gui=gui, progress=progress)
+        report = replay(store=db_location(ctx), trial_id=trial_id, gif=gif, gui=gui, progress=progress)
     if as_json:
         print_json(report.as_json())
     else:

@@ -10,7 +10,7 @@ import typer
 from llcps.cli._common import JsonFlag, choice_enum, message, new_app, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
-from llcps.outputs import check_output_dir
+from llcps.jobs import scenario as jobs
 from llcps.scenarios import CONDITIONS, get_scenario
 from llcps.scenarios.variants import MAX_VARIANT, parse_range, range_text
 
@@ -34,38 +34,17 @@ VariantOption = Annotated[
 ]
 
 
-def _ref(name: str) -> str:
-    """How the library finds the scenario again: its registered name, or the file given."""
-    from llcps.scenarios import SCENARIOS
-
-    scenario = get_scenario(name)
-    return scenario.name if SCENARIOS.get(scenario.name) is scenario else name
-
-
 @app.command("list", epilog=examples("llcps scenario list", "llcps scenario list --json"))
 def list_cli(as_json: JsonFlag = False) -> None:
     """List the shipped scenarios: name, alias, goal, whether variants differ, and the file."""
-    from llcps.scenarios import SCENARIOS
-    from llcps.scenarios.goal import goal_text
-
-    rows = [
-        {
-            "name": s.name,
-            "alias": s.alias,
-            "title": s.title,
-            "goal": goal_text(s.goal_pos, s.goal_neg),
-            "varies": s.varies,
-            "file": str(s.source.path) if s.source is not None else None,
-        }
-        for s in SCENARIOS.values()
-    ]
+    scenarios = jobs.list_scenarios()
     if as_json:
-        print_json(rows)
+        print_json([s.as_json() for s in scenarios])
         return
     print_table(
         "scenarios",
         ("name", "alias", "task", "goal", "variants differ"),
-        [(r["name"], r["alias"], r["title"], " ".join(r["goal"]), "yes" if r["varies"] else "no") for r in rows],
+        [(s.name, s.alias, s.title, " ".join(s.goal), "yes" if s.varies else "no") for s in scenarios],
     )
 
 
@@ -86,11 +65,7 @@ def show_cli(
 
     A shown file loads back to the same scenario (and a shown variant to that variant's scene).
     """
-    from llcps.scenarios.loader import dump
-
-    scenario = get_scenario(name)
-    assert scenario.source is not None
-    text = dump(scenario.source, fmt=str(fmt.value), variant=variant)  # type: ignore[attr-defined]
+    text = jobs.show_scenario(name=name, fmt=str(fmt.value), variant=variant)  # type: ignore[attr-defined]
     typer.echo(text, nl=False)
 
 
@@ -113,17 +88,13 @@ def render_cli(
     as_json: JsonFlag = False,
 ) -> None:
     """Render the scenes of a variant (after they settle) to PNG, one per condition."""
-    scenario = get_scenario(name)
-    check_output_dir(out_dir, what="--out-dir")
     chosen = CONDITIONS if condition is None else (str(condition.value),)  # type: ignore[attr-defined]
     with progress_display("render", "loading the simulator") as progress:
-        from llcps.scenarios.pictures import render_scenes
-
-        written = render_scenes(scenario, out_dir, variant=variant or 0, conditions=chosen, progress=progress)
+        result = jobs.render_scenario(name=name, out_dir=out_dir, variant=variant, conditions=chosen, progress=progress)
     if as_json:
-        print_json({"scenario": scenario.name, "variant": variant or 0, "files": [str(p) for p in written]})
+        print_json(result.as_json())
         return
-    for path in written:
+    for path in result.files:
         message(f"wrote {path}")
 
 
@@ -156,12 +127,9 @@ def check_cli(
     Exit code 0 when every property holds on every variant, 1 when one does not.
     """
     chosen = parse_range(variants)
-    ref = _ref(name)
-    scenario = get_scenario(ref)
-    with progress_display(f"check {scenario.name}", "loading the simulator") as progress:
-        from llcps.cps.check import check_scenario
-
-        report = check_scenario(scenario, ref, variants=chosen, quick=quick, progress=progress)
+    label = get_scenario(name).name
+    with progress_display(f"check {label}", "loading the simulator") as progress:
+        report = jobs.check_scenario(name=name, variants=chosen, quick=quick, progress=progress)
     if as_json:
         print_json({**report.as_json(), "variant_range": range_text(chosen)})
     else:

@@ -1,0 +1,231 @@
+"""``llcps inspect``: what the store holds — trials, runs, episodes, the knowledge base and
+how well the world models predict."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+from llcps.errors import LlcpsError
+from llcps.jobs._common import Progress, StoreRef, opened
+
+if TYPE_CHECKING:
+    from llcps.cps.inspection import ModelInspection
+    from llcps.domain import TrialRecord
+    from llcps.store import EpisodeRecord, OperatorRecord, RunRecord
+    from llcps.store.runs import RunComparison
+
+
+def _scenario_name(scenario: str | None) -> str | None:
+    """A scenario filter as its registered name (an alias or a file resolves to it)."""
+    if scenario is None:
+        return None
+    from llcps.scenarios import get_scenario
+
+    return get_scenario(scenario).name
+
+
+@dataclass(frozen=True)
+class TrialsResult:
+    """The trials a branch sees, oldest of the selection first."""
+
+    branch: str
+    trials: tuple[TrialRecord, ...]
+
+
+@dataclass(frozen=True)
+class RunRow:
+    """A run, how long it took and what it wrote (its episodes and its trials by source)."""
+
+    run: RunRecord
+    seconds: float | None
+    activity: Mapping[str, int]
+
+    def as_json(self) -> dict[str, Any]:
+        return {**self.run.as_json(), "seconds": self.seconds, "activity": dict(self.activity)}
+
+
+@dataclass(frozen=True)
+class RunsResult:
+    """Runs, oldest first; ``branch`` None means every branch."""
+
+    branch: str | None
+    runs: tuple[RunRow, ...]
+
+
+@dataclass(frozen=True)
+class EpisodesResult:
+    """Episodes, oldest first; ``branch`` None means every branch."""
+
+    branch: str | None
+    episodes: tuple[EpisodeRecord, ...]
+
+
+@dataclass(frozen=True)
+class OperatorCost:
+    """An operator of the knowledge base: its executions as plan steps and its plan cost."""
+
+    operator: str
+    learned: bool
+    successes: int
+    failures: int
+    nominal_cost: float
+    cost: float
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "operator": self.operator,
+            "learned": self.learned,
+            "successes": self.successes,
+            "failures": self.failures,
+            "nominal_cost": self.nominal_cost,
+            "cost": self.cost,
+        }
+
+
+@dataclass(frozen=True)
+class KnowledgeResult:
+    """A branch's knowledge base K': its PDDL domain, each operator's cost, the learned operators."""
+
+    branch: str
+    domain: str
+    operators: tuple[OperatorCost, ...]
+    learned_operators: tuple[OperatorRecord, ...]
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "branch": self.branch,
+            "domain": self.domain,
+            "operators": [op.as_json() for op in self.operators],
+            "learned_operators": [op.as_json() for op in self.learned_operators],
+        }
+
+
+def list_trials(
+    *,
+    store: StoreRef,
+    branch: str | None = None,
+    scenario: str | None = None,
+    source: str | None = None,
+    solved: bool | None = None,
+    episode: int | None = None,
+    limit: int | None = None,
+) -> TrialsResult:
+    """The trials ``branch`` (None: the current branch) sees that match the filters: the newest
+    ``limit`` (None: all), oldest first. ``scenario`` may be a name or its alias."""
+    scenario = _scenario_name(scenario)
+    with opened(store) as s:
+        name = s.resolve_branch(branch).name
+        records = s.visible_trials(
+            name, source=source, scenario=scenario, solved=solved, episode=episode, limit=limit, newest_first=True
+        )
+    records.reverse()
+    return TrialsResult(branch=name, trials=tuple(records))
+
+
+def list_runs(
+    *, store: StoreRef, branch: str | None = None, all_branches: bool = False, limit: int | None = None, activity: bool = True
+) -> RunsResult:
+    """The newest ``limit`` (None: all) runs on ``branch`` (None: the current branch; every
+    branch with ``all_branches``), oldest first, each with its duration and (with ``activity``)
+    its episodes and trials by source."""
+    from llcps.store.runs import run_seconds
+
+    with opened(store) as s:
+        name = None if all_branches else s.resolve_branch(branch).name
+        runs = s.list_runs(branch=name, limit=limit)
+        counts = s.run_activity([r.id for r in runs]) if activity else {}
+    runs.reverse()
+    return RunsResult(branch=name, runs=tuple(RunRow(run=r, seconds=run_seconds(r), activity=counts.get(r.id, {})) for r in runs))
+
+
+def compare_runs(*, store: StoreRef, a: int, b: int) -> RunComparison:
+    """Runs ``a`` and ``b`` side by side, field by field."""
+    from llcps.store.runs import compare_runs as compare
+
+    with opened(store) as s:
+        return compare(s, a, b)
+
+
+def list_episodes(
+    *,
+    store: StoreRef,
+    branch: str | None = None,
+    all_branches: bool = False,
+    scenario: str | None = None,
+    run: int | None = None,
+    limit: int | None = None,
+) -> EpisodesResult:
+    """The newest ``limit`` (None: all) episodes run on ``branch`` (None: the current branch;
+    every branch with ``all_branches``), oldest first; ``scenario`` may be a name or its alias."""
+    scenario = _scenario_name(scenario)
+    with opened(store) as s:
+        name = None if all_branches else s.resolve_branch(branch).name
+        episodes = s.list_episodes(branch=name, scenario=scenario, run_id=run, limit=limit)
+    episodes.reverse()
+    return EpisodesResult(branch=name, episodes=tuple(episodes))
+
+
+def knowledge(*, store: StoreRef, branch: str | None = None) -> KnowledgeResult:
+    """The knowledge base K' ``branch`` (None: the current branch) plans with, and what its
+    experience says of each operator (docs/knowledge.md)."""
+    from llcps.cps.knowledge import load_knowledge
+
+    with opened(store) as s:
+        name = s.resolve_branch(branch).name
+        kb = load_knowledge(s, name)
+        learned_operators = s.visible_operators(name)
+    learned = {op.name for op in kb.learned}
+    operators = tuple(
+        OperatorCost(
+            operator=op.name,
+            learned=op.name in learned,
+            successes=kb.counts(op.name)[0],
+            failures=kb.counts(op.name)[1],
+            nominal_cost=kb.nominal_cost(op.name),
+            cost=round(kb.cost(op.name), 4),
+        )
+        for op in kb.operators()
+    )
+    return KnowledgeResult(branch=name, domain=kb.to_pddl(), operators=operators, learned_operators=tuple(learned_operators))
+
+
+def inspect_model(
+    *,
+    store: StoreRef,
+    branch: str | None = None,
+    models: Sequence[str] | None = None,
+    scenario: str | None = None,
+    variant: int = 0,
+    limit: int = 5,
+    seed: int = 0,
+    model_seed: int | None = None,
+    test_fraction: float = 0.25,
+    progress: Progress | None = None,
+) -> ModelInspection:
+    """Evaluate ``models`` (default: the paper's nb and nn) on the trials ``branch`` (None: the
+    current branch) sees, on a held-out split, next to the majority baseline; with ``scenario``
+    (and its ``variant``), also rank its failure-state candidates under every measure (``limit``
+    per measure)."""
+    from llcps.models import PAPER_MODELS
+
+    names = list(models) if models else list(PAPER_MODELS)
+    if variant and scenario is None:
+        raise LlcpsError("--variant needs --scenario", hint="e.g. `llcps inspect model --scenario scenario3 --variant 7`")
+    scenario = _scenario_name(scenario)
+    from llcps.cps.inspection import inspect_models  # sklearn loads only when used
+
+    with opened(store) as s:
+        name = s.resolve_branch(branch).name
+        return inspect_models(
+            s,
+            branch=name,
+            models=names,
+            seed=seed,
+            model_seed=model_seed,
+            test_fraction=test_fraction,
+            scenario=scenario,
+            top=limit,
+            variant=variant,
+            progress=progress,
+        )
