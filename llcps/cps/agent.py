@@ -42,7 +42,7 @@ from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
 from llcps.sim.controllers import DEFAULT_MAX_STEPS
 from llcps.sim.perception import perceive
 from llcps.sim.trial import TrialResult, run_trial
-from llcps.sim.world import SavedState, World
+from llcps.sim.world import SETTLE_STEPS, SavedState, World
 from llcps.store import Store
 from llcps.symbolic.experience import Context, Experience
 from llcps.symbolic.knowledge import KnowledgeBase, Task
@@ -55,8 +55,6 @@ NOMINAL_RATE = 0.4
 NOMINAL_MAGNITUDE = 0.15
 #: Push directions K may use to move an object toward a target ("top" tips it instead).
 PUSH_DIRECTIONS = {k: v for k, v in PUSH_DIRECTION.items() if k != "top"}
-#: Cap on steps of one settle/trial, as a safety net (240 Hz).
-SETTLE_STEPS = 480
 #: Re-plans after the first failed plan step before exploration starts.
 MAX_PLAN_REPAIRS = 3
 

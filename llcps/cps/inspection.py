@@ -137,10 +137,10 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, varian
         LlcpsError: unknown scenario, no plan, or a plan (or a repair) that reaches the goal.
     """
     # The agent's machinery (PyBullet, planner) loads only when a scenario is asked for.
-    from llcps.cps.agent import SETTLE_STEPS, Agent, SolveConfig, SolveResult, load_knowledge, plan_and_repair
+    from llcps.cps.agent import Agent, SolveConfig, SolveResult, load_knowledge, plan_and_repair
     from llcps.cps.exploration import failure_point
     from llcps.sim.perception import perceive
-    from llcps.sim.world import World
+    from llcps.sim.world import SETTLE_STEPS, World
 
     config = SolveConfig(scenario=scenario, seed=seed, variant=variant)
     spec = config.validate()

@@ -13,13 +13,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from llcps.cps.agent import SETTLE_STEPS, Agent, plan_and_repair, resolves
+from llcps.cps.agent import Agent, plan_and_repair, resolves
 from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.episode import SolveConfig, SolveResult
 from llcps.cps.knowledge import load_knowledge
 from llcps.scenarios.base import Scenario
 from llcps.sim.perception import perceive
-from llcps.sim.world import World
+from llcps.sim.world import SETTLE_STEPS, World
 from llcps.store import Store
 
 
