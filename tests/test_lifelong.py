@@ -12,12 +12,12 @@ import pytest
 from llcps.cps.agent import solve
 from llcps.cps.candidates import candidate_space_size
 from llcps.cps.episode import SolveConfig
-from llcps.cps.knowledge import load_knowledge
+from llcps.cps.branch_knowledge import load_knowledge
 from llcps.domain import TrialSpec, ControllerParams, fluent
 from llcps.pretrain import pretrain
 from llcps.scenarios import SCENARIOS
 from llcps.store import Store
-from llcps.cps.knowledge import load_experience
+from llcps.cps.branch_knowledge import load_experience
 from llcps.symbolic.experience import Experience, experience_cost
 from llcps.symbolic.knowledge import KnowledgeBase, Task
 from llcps.symbolic.operators import learn_operator

@@ -14,7 +14,7 @@ from sqlalchemy import update
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
-from llcps.cps.changes import backfill_changes
+from llcps.cps.backfill import backfill_changes
 from llcps.domain import Body, TrialChange, fluent
 from llcps.errors import LlcpsError, StoreError
 from llcps.experiments.transfer import export_branches, import_payload

@@ -277,7 +277,7 @@ def upgrade_cli(
     replay disagrees with what was stored is marked unknown. `llcps db status` shows the
     counts.
     """
-    from llcps.cps.changes import backfill_changes  # PyBullet loads only when there is work
+    from llcps.cps.backfill import backfill_changes  # PyBullet loads only when there is work
 
     with open_store(ctx, allow_outdated=True) as store, progress_display("db upgrade", "checking the schema") as progress:
         before, after = store.upgrade(progress=lambda revision, done, total: progress(f"migrating to schema {revision}", done, total))

@@ -153,7 +153,7 @@ def knowledge_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
     which its executions as plan steps on the branch achieved their effects, relative to
     the rate 1/2 of an operator never executed (docs/knowledge.md). The PDDL shows these costs.
     """
-    from llcps.cps.knowledge import load_knowledge
+    from llcps.cps.branch_knowledge import load_knowledge
 
     with open_store(ctx) as store:
         branch = store.resolve_branch(selected_branch(ctx)).name

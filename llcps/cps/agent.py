@@ -30,7 +30,7 @@ import numpy as np
 
 from llcps.cps.episode import SolveConfig, SolveResult
 from llcps.cps.exploration import failure_point, rank_candidates
-from llcps.cps.knowledge import load_experience, load_knowledge
+from llcps.cps.branch_knowledge import load_experience, load_knowledge
 from llcps.domain import PUSH_DIRECTION, ControllerParams, State, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
 from llcps.models.measures import get_measure

@@ -16,7 +16,7 @@ from typing import Callable
 from llcps.cps.agent import Agent, plan_and_repair, resolves
 from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.episode import SolveConfig, SolveResult
-from llcps.cps.knowledge import load_knowledge
+from llcps.cps.branch_knowledge import load_knowledge
 from llcps.scenarios.base import Scenario
 from llcps.sim.perception import perceive
 from llcps.sim.world import SETTLE_STEPS, World
