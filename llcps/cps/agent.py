@@ -45,7 +45,8 @@ from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import SETTLE_STEPS, SavedState, World
 from llcps.store import Store
 from llcps.symbolic.experience import Context, Experience
-from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.task import Task
 from llcps.symbolic.monitor import StepFailure, check_step
 from llcps.symbolic.operators import learn_operator
 from llcps.symbolic.planner import GroundAction, plan
@@ -167,9 +168,9 @@ class Agent:
 
     # -- symbolic glue -------------------------------------------------------
     def task(self, state: State) -> Task:
-        objects = {name: ("item" if kind == "object" else "container") for name, kind in self.kinds.items()}
-        objects.update({name: "surface" for name in self.world.fixtures if name != "table"})
-        return Task(objects=objects, init=state, goal_pos=self.scenario.goal_pos, goal_neg=self.scenario.goal_neg)
+        return Task.from_scene(
+            entities=self.kinds, fixtures=self.world.fixtures, init=state, goal_pos=self.scenario.goal_pos, goal_neg=self.scenario.goal_neg
+        )
 
     def controller_call(self, step: GroundAction) -> TrialSpec:
         """Map a plan step to its controller call: learned settings, or K's nominal ones."""
