@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from llcps.cps.replay import ReplayReport
     from llcps.experiments.runner import RunSummary
     from llcps.models.persistence import FittedModel
-    from llcps.pretrain import PretrainSummary
+    from llcps.cps.pretraining import PretrainSummary
 
 #: Columns of :meth:`Workbench.episodes`: name -> (kind, meaning); kinds are keys of llcps.store.flat.KINDS.
 EPISODE_COLUMNS: Mapping[str, tuple[str, str]] = {
@@ -265,7 +265,7 @@ class Workbench:
         """``llcps pretrain``: random interactions stored as trials, then world models fitted."""
         from llcps.models import PAPER_MODELS
         from llcps.models.persistence import fit_models
-        from llcps.pretrain import pretrain
+        from llcps.cps.pretraining import pretrain
 
         summary = pretrain(self.store, branch=branch, n=trials, seed=seed, progress=progress)
         fitted = fit_models(self.store, summary.branch, list(models or PAPER_MODELS), model_seed)

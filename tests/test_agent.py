@@ -15,7 +15,7 @@ import pytest
 from llcps.cps.agent import solve
 from llcps.cps.episode import SolveConfig
 from llcps.cps.replay import replay
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.store import Store
 
 

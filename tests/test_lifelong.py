@@ -14,7 +14,7 @@ from llcps.cps.candidates import candidate_space_size
 from llcps.cps.episode import SolveConfig
 from llcps.cps.branch_knowledge import load_knowledge
 from llcps.domain import TrialSpec, ControllerParams, fluent
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.scenarios import SCENARIOS
 from llcps.store import Store
 from llcps.cps.branch_knowledge import load_experience

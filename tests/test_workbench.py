@@ -24,7 +24,7 @@ from llcps.cps.episode import SolveConfig
 from llcps.cps.film import FILM_EVERY, FILM_SIZE, episode_shots
 from llcps.cps.replay import replay
 from llcps.experiments.grid import Cell, Sequence
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.sim.render import CAPTION_HEIGHT
 from llcps.store import Store
 

@@ -13,7 +13,7 @@ from llcps.domain import MAX_PRETRAIN_TRIALS, MAX_SEED, OUTCOME_NAMES
 from llcps.models import PAPER_MODELS, WORLD_MODELS
 
 if TYPE_CHECKING:
-    from llcps.pretrain import PretrainSummary
+    from llcps.cps.pretraining import PretrainSummary
 
 ModelName = choice_enum("PretrainModel", tuple(WORLD_MODELS))
 
@@ -49,7 +49,7 @@ def pretrain_cli(
     """
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
     with progress_display("pretrain", "loading the simulator") as progress:
-        from llcps.pretrain import pretrain  # the simulator loads only when a command needs it
+        from llcps.cps.pretraining import pretrain  # the simulator loads only when a command needs it
 
         with open_store(ctx, create=create) as store:
             summary = pretrain(

@@ -110,7 +110,7 @@ def report(kind: str, value: object) -> None:
 def warm_up() -> None:
     """Import what every task needs while the worker would otherwise wait for its first task."""
     import llcps.cps.agent  # noqa: F401  (the agent, the simulator, the models' registry)
-    import llcps.pretrain  # noqa: F401
+    import llcps.cps.pretraining  # noqa: F401
 
 
 def worker_cache(url: str) -> Any:
@@ -149,7 +149,7 @@ def execute_task(task: Task) -> TaskOutput:
 def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
     from dataclasses import replace
 
-    from llcps.pretrain import pretrain
+    from llcps.cps.pretraining import pretrain
 
     own = {size: name for size, name in zip(task.sizes, task.branches)}
     pool_branch = own.get(task.pool, POOL_BRANCH)
