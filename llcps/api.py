@@ -282,8 +282,7 @@ class Workbench:
     ) -> SolveResult:
         """``llcps solve``: one episode. ``config`` takes the fields of
         :class:`~llcps.cps.episode.SolveConfig` (condition, model, measure, seed, model_seed, budget, ...)."""
-        from llcps.cps.agent import solve
-        from llcps.cps.episode import SolveConfig
+        from llcps.cps.episode import SolveConfig, solve
 
         try:
             settings = SolveConfig(scenario=scenario, **config)

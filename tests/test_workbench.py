@@ -19,8 +19,7 @@ from typer.testing import CliRunner
 import llcps
 from llcps.cli import _progress
 from llcps.cli.main import app
-from llcps.cps.agent import solve
-from llcps.cps.episode import SolveConfig
+from llcps.cps.episode import SolveConfig, solve
 from llcps.cps.film import FILM_EVERY, FILM_SIZE, episode_shots
 from llcps.cps.replay import replay
 from llcps.experiments.grid import Cell, Sequence

@@ -10,7 +10,7 @@ import typer
 from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
-from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, MAX_BUDGET, SolveConfig
+from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, MAX_BUDGET, SolveConfig, solve
 from llcps.domain import MAX_SEED
 from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.models import MEASURES, WORLD_MODELS
@@ -18,7 +18,7 @@ from llcps.scenarios import CONDITIONS, shipped_names
 from llcps.scenarios.variants import MAX_VARIANT
 
 if TYPE_CHECKING:
-    from llcps.cps.agent import SolveResult
+    from llcps.cps.episode import SolveResult
 
 ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
 MeasureName = choice_enum("MeasureName", tuple(MEASURES))
@@ -103,8 +103,6 @@ def solve_cli(
         check_output_file(gif, what="--gif", suffixes=GIF_SUFFIXES)
     before = _mtime(gif)
     with progress_display("solve", "loading the simulator") as progress:
-        from llcps.cps.agent import solve  # the simulator loads only when a command needs it
-
         with open_store(ctx, create=create) as store:
             result = solve(store, branch=selected_branch(ctx), config=config, gui=gui, gif=gif, progress=progress)
     if as_json:

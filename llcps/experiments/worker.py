@@ -109,7 +109,9 @@ def report(kind: str, value: object) -> None:
 
 def warm_up() -> None:
     """Import what every task needs while the worker would otherwise wait for its first task."""
-    import llcps.cps.agent  # noqa: F401  (the agent, the simulator, the models' registry)
+    import llcps.cps.executor  # noqa: F401  (the trial executor, the simulator, the models' registry)
+    import llcps.cps.plan_execution  # noqa: F401  (the planner)
+    import llcps.cps.exploration  # noqa: F401
     import llcps.cps.pretraining  # noqa: F401
 
 
@@ -176,8 +178,7 @@ def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
 
 
 def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str, ...], dict[str, Any] | None]:
-    from llcps.cps.agent import solve
-    from llcps.cps.episode import SolveConfig
+    from llcps.cps.episode import SolveConfig, solve
 
     if task.base is None:
         raise LlcpsError(f"task {task.label} was sent without its pretraining trials")
