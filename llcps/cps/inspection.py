@@ -16,17 +16,18 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
+from llcps.cps.exploration import FailurePoint, failure_point, rank_candidates
 from llcps.domain import OUTCOME_NAMES, check_seed
 from llcps.errors import LlcpsError
 from llcps.models.base import WorldModel
 from llcps.models.evaluation import EvaluationReport, evaluate
 from llcps.models.features import outcome_matrix
+from llcps.models.goal import joint_probability
 from llcps.models.measures import MEASURES
 from llcps.models.persistence import fit_or_load
 from llcps.models.registry import world_model_entry
 
 if TYPE_CHECKING:
-    from llcps.cps.exploration import FailurePoint
     from llcps.store import Store
 
 
@@ -105,9 +106,6 @@ class ModelInspection:
 
 def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top: int, seed: int) -> list[RankedCandidate]:
     """The ``top`` best candidates of a failure point under ``measure``, with their predictions."""
-    from llcps.cps.exploration import rank_candidates
-    from llcps.models.goal import joint_probability
-
     ranking = rank_candidates(model, point, measure=measure, seed=seed)
     goal = ranking.goal if ranking.goal is not None else model.predict_goal(point.query())
     atoms = [atom.label for atom in point.query([]).atoms]
@@ -140,7 +138,6 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, varian
     from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
     from llcps.cps.episode import SolveConfig
     from llcps.cps.executor import TrialExecutor
-    from llcps.cps.exploration import failure_point
     from llcps.cps.plan_execution import PlanLog, plan_and_repair
     from llcps.sim.perception import perceive
     from llcps.sim.world import SETTLE_STEPS, World
