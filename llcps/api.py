@@ -23,18 +23,19 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
 
 import pandas as pd
 
+from llcps.cps.episode import SolveConfig, SolveResult
 from llcps.errors import LlcpsError
+from llcps.jobs.solve import solve as solve_job
 from llcps.provenance import FIELDS as PROVENANCE_FIELDS
 from llcps.store import Store
 from llcps.store.flat import KINDS, Column, flat_rows, trial_columns
 
 if TYPE_CHECKING:
-    from llcps.cps.episode import SolveResult
     from llcps.cps.replay import ReplayReport
     from llcps.experiments.scheduler import RunSummary
     from llcps.jobs.experiment import ExperimentReport
     from llcps.models.persistence import FittedModel
-    from llcps.pretrain import PretrainSummary
+    from llcps.cps.pretraining import PretrainSummary
 
 #: Columns of :meth:`Workbench.episodes`: name -> (kind, meaning); kinds are keys of llcps.store.flat.KINDS.
 EPISODE_COLUMNS: Mapping[str, tuple[str, str]] = {
@@ -286,14 +287,11 @@ class Workbench:
     ) -> SolveResult:
         """``llcps solve``: one episode. ``config`` takes the fields of
         :class:`~llcps.cps.episode.SolveConfig` (condition, model, measure, seed, model_seed, budget, ...)."""
-        from llcps.cps.agent import solve
-        from llcps.cps.episode import SolveConfig
-
         try:
-            settings = SolveConfig(scenario=scenario, **config)
+            SolveConfig(scenario=scenario, **config)
         except TypeError as exc:
             raise LlcpsError(f"bad solve setting: {exc}", hint="see llcps.cps.episode.SolveConfig") from None
-        return solve(self.store, branch=branch, config=settings, gif=gif, progress=progress)
+        return solve_job(store=self.store, scenario=scenario, branch=branch, gif=gif, progress=progress, **config)
 
     def replay(self, trial_id: int, *, gif: str | Path | None = None) -> ReplayReport:
         """``llcps replay``: re-execute a stored trial; ``.matches`` says whether it reproduced."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Protocol
 
 from llcps.errors import LlcpsError
 
@@ -302,6 +302,22 @@ class Outcome:
         return dict(zip(OUTCOME_NAMES, self.bits()))
 
 
+class ExecutedTrial(Protocol):
+    """What a trial record is made from: a trial as executed
+    (:class:`llcps.sim.result.TrialResult` is one)."""
+
+    @property
+    def spec(self) -> TrialSpec: ...
+    @property
+    def features(self) -> tuple[EntityFeatures, ...]: ...
+    @property
+    def outcome(self) -> Outcome: ...
+    @property
+    def sim_steps(self) -> int: ...
+    @property
+    def wall_seconds(self) -> float: ...
+
+
 @dataclass(frozen=True)
 class TrialRecord:
     """A trial as the experience store keeps it: the lifelong training set's unit.
@@ -331,6 +347,53 @@ class TrialRecord:
     #: computed the result (for a simulated trial, its own simulation time).
     cache_hit: bool = False
     simulation_wall_seconds: float | None = None
+
+    @classmethod
+    def from_result(
+        cls,
+        result: ExecutedTrial,
+        *,
+        branch: str,
+        source: str,
+        seed: int,
+        solved: bool = False,
+        run_id: int | None = None,
+        episode_id: int | None = None,
+        snapshot_id: int | None = None,
+        scenario: str | None = None,
+        extra: Mapping[str, object] | None = None,
+        wall_seconds: float | None = None,
+        cache_hit: bool = False,
+        simulation_wall_seconds: float | None = None,
+    ) -> TrialRecord:
+        """The record of an executed trial, about to be stored.
+
+        Args:
+            result: the trial as executed: its controller call, features, Omega and steps.
+            wall_seconds: what this run spent on it (default: the result's own wall time).
+            cache_hit: the result was answered by the physics cache, not simulated.
+            simulation_wall_seconds: the wall time of the simulation that computed the
+                result (None: not recorded).
+            The other arguments are the record's fields of the same name.
+        """
+        return cls(
+            branch=branch,
+            source=source,
+            spec=result.spec,
+            features=result.features,
+            outcome=result.outcome,
+            solved=solved,
+            sim_steps=result.sim_steps,
+            wall_seconds=result.wall_seconds if wall_seconds is None else wall_seconds,
+            seed=seed,
+            run_id=run_id,
+            episode_id=episode_id,
+            snapshot_id=snapshot_id,
+            scenario=scenario,
+            extra={} if extra is None else extra,
+            cache_hit=cache_hit,
+            simulation_wall_seconds=simulation_wall_seconds,
+        )
 
     @property
     def model_input(self) -> WorldModelInput:

@@ -12,10 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from llcps.cps.agent import solve
-from llcps.cps.episode import SolveConfig
+from llcps.cps.episode import SolveConfig, solve
 from llcps.cps.replay import replay
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.store import Store
 
 
@@ -135,12 +134,12 @@ def test_remembered_rebuilds_and_perceptions_change_no_trial(tmp_path: Path, mon
     import sqlite3
     from contextlib import closing
 
-    import llcps.cps.agent as agent_module
+    from llcps.cps.executor import WORLD_READS
     from llcps.store.physics_cache import StorePhysicsCache
 
     def run(name: str, capacity: int) -> tuple[list[tuple], list[bytes]]:
-        monkeypatch.setattr(agent_module, "_REMEMBERED", type(agent_module._REMEMBERED)())
-        monkeypatch.setattr(agent_module, "_REMEMBERED_CAPACITY", capacity)
+        WORLD_READS.clear()
+        monkeypatch.setattr(WORLD_READS, "capacity", capacity)
         path = tmp_path / f"{name}.db"
         with Store.open(str(path), create=True) as store:
             cache = StorePhysicsCache(store.engine)

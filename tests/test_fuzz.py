@@ -27,7 +27,7 @@ from typer.testing import CliRunner
 from llcps.cli.main import app
 from llcps.domain import ControllerParams, TrialSpec, fluent
 from llcps.models.persistence import fit_or_load
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.store import Store
 from llcps.symbolic.operators import learn_operator
 

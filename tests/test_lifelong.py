@@ -9,17 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from llcps.cps.agent import solve
 from llcps.cps.candidates import candidate_space_size
-from llcps.cps.episode import SolveConfig
-from llcps.cps.knowledge import load_knowledge
+from llcps.cps.episode import SolveConfig, solve
 from llcps.domain import TrialSpec, ControllerParams, fluent
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.scenarios import SCENARIOS
 from llcps.store import Store
-from llcps.cps.knowledge import load_experience
+from llcps.cps.branch_knowledge import load_experience, load_knowledge
 from llcps.symbolic.experience import Experience, experience_cost
-from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.task import Task
 from llcps.symbolic.operators import learn_operator
 from llcps.symbolic.planner import plan
 

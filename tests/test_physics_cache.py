@@ -12,10 +12,9 @@ from pathlib import Path
 import pytest
 from sqlalchemy import update
 
-from llcps.cps.agent import solve
-from llcps.cps.episode import SolveConfig
+from llcps.cps.episode import SolveConfig, solve
 from llcps.domain import Body, ControllerParams, EntityFeatures, Outcome, TrialSpec
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.sim.cache import decode_result, encode_result, trial_key
 from llcps.sim.trial import TrialResult
 from llcps.sim.world import PhysicsSettings

@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from llcps.cli.main import app
 from llcps.errors import LlcpsError
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.sim.trial import run_trial
 from llcps.sim.world import World
 from llcps.store import Store

@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from llcps.cli.main import app
 from llcps.domain import EntityFeatures
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.sim import snapshot as snapshots
 from llcps.store import Store
 from llcps.store.trials import pack_features

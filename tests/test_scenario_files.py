@@ -200,8 +200,7 @@ def test_not_toml_is_one_error(tmp_path: Path) -> None:
 
 def _episode(path: Path, variant: int) -> tuple[list[tuple[object, ...]], list[dict[str, Any]]]:
     """The trials (what is compared bit for bit) and stored scenes of one short episode."""
-    from llcps.cps.agent import solve
-    from llcps.cps.episode import SolveConfig
+    from llcps.cps.episode import SolveConfig, solve
     from llcps.store import Store
 
     with Store.open(str(path), create=True) as store:

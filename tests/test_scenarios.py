@@ -9,8 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from llcps.cps.agent import solve
-from llcps.cps.episode import SolveConfig
+from llcps.cps.episode import SolveConfig, solve
 from llcps.cps.sweep import sweep
 from llcps.scenarios import SCENARIOS, get_scenario
 from llcps.store import Store

@@ -13,7 +13,7 @@ import pytest
 
 from llcps.cps.candidates import ARGUMENT_KINDS
 from llcps.domain import ACTIONS, OUTCOME_NAMES
-from llcps.pretrain import random_trial, trial_seed
+from llcps.cps.pretraining import random_trial, trial_seed
 from llcps.sim.sampler import sample_interaction, settled_ok
 from llcps.sim.world import World
 
@@ -62,7 +62,7 @@ def test_the_same_seed_gives_the_same_scene_and_call(world) -> None:
 FRESH = textwrap.dedent(
     """
     import json, sys
-    from llcps.pretrain import random_trial, trial_seed
+    from llcps.cps.pretraining import random_trial, trial_seed
     from llcps.sim.world import World
     world = World()
     out = []

@@ -14,11 +14,11 @@ from sqlalchemy import update
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
-from llcps.cps.changes import backfill_changes
+from llcps.cps.backfill import backfill_changes
 from llcps.domain import Body, TrialChange, fluent
 from llcps.errors import LlcpsError, StoreError
 from llcps.experiments.transfer import export_branches, import_payload
-from llcps.pretrain import random_trial
+from llcps.cps.pretraining import random_trial
 from llcps.sim.world import World
 from llcps.store import Store, migrations
 from llcps.store import backends
@@ -189,7 +189,7 @@ def test_db_upgrade_backfills_with_a_summary(tmp_path: Path, new_trial) -> None:
 
 
 def test_new_trials_of_pretraining_and_solving_record_their_change(store: Store) -> None:
-    from llcps.pretrain import pretrain
+    from llcps.cps.pretraining import pretrain
 
     summary = pretrain(store, branch=None, n=2, seed=4, control_loop_every=0)
     changes = store.visible_changes(None)

@@ -19,12 +19,11 @@ from typer.testing import CliRunner
 import llcps
 from llcps.cli import _progress
 from llcps.cli.main import app
-from llcps.cps.agent import solve
-from llcps.cps.episode import SolveConfig
+from llcps.cps.episode import SolveConfig, solve
 from llcps.cps.film import FILM_EVERY, FILM_SIZE, episode_shots
 from llcps.cps.replay import replay
 from llcps.experiments.design import Cell, Sequence
-from llcps.pretrain import pretrain
+from llcps.cps.pretraining import pretrain
 from llcps.sim.render import CAPTION_HEIGHT
 from llcps.store import Store
 

@@ -20,7 +20,7 @@ from typing import Any
 
 from llcps.bench.core import DRIFT_WARNING, Clock, Figure, Progress, figure, say
 from llcps.bench.physics import settled_world
-from llcps.cps.agent import solve
+from llcps.cps.episode import solve
 from llcps.cps.episode import SolveConfig
 from llcps.models.registry import WORLD_MODELS
 from llcps.scenarios import SCENARIOS

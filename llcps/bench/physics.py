@@ -12,7 +12,7 @@ from collections.abc import Callable
 from functools import partial
 
 from llcps.bench.core import Figure, Progress, figure, say
-from llcps.cps.agent import SETTLE_STEPS
+from llcps.sim.world import SETTLE_STEPS
 from llcps.scenarios import SCENARIOS
 from llcps.sim.motion import control_loop_rate
 from llcps.sim.world import World

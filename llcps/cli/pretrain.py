@@ -14,7 +14,7 @@ from llcps.jobs.pretrain import pretrain
 from llcps.models import PAPER_MODELS, WORLD_MODELS
 
 if TYPE_CHECKING:
-    from llcps.pretrain import PretrainSummary
+    from llcps.cps.pretraining import PretrainSummary
 
 ModelName = choice_enum("PretrainModel", tuple(WORLD_MODELS))
 

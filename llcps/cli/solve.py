@@ -7,18 +7,19 @@ from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, err_console, message, open_store, print_json, print_table, selected_branch
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, cli_context, err_console, message, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
-from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, MAX_BUDGET, SolveConfig
+from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, MAX_BUDGET
 from llcps.domain import MAX_SEED
-from llcps.outputs import GIF_SUFFIXES, check_output_file
+from llcps.jobs.solve import solve
 from llcps.models import MEASURES, WORLD_MODELS
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.scenarios import CONDITIONS, shipped_names
 from llcps.scenarios.variants import MAX_VARIANT
 
 if TYPE_CHECKING:
-    from llcps.cps.agent import SolveResult
+    from llcps.cps.episode import SolveResult
 
 ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
 MeasureName = choice_enum("MeasureName", tuple(MEASURES))
@@ -87,26 +88,27 @@ def solve_cli(
     current rate: an upper bound, as a resolving trial ends it early). Exit code 0 when the task is solved, 1 when the budget ran out (every trial is
     kept), 2 for bad input, 130 when interrupted (Ctrl-C; completed trials are kept).
     """
-    config = SolveConfig(
-        scenario=scenario,
-        condition=str(condition.value),  # type: ignore[attr-defined]
-        model=str(model.value),  # type: ignore[attr-defined]
-        measure=str(measure.value),  # type: ignore[attr-defined]
-        seed=seed,
-        model_seed=model_seed,
-        budget=budget,
-        refit_every=refit_every,
-        variant=variant,
-    )
-    config.validate()
     if gif is not None:
         check_output_file(gif, what="--gif", suffixes=GIF_SUFFIXES)
     before = _mtime(gif)
     with progress_display("solve", "loading the simulator") as progress:
-        from llcps.cps.agent import solve  # the simulator loads only when a command needs it
-
-        with open_store(ctx, create=create) as store:
-            result = solve(store, branch=selected_branch(ctx), config=config, gui=gui, gif=gif, progress=progress)
+        result = solve(
+            store=cli_context(ctx).db,
+            create=create,
+            branch=selected_branch(ctx),
+            scenario=scenario,
+            condition=str(condition.value),  # type: ignore[attr-defined]
+            model=str(model.value),  # type: ignore[attr-defined]
+            measure=str(measure.value),  # type: ignore[attr-defined]
+            seed=seed,
+            model_seed=model_seed,
+            budget=budget,
+            refit_every=refit_every,
+            variant=variant,
+            gui=gui,
+            gif=gif,
+            progress=progress,
+        )
     if as_json:
         print_json(result.as_json())
     else:

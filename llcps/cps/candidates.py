@@ -15,7 +15,7 @@ import itertools
 from dataclasses import dataclass
 from typing import Iterator, Mapping, Sequence
 
-from llcps.cps.grid import EXPLORATION_ORIENTATIONS, MOVEMENT_MAGNITUDES, RATES
+from llcps.cps.discretization import EXPLORATION_ORIENTATIONS, MOVEMENT_MAGNITUDES, RATES
 from llcps.domain import ACTIONS, ControllerParams, TrialSpec
 
 #: Entity kinds an argument slot accepts, per action.

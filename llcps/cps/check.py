@@ -19,8 +19,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
+from llcps.cps.episode import SolveConfig, solve
 from llcps.cps.sweep import Sweep, sweep
 from llcps.scenarios.base import Scenario
+from llcps.store import Store
 
 #: The properties, in order, with what each says.
 PROPERTIES: dict[str, str] = {
@@ -123,10 +125,6 @@ def check_variant(scenario: Scenario, ref: str, variant: int, *, quick: bool, pr
         quick: stop the sweep at the first resolving candidate.
         progress: see :data:`ProgressCallback`.
     """
-    from llcps.cps.agent import solve
-    from llcps.cps.episode import SolveConfig
-    from llcps.store import Store
-
     if progress is not None:
         progress(f"variant {variant}: original condition", 0, 0)
     with Store.open("sqlite://", create=True) as store:

@@ -1,18 +1,48 @@
-"""What defines an episode (:class:`SolveConfig`) and what it produced
-(:class:`SolveResult`). Light to import: the CLI validates options with it
-before the simulator loads."""
+"""One episode: what defines it (:class:`SolveConfig`), the loop that runs it
+(:func:`solve`) and what it produced (:class:`SolveResult`).
+
+One call of :func:`solve` is one *episode*: a scenario in one condition, solved on one
+branch of the experience store. Every trial the robot executes is written to the store
+as it happens; the world model trains on every trial the branch can see (the lifelong
+training set) and is refit during exploration, as the paper's agent does within a
+scenario.
+
+The loop: perceive; execute K's plan, repairing it with what K knows when a step fails
+(:mod:`llcps.cps.plan_execution`); only when no repaired plan reaches the goal does
+creative problem solving start, for the first step that failed, a_f: the novelty is that
+a_f fails where K expected it to work, so exploration tries candidates ranked by the
+world model (:mod:`llcps.cps.exploration`) from the state a_f was executed in, until one
+resolves the novelty, and a learned operator records that state as its context
+(:mod:`llcps.cps.learning`).
+
+Light to import: the CLI validates options with :class:`SolveConfig` before anything
+loads, so the loop loads the simulator, the planner and numpy when it runs.
+"""
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from llcps.cps.candidates import Grid
 from llcps.domain import check_seed
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.models import MEASURES, WORLD_MODELS
+from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.scenarios import get_scenario
 from llcps.scenarios.base import CONDITIONS, Scenario
 from llcps.scenarios.variants import check_variant
+
+if TYPE_CHECKING:
+    from llcps.cps.branch_knowledge import BranchExperience
+    from llcps.cps.executor import ProgressCallback, TrialExecutor
+    from llcps.cps.plan_execution import Failure, PlanLog
+    from llcps.models.base import WorldModel
+    from llcps.sim.cache import PhysicsCache
+    from llcps.store import Store
+    from llcps.symbolic.knowledge import KnowledgeBase
 
 DEFAULT_MODEL = "nb"
 DEFAULT_MEASURE = "goal-directed"
@@ -68,7 +98,7 @@ class SolveConfig:
         return scenario
 
 
-@dataclass
+@dataclass(frozen=True)
 class SolveResult:
     """The summary of one episode (``llcps solve --json`` prints :meth:`as_json`)."""
 
@@ -128,3 +158,224 @@ class SolveResult:
             "episode_id": self.episode_id,
             "run_id": self.run_id,
         }
+
+
+@dataclass
+class _Progress:
+    """What the loop found so far (written as it goes, so an interrupted episode is summed
+    up with what it found before the interruption)."""
+
+    plan: PlanLog
+    status: str = "running"
+    candidates: int = 0
+    learned_operators: list[str] = field(default_factory=list)
+    resolving_trial_id: int | None = None
+
+
+def solve(
+    store: Store,
+    *,
+    branch: str | None,
+    config: SolveConfig,
+    command: str = "solve",
+    gui: bool = False,
+    gif: str | Path | None = None,
+    progress: ProgressCallback | None = None,
+    cache: PhysicsCache | None = None,
+) -> SolveResult:
+    """Solve one scenario on one branch; see the module docstring.
+
+    Args:
+        store: the experience store (trials, operators and models are read and written there).
+        branch: branch name, ``None`` for the store's current branch.
+        config: scenario, condition, world model, measure, seed, budget.
+        command: the command line recorded with the run.
+        gui: open a PyBullet GUI window (needs a display).
+        gif: film the episode to this GIF afterwards (:func:`llcps.cps.film.film_episode`);
+            the episode's stored wall time does not include it.
+        progress: optional callback for progress bars (see :data:`~llcps.cps.executor.ProgressCallback`).
+        cache: the physics cache (:mod:`llcps.store.physics_cache`), to answer trials
+            simulated before without stepping the engine; what the episode records is
+            the same with or without it, but for the trials marked ``cache_hit`` and
+            their wall seconds.
+
+    Returns:
+        The episode summary; ``status`` is ``solved``, ``budget_exhausted``,
+        ``no_plan`` or ``interrupted``.
+    """
+    # PyBullet, the planner, numpy and the world models load only when an episode runs.
+    from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
+    from llcps.cps.executor import TrialExecutor
+    from llcps.cps.plan_execution import PlanLog
+    from llcps.models.measures import get_measure
+    from llcps.models.persistence import fit_or_load
+    from llcps.sim.world import SETTLE_STEPS, World
+
+    scenario = config.validate()
+    if gif is not None:
+        check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
+    branch_name = store.resolve_branch(branch).name
+    started = time.perf_counter()
+    # What the store holds is read (and checked) first: a malformed row stops the
+    # episode before it records a run.
+    if progress is not None:
+        progress(f"fit world model {config.model}", 0, 0)
+    records = list(store.visible_trials(branch_name))
+    changes = store.visible_changes(branch_name)
+    goal = get_measure(config.measure).uses_goal  # a measure ranking by Omega alone needs no goal head
+    model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes, goal=goal)
+    kb = load_knowledge(store, branch_name)
+    run_id = store.start_run(command=command, seed=config.seed, config=_config_json(config), branch=branch_name)
+    episode_id = store.start_episode(
+        run_id=run_id,
+        branch=branch_name,
+        scenario=scenario.name,
+        condition=config.condition,
+        model=config.model,
+        measure=config.measure,
+        seed=config.seed,
+    )
+    found = _Progress(plan=PlanLog())
+    world: World | None = None
+    executor: TrialExecutor | None = None
+    try:
+        world = World.from_scene(scenario.scene(config.condition, config.variant), gui=gui)
+        world.settle(max_steps=SETTLE_STEPS)
+        executor = TrialExecutor(
+            store=store,
+            branch=branch_name,
+            world=world,
+            scenario=scenario,
+            seed=config.seed,
+            run_id=run_id,
+            episode_id=episode_id,
+            records=records,
+            changes=changes,
+            cache=cache,
+            progress=progress,
+        )
+        experience = BranchExperience(store, branch_name, episode_id=episode_id)
+        _run(executor, experience, kb, model, config, found)
+    except KeyboardInterrupt:
+        found.status = "interrupted"
+    finally:
+        tally = executor.tally if executor is not None else None
+        sim_steps = tally.sim_steps if tally is not None else 0
+        log = found.plan
+        result = SolveResult(
+            scenario=scenario.name,
+            condition=config.condition,
+            model=config.model,
+            measure=config.measure,
+            seed=config.seed,
+            branch=branch_name,
+            variant=config.variant,
+            status="error" if found.status == "running" else found.status,
+            plan=list(log.plan),
+            plan_repairs=list(log.repairs),
+            failed_action=log.failed_action,
+            missing_effects=log.missing_effects,
+            exploration_trials=tally.exploration_trials if tally is not None else 0,
+            plan_trials=tally.plan_trials if tally is not None else 0,
+            cache_hits=tally.cache_hits if tally is not None else 0,
+            candidates=found.candidates,
+            sim_steps=sim_steps,
+            sim_seconds=sim_steps * (world.time_step if world is not None else 1 / 240),
+            wall_seconds=time.perf_counter() - started,
+            learned_operators=list(found.learned_operators),
+            resolving_trial_id=found.resolving_trial_id,
+            episode_id=episode_id,
+            run_id=run_id,
+        )
+        if world is not None:
+            world.close()
+        if cache is not None:
+            cache.flush()
+        store.finish_episode(episode_id, status=result.status, summary=result.as_json())
+        store.finish_run(run_id, status=result.status)
+    if gif is not None and result.status != "interrupted":
+        from llcps.cps.film import film_episode
+
+        film_episode(store, episode_id, gif, progress=progress)
+    return result
+
+
+def _run(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, model: WorldModel, config: SolveConfig, found: _Progress) -> None:
+    """Plan with K and repair the plan; only if no plan reaches the goal, explore."""
+    from llcps.cps.plan_execution import plan_and_repair
+
+    state = executor.perceive()
+    if executor.scenario.goal_reached(state):
+        found.status = "solved"
+        return
+    failure = plan_and_repair(executor, experience, kb, state, found.plan)
+    if found.plan.solved:
+        found.status = "solved"
+        return
+    if failure is None:
+        found.status = "no_plan"
+        return
+    _explore(executor, experience, kb, model, config, failure, found)
+
+
+def _explore(
+    executor: TrialExecutor,
+    experience: BranchExperience,
+    kb: KnowledgeBase,
+    model: WorldModel,
+    config: SolveConfig,
+    failure: Failure,
+    found: _Progress,
+) -> None:
+    """Try ranked candidates from the failure snapshot until one resolves the novelty."""
+    from llcps.cps.exploration import failure_point, rank_candidates
+    from llcps.cps.learning import learn
+    from llcps.cps.plan_execution import resolves
+
+    snapshot = failure.snapshot
+    assert snapshot is not None  # the episode stores its plan
+    executor.restore(snapshot)
+    point = failure_point(
+        executor, failure.monitor, failure.state, kb, grid=config.candidate_grid(executor.scenario), known=experience.costed(kb)
+    )
+    candidates = point.candidates
+    found.candidates = len(candidates)
+    remaining = list(range(len(candidates)))
+    order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
+    executor.report("explore", total=min(config.budget, len(candidates)))
+    tried = 0
+    subgoal_failures = [0] * len(point.subgoals)  # trials that met a subgoal, and K's plan still failed
+    while order and executor.tally.exploration_trials < config.budget:
+        index = order.pop(0)
+        remaining.remove(index)
+        spec = candidates[index]
+        trial, record = executor.execute(spec, source="exploration", snapshot_id=snapshot, start=snapshot)
+        tried += 1
+        executor.report("explore")
+        if resolves(executor, experience, kb, trial, failure):
+            found.learned_operators.append(learn(executor, experience, kb, spec, trial, failure, record))
+            found.resolving_trial_id = record.id if record is not None else None
+            found.status = "solved"
+            return
+        for k, subgoal in enumerate(point.subgoals):
+            subgoal_failures[k] += subgoal.met(trial.after)
+        if tried % config.refit_every == 0 and remaining:
+            model.update(executor.records, executor.changes, start=snapshot)
+            order = rank_candidates(
+                model, point, measure=config.measure, seed=config.seed, indices=remaining, subgoal_failures=subgoal_failures
+            ).order
+    found.status = "budget_exhausted"
+
+
+def _config_json(config: SolveConfig) -> dict[str, Any]:
+    return {
+        "scenario": config.scenario,
+        "condition": config.condition,
+        "model": config.model,
+        "measure": config.measure,
+        "seed": config.seed,
+        "variant": config.variant,
+        "model_seed": config.fit_seed,
+        "budget": config.budget,
+        "refit_every": config.refit_every,
+    }

@@ -1,7 +1,7 @@
 """Where exploration starts: the failure point, its candidates, and their ranking.
 
 One place for the path from a failed plan step to an ordered list of candidate
-trials, used by the agent (:mod:`llcps.cps.agent`) and by ``llcps inspect model``
+trials, used by the episode (:mod:`llcps.cps.episode`) and by ``llcps inspect model``
 (:mod:`llcps.cps.inspection`): enumerate the candidates in the default order, describe
 each for the world model (Table-1 inputs for Omega, and the goal-aware query of the
 failure's missing atoms over the scene as it is at the failure), and rank them with a
@@ -9,7 +9,7 @@ world model and a measure.
 
 **Subgoals: the other way to the missing atoms.** A trial resolves the novelty when the
 goal holds after it, or when K plans from the state it leaves and that plan works
-(:func:`llcps.cps.agent.resolves`). So a trial need not make a missing atom itself: it
+(:func:`llcps.cps.plan_execution.resolves`). So a trial need not make a missing atom itself: it
 may meet what another step of K lacks. Every ground step of K (other than a_f) that
 would make a missing atom but is not applicable at the failure gives a
 :class:`Subgoal`: its unmet preconditions (at most :data:`MAX_SUBGOAL_ATOMS`; K's
@@ -26,23 +26,25 @@ there still failed.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from llcps.cps.candidates import enumerate_candidates
+from llcps.cps.candidates import Grid, enumerate_candidates
 from llcps.cps.outcomes import desired_outcome
 from llcps.domain import Body, Fluent, State, TrialSpec, WorldModelInput, format_fluent
 from llcps.models.base import WorldModel
 from llcps.models.goal import joint_probability
 from llcps.models.measures import get_measure, rank
 from llcps.models.relational import GoalQuery
-from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.task import Task
 from llcps.symbolic.monitor import StepFailure
-from llcps.symbolic.planner import ground
+from llcps.symbolic.planner import GroundAction, ground
 
 if TYPE_CHECKING:
-    from llcps.cps.agent import Agent
+    from llcps.scenarios.base import Scenario
+    from llcps.sim.world import World
 
 #: Most unmet preconditions a step of K may lack to be a subgoal (see the module docstring).
 MAX_SUBGOAL_ATOMS = 2
@@ -172,26 +174,51 @@ class FailurePoint:
         )
 
 
-def failure_point(agent: Agent, failure: StepFailure, state: State, kb: KnowledgeBase) -> FailurePoint:
-    """The failure point of ``agent``'s world as it is now (just after a_f failed);
-    ``kb`` says which candidates' actions claim the missing atoms as effects."""
+class FailureSite(Protocol):
+    """What :func:`failure_point` needs of the trial executor
+    (:class:`~llcps.cps.executor.TrialExecutor` is one): the world just after a_f failed,
+    its entities, and how K's steps and states become controller calls and tasks."""
+
+    @property
+    def world(self) -> World: ...
+    @property
+    def scenario(self) -> Scenario: ...
+    @property
+    def kinds(self) -> Mapping[str, str]: ...
+    def sync(self) -> None: ...
+    def controller_call(self, step: GroundAction) -> TrialSpec: ...
+    def task(self, state: State) -> Task: ...
+
+
+def failure_point(
+    site: FailureSite, failure: StepFailure, state: State, kb: KnowledgeBase, *, grid: Grid, known: KnowledgeBase | None = None
+) -> FailurePoint:
+    """The failure point of ``site``'s world as it is now (just after a_f failed).
+
+    Args:
+        kb: says which candidates' actions claim the missing atoms as effects.
+        grid: the controller settings the candidates take.
+        known: K costed by the experience the branch has now, whose steps give the
+            subgoals (default: ``kb``).
+    """
     from llcps.sim.perception import entity_features, scene_bodies
 
-    world = agent.world
-    agent.sync()
-    failed_spec = agent.controller_call(failure.step)
-    specs = enumerate_candidates(failed=failed_spec, entities=agent.kinds, grid=agent.config.candidate_grid(agent.scenario))
-    features = {name: entity_features(world, name) for name in agent.kinds}
+    world = site.world
+    site.sync()
+    failed_spec = site.controller_call(failure.step)
+    specs = enumerate_candidates(failed=failed_spec, entities=site.kinds, grid=grid)
+    features = {name: entity_features(world, name) for name in site.kinds}
     inputs = tuple(WorldModelInput(spec=c, features=tuple(features[a] for a in c.arguments)) for c in specs)
-    task = agent.task(state)
+    task = site.task(state)
 
     def claimed_by(atoms: Sequence[tuple[Fluent, bool]]) -> tuple[frozenset[tuple[Fluent, bool]], ...]:
         return tuple(frozenset(m for m in atoms if kb.claims(c, m[0], add=m[1], objects=task.objects)) for c in specs)
 
     claimed = claimed_by(_signed_missing(failure))
-    routes = tuple(Subgoal(step, atoms, claimed_by(atoms)) for step, atoms in subgoals(agent.knowledge(kb), task, failure, state))
+    steps_of = kb if known is None else known
+    routes = tuple(Subgoal(step, atoms, claimed_by(atoms)) for step, atoms in subgoals(steps_of, task, failure, state))
     return FailurePoint(
-        scenario=agent.scenario.name,
+        scenario=site.scenario.name,
         failure=failure,
         state=state,
         bodies=scene_bodies(world),

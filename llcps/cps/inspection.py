@@ -3,7 +3,7 @@ the training set's label frequencies, and optionally the top candidates of a
 scenario's failure point under each measure, with each candidate's predicted
 probability of the failure's missing atoms.
 
-The failure point is reached the way the agent reaches it (:func:`~llcps.cps.agent.plan_and_repair`,
+The failure point is reached the way the agent reaches it (:func:`~llcps.cps.plan_execution.plan_and_repair`,
 then :func:`~llcps.cps.exploration.failure_point` from the state a_f was executed in),
 without storing anything (except the fitted models, stored by
 :func:`~llcps.models.persistence.fit_or_load`).
@@ -16,17 +16,18 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
+from llcps.cps.exploration import FailurePoint, failure_point, rank_candidates
 from llcps.domain import OUTCOME_NAMES, check_seed
 from llcps.errors import LlcpsError
 from llcps.models.base import WorldModel
 from llcps.models.evaluation import EvaluationReport, evaluate
 from llcps.models.features import outcome_matrix
+from llcps.models.goal import joint_probability
 from llcps.models.measures import MEASURES
 from llcps.models.persistence import fit_or_load
 from llcps.models.registry import world_model_entry
 
 if TYPE_CHECKING:
-    from llcps.cps.exploration import FailurePoint
     from llcps.store import Store
 
 
@@ -105,9 +106,6 @@ class ModelInspection:
 
 def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top: int, seed: int) -> list[RankedCandidate]:
     """The ``top`` best candidates of a failure point under ``measure``, with their predictions."""
-    from llcps.cps.exploration import rank_candidates
-    from llcps.models.goal import joint_probability
-
     ranking = rank_candidates(model, point, measure=measure, seed=seed)
     goal = ranking.goal if ranking.goal is not None else model.predict_goal(point.query())
     atoms = [atom.label for atom in point.query([]).atoms]
@@ -137,23 +135,26 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, varian
         LlcpsError: unknown scenario, no plan, or a plan (or a repair) that reaches the goal.
     """
     # The agent's machinery (PyBullet, planner) loads only when a scenario is asked for.
-    from llcps.cps.agent import SETTLE_STEPS, Agent, SolveConfig, SolveResult, load_knowledge, plan_and_repair
-    from llcps.cps.exploration import failure_point
+    from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
+    from llcps.cps.episode import SolveConfig
+    from llcps.cps.executor import TrialExecutor
+    from llcps.cps.plan_execution import PlanLog, plan_and_repair
     from llcps.sim.perception import perceive
-    from llcps.sim.world import World
+    from llcps.sim.world import SETTLE_STEPS, World
 
     config = SolveConfig(scenario=scenario, seed=seed, variant=variant)
     spec = config.validate()
     world = World.from_scene(spec.scene("novelty", config.variant))
     try:
         world.settle(max_steps=SETTLE_STEPS)
-        result = SolveResult(scenario=spec.name, condition="novelty", model="-", measure="-", seed=seed, branch=branch)
-        agent = Agent(store=store, branch=branch, world=world, scenario=spec, config=config, result=result, records=[])
+        executor = TrialExecutor(store=store, branch=branch, world=world, scenario=spec, seed=seed)
+        experience = BranchExperience(store, branch)
         kb = load_knowledge(store, branch)
-        failure = plan_and_repair(agent, kb, perceive(world), result, store=False)
-        if failure is None and result.status != "solved":
+        log = PlanLog()
+        failure = plan_and_repair(executor, experience, kb, perceive(world), log, store=False)
+        if failure is None and not log.solved:
             raise LlcpsError(f"the knowledge base of {branch!r} has no plan for {spec.name}'s novelty condition")
-        if failure is None or result.status == "solved":
+        if failure is None or log.solved:
             learned = bool(store.visible_operators(branch))
             raise LlcpsError(
                 f"the plan for {spec.name}'s novelty condition succeeds on {branch!r}: no failure state to rank",
@@ -162,7 +163,9 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, varian
                 else "the novelty does not make the nominal plan fail (see docs/scenarios.md)",
             )
         world.restore_serialized(failure.physics)  # candidates start where a_f did
-        return failure_point(agent, failure.monitor, failure.state, kb)
+        return failure_point(
+            executor, failure.monitor, failure.state, kb, grid=config.candidate_grid(spec), known=experience.costed(kb)
+        )
     finally:
         world.close()
 

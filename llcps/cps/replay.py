@@ -15,6 +15,8 @@ from llcps.cps.film import PHASES, ProgressCallback, Shot, reenact
 from llcps.domain import Fluent, Outcome, TrialRecord
 from llcps.errors import LlcpsError
 from llcps.outputs import GIF_SUFFIXES, check_output_file
+from llcps.scenarios import get_scenario, is_path
+from llcps.scenarios.goal import parse_goal
 from llcps.store import Store
 
 
@@ -63,9 +65,6 @@ def trial_goal(store: Store, trial: TrialRecord) -> tuple[frozenset[Fluent], fro
     Raises:
         LlcpsError: the stored goal is malformed (the store is untrusted input).
     """
-    from llcps.scenarios import get_scenario, is_path
-    from llcps.scenarios.goal import parse_goal
-
     if trial.snapshot_id is not None:
         scene = store.get_snapshot(trial.snapshot_id).scene
         atoms = scene.get("goal") if isinstance(scene, dict) else None

@@ -13,13 +13,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from llcps.cps.agent import SETTLE_STEPS, Agent, plan_and_repair, resolves
+from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
 from llcps.cps.candidates import enumerate_candidates
-from llcps.cps.episode import SolveConfig, SolveResult
-from llcps.cps.knowledge import load_knowledge
+from llcps.cps.episode import SolveConfig
+from llcps.cps.executor import TrialExecutor
+from llcps.cps.plan_execution import PlanLog, plan_and_repair, resolves
 from llcps.scenarios.base import Scenario
 from llcps.sim.perception import perceive
-from llcps.sim.world import World
+from llcps.sim.world import SETTLE_STEPS, World
 from llcps.store import Store
 
 
@@ -84,22 +85,25 @@ def sweep(
     found = Sweep(scenario=scenario.name)
     with Store.open("sqlite://", create=True) as store:
         branch = store.current_branch()
-        result = SolveResult(scenario=scenario.name, condition="novelty", model="-", measure="-", seed=0, branch=branch)
         world = World.from_scene(scenario.scene("novelty", variant))
         try:
             world.settle(max_steps=SETTLE_STEPS)
-            agent = Agent(store=store, branch=branch, world=world, scenario=scenario, config=config, result=result, records=[])
+            executor = TrialExecutor(store=store, branch=branch, world=world, scenario=scenario, seed=config.seed)
+            experience = BranchExperience(store, branch)
             kb = load_knowledge(store, branch)
-            failure = plan_and_repair(agent, kb, perceive(world), result)
-            found.plan, found.plan_repairs, found.failed_action = result.plan, result.plan_repairs, result.failed_action
+            log = PlanLog()
+            failure = plan_and_repair(executor, experience, kb, perceive(world), log)
+            found.plan, found.plan_repairs, found.failed_action = log.plan, log.repairs, log.failed_action
             if failure is None or failure.snapshot is None:
                 return found
-            candidates = enumerate_candidates(failed=agent.controller_call(failure.step), entities=agent.kinds, grid=config.candidate_grid(scenario))
+            candidates = enumerate_candidates(
+                failed=executor.controller_call(failure.step), entities=executor.kinds, grid=config.candidate_grid(scenario)
+            )
             found.candidates = len(candidates)
             for index, spec in enumerate(candidates):
-                trial, _ = agent.execute(spec, source="exploration", snapshot_id=failure.snapshot, start=failure.snapshot)
+                trial, _ = executor.execute(spec, source="exploration", snapshot_id=failure.snapshot, start=failure.snapshot)
                 found.tried += 1
-                if resolves(agent, kb, trial, failure):
+                if resolves(executor, experience, kb, trial, failure):
                     found.resolving.append(index)
                     found.labels.append(spec.label)
                 if progress is not None:

@@ -111,8 +111,10 @@ def report(kind: str, value: object) -> None:
 
 def warm_up() -> None:
     """Import what every task needs while the worker would otherwise wait for its first task."""
-    import llcps.cps.agent  # noqa: F401  (the agent, the simulator, the models' registry)
-    import llcps.pretrain  # noqa: F401
+    import llcps.cps.executor  # noqa: F401  (the trial executor, the simulator, the models' registry)
+    import llcps.cps.plan_execution  # noqa: F401  (the planner)
+    import llcps.cps.exploration  # noqa: F401
+    import llcps.cps.pretraining  # noqa: F401
 
 
 def worker_cache(url: str) -> Any:
@@ -149,7 +151,7 @@ def execute_task(task: Task) -> TaskOutput:
 
 
 def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
-    from llcps.pretrain import pretrain  # the simulator: not loaded where the CLI starts
+    from llcps.cps.pretraining import pretrain  # the simulator: not loaded where the CLI starts
 
     own = {size: name for size, name in zip(task.sizes, task.branches)}
     pool_branch = own.get(task.pool, POOL_BRANCH)
@@ -176,7 +178,7 @@ def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
 
 
 def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str, ...], dict[str, Any] | None]:
-    from llcps.cps.agent import solve  # the simulator: not loaded where the CLI starts
+    from llcps.cps.episode import solve  # the simulator: not loaded where the CLI starts
 
     if task.base is None:
         raise LlcpsError(f"task {task.label} was sent without its pretraining trials")

@@ -11,7 +11,7 @@ from llcps.jobs._common import Progress, StoreRef, no_progress, opened
 from llcps.store import PRETRAIN, BranchChange, BranchInfo, CompactResult, StoreStatus
 
 if TYPE_CHECKING:
-    from llcps.cps.changes import BackfillReport
+    from llcps.cps.backfill import BackfillReport
 
 
 @dataclass(frozen=True)
@@ -110,7 +110,7 @@ def upgrade_store(*, store: StoreRef, replay_changes: bool = True, progress: Pro
     report = progress or no_progress
     with opened(store, allow_outdated=True) as s:
         before, after = s.upgrade(progress=lambda revision, done, total: report(f"migrating to schema {revision}", done, total))
-        from llcps.cps.changes import backfill_changes  # PyBullet loads only when there is work
+        from llcps.cps.backfill import backfill_changes  # PyBullet loads only when there is work
 
         changes = backfill_changes(
             s, replay=replay_changes, progress=lambda done, total: report("replaying trials for their changes", done, total)

@@ -169,7 +169,7 @@ def list_episodes(
 def knowledge(*, store: StoreRef, branch: str | None = None) -> KnowledgeResult:
     """The knowledge base K' ``branch`` (None: the current branch) plans with, and what its
     experience says of each operator (docs/knowledge.md)."""
-    from llcps.cps.knowledge import load_knowledge
+    from llcps.cps.branch_knowledge import load_knowledge
 
     with opened(store) as s:
         name = s.resolve_branch(branch).name

@@ -9,7 +9,7 @@ from llcps.jobs._common import Progress, StoreRef, no_progress, opened
 
 if TYPE_CHECKING:
     from llcps.models.persistence import FittedModel
-    from llcps.pretrain import PretrainSummary
+    from llcps.cps.pretraining import PretrainSummary
 
 #: The phase in which the random interactions run (counted trial by trial).
 INTERACTIONS = "random interactions"
@@ -44,7 +44,7 @@ def pretrain(
     ``create`` makes the store when ``store`` names none yet.
     """
     from llcps.models import PAPER_MODELS
-    from llcps.pretrain import pretrain as run_pretrain  # the simulator loads only when a job needs it
+    from llcps.cps.pretraining import pretrain as run_pretrain  # the simulator loads only when a job needs it
 
     report = progress or no_progress
     names = list(models) if models else list(PAPER_MODELS)

@@ -9,8 +9,6 @@ from llcps.scenarios.base import CONDITIONS, Scenario
 
 #: Size of a scene picture (pixels); the documentation's pictures are this size.
 PICTURE_SIZE = (480, 360)
-#: Steps the scene settles before its picture is taken (as a solve lets it settle).
-SETTLE_STEPS = 480
 
 
 def picture_name(scenario: str, condition: str, variant: int) -> str:
@@ -28,7 +26,7 @@ def render_scenes(
 ) -> list[Path]:
     """Render each condition of ``variant`` after the scene settles; returns the files written."""
     from llcps.sim.render import render_png
-    from llcps.sim.world import World
+    from llcps.sim.world import SETTLE_STEPS, World
 
     chosen = list(conditions)
     written: list[Path] = []

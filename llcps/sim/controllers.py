@@ -31,8 +31,9 @@ if TYPE_CHECKING:
 
 #: Default step budget of one trial (25 s of simulated time at 240 Hz).
 DEFAULT_MAX_STEPS = 6000
-#: Steps allowed after the motion for everything to come to rest.
-SETTLE_STEPS = 720
+#: Steps allowed after an action's motion for everything to come to rest (longer than a
+#: fresh scene's settle, :data:`llcps.sim.world.SETTLE_STEPS`: what was pushed may still roll).
+REST_AFTER_MOTION_STEPS = 720
 
 
 #: Tool travel before the fingers meet the pushed entity (m).
@@ -358,7 +359,7 @@ def execute(world: "World", spec: TrialSpec, *, max_steps: int = DEFAULT_MAX_STE
     m = Motion(world, max_steps=max_steps)
     try:
         CONTROLLERS[spec.action](world, m, spec.arguments, spec.params)
-        m.wait_rest(max_steps=min(SETTLE_STEPS, max_steps - m.steps))
+        m.wait_rest(max_steps=min(REST_AFTER_MOTION_STEPS, max_steps - m.steps))
     except CapReached:
         pass
     finally:

@@ -27,7 +27,7 @@ from llcps.sim.builders import bucket, inside, open_box, shelf, solid, stacked
 from llcps.sim.specs import EntitySpec, FixtureSpec, TableSpec
 from llcps.sim.geometry import in_interior
 from llcps.sim.perception import CAMERA
-from llcps.sim.world import SceneSpec, World
+from llcps.sim.world import SETTLE_STEPS, SceneSpec, World
 
 
 @dataclass(frozen=True)
@@ -54,8 +54,7 @@ CATALOG: Mapping[str, CatalogItem] = {
 #: Controller settings drawn for pretraining: rate log-uniform (m/s), magnitude uniform (m).
 RATE_RANGE: tuple[float, float] = (0.05, 1.0)
 MAGNITUDE_RANGE: tuple[float, float] = (0.02, 0.4)
-#: Steps a layout gets to settle, and how far anything may move meanwhile (m).
-SETTLE_STEPS = 480
+#: Steps a layout always takes to settle, and how far anything may move meanwhile (m).
 SETTLE_MIN_STEPS = 48
 MOVE_TOLERANCE = 0.01
 #: Layouts drawn before giving up (a bug, not bad luck, if ever reached).

@@ -47,6 +47,9 @@ REST_LINEAR = 0.005  # m/s
 REST_ANGULAR = 0.05  # rad/s
 REST_CHECK_EVERY = 8  # steps between rest checks
 REST_CHECKS = 3  # consecutive quiet checks that count as rest
+#: Cap on the steps a scene gets to settle (:meth:`World.settle`) before anything runs in it
+#: (2 s at 240 Hz): a solve, a scene picture and a pretraining layout settle alike.
+SETTLE_STEPS = 480
 
 
 def _engine_version() -> str:

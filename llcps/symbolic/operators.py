@@ -22,6 +22,7 @@ from typing import Collection, Mapping, Sequence
 
 from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, TrialSpec, fluent
 from llcps.errors import LlcpsError
+from llcps.symbolic.naive_domain import default_constants, default_predicates
 from llcps.symbolic.schema import (
     EQUALITY,
     Controller,
@@ -349,12 +350,8 @@ def learn_operator(
         predicates: predicate -> arity of the knowledge base the context is written in;
             defaults to the default domain's predicates.
     """
-    if constants is None or predicates is None:
-        from llcps.symbolic.knowledge import KnowledgeBase
-
-        default = KnowledgeBase.default()
-        constants = default.constants.keys() if constants is None else constants
-        predicates = default.predicates if predicates is None else predicates
+    constants = default_constants() if constants is None else constants
+    predicates = default_predicates() if predicates is None else predicates
     constants = set(constants)
     before, after = frozenset(before), frozenset(after)
     changed = (after - before) | (before - after)

@@ -21,7 +21,8 @@ import itertools
 from typing import Collection
 
 from llcps.errors import LlcpsError
-from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.task import Task
 from llcps.symbolic.schema import GroundAction
 
 Plan = tuple[GroundAction, ...]

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 import numpy as np
 
-from llcps.domain import ACTIONS, MAX_PRETRAIN_TRIALS, OUTCOME_NAMES, check_seed
+from llcps.domain import ACTIONS, MAX_PRETRAIN_TRIALS, OUTCOME_NAMES, TrialRecord, check_seed
 from llcps.errors import LlcpsError
 from llcps.sim.motion import control_loop_rate
 from llcps.sim.sampler import sample_interaction
@@ -184,8 +184,6 @@ def pretrain(
     if not 0 <= n <= MAX_PRETRAIN_TRIALS:
         raise LlcpsError(f"the number of trials must be from 0 to {MAX_PRETRAIN_TRIALS}, got {n}", hint="pass --trials 200, say")
     check_seed(seed)
-    from llcps.domain import TrialRecord
-
     name = store.resolve_branch(branch).name
     summary = PretrainSummary(branch=name, seed=seed, requested=n)
     summary.run_id = store.start_run(command="pretrain", seed=seed, config={"n": n}, branch=name)
@@ -199,23 +197,16 @@ def pretrain(
         for index, (trial, rate, spent) in enumerate(trials):
             r = trial.result
             snapshot_id = store.put_snapshot(scene=trial.scene.to_dict(), state=trial.state)
-            trial_id = store.add_trial(
-                TrialRecord(
-                    branch=name,
-                    source="pretrain",
-                    spec=r.spec,
-                    features=r.features,
-                    outcome=r.outcome,
-                    solved=False,
-                    sim_steps=r.sim_steps,
-                    wall_seconds=r.wall_seconds,
-                    seed=trial.seed,
-                    run_id=summary.run_id,
-                    snapshot_id=snapshot_id,
-                    extra={"pretrain_seed": seed, "index": index},
-                ),
-                change=r.change,
+            record = TrialRecord.from_result(
+                r,
+                branch=name,
+                source="pretrain",
+                seed=trial.seed,
+                run_id=summary.run_id,
+                snapshot_id=snapshot_id,
+                extra={"pretrain_seed": seed, "index": index},
             )
+            trial_id = store.add_trial(record, change=r.change)
             summary.trial_ids.append(trial_id)
             for key, bit in r.outcome.as_dict().items():
                 summary.outcome_counts[key] += bit

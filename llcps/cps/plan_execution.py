@@ -1,0 +1,203 @@
+"""Plan execution and monitoring: K's plan run step by step, repaired when a step fails.
+
+Every step is executed as a trial (:class:`~llcps.cps.executor.TrialExecutor`) and
+checked by the monitor for the effects the rest of the plan relies on. When a step
+fails, the agent first tries what it already knows: it re-plans from the perceived state
+without that ground action (the operator that failed is demoted by its failure, see
+:func:`llcps.symbolic.knowledge.experience_cost`), executes the repaired plan, and
+repeats up to :data:`MAX_PLAN_REPAIRS` times. The first step that failed, a_f, is where
+exploration starts (:mod:`llcps.cps.exploration`), from the snapshot stored before it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Sequence
+
+from llcps.cps.branch_knowledge import BranchExperience
+from llcps.cps.executor import TrialExecutor
+from llcps.domain import State
+from llcps.scenarios.base import Scenario
+from llcps.sim.trial import TrialResult
+from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.monitor import StepFailure, check_step
+from llcps.symbolic.planner import GroundAction, plan
+
+#: Re-plans after the first failed plan step before exploration starts.
+MAX_PLAN_REPAIRS = 3
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A plan step that failed: the step a_f, what the monitor found missing, and the
+    state it was executed from: perceived, as physics (serialized) and as a stored
+    snapshot (None when the plan was not stored). Exploration looks for an alternative to
+    a_f from that state."""
+
+    step: GroundAction
+    monitor: StepFailure
+    state: State
+    physics: bytes
+    snapshot: int | None
+
+
+@dataclass(frozen=True)
+class PlanRun:
+    """How a plan execution ended: the state after the last executed step and, if a step
+    failed, the failure."""
+
+    state: State
+    failure: Failure | None = None
+
+
+@dataclass
+class PlanLog:
+    """What :func:`plan_and_repair` found, written as it goes (an interrupted episode keeps
+    what was found before the interruption).
+
+    Attributes:
+        plan: K's first plan, as step labels.
+        repairs: each repaired plan, the step that failed in it and what it missed, as
+            ``solve --json`` prints them.
+        failed_action: the first step that failed, a_f (None: no step failed).
+        missing_effects: what the monitor found missing after a_f.
+        solved: a plan reached the goal.
+    """
+
+    plan: list[str] = field(default_factory=list)
+    repairs: list[dict[str, object]] = field(default_factory=list)
+    failed_action: str | None = None
+    missing_effects: str | None = None
+    solved: bool = False
+
+
+def run_plan(
+    executor: TrialExecutor,
+    steps: Sequence[GroundAction],
+    *,
+    store: bool = True,
+    record: KnowledgeBase | None = None,
+    experience: BranchExperience | None = None,
+) -> PlanRun:
+    """Execute a plan step by step with the monitor; stop at the first failing step.
+
+    The monitor checks the effects the plan relies on (causal links): those in the
+    goal or needed by a later step's preconditions. A learned operator records every
+    change it was seen to make; an incidental one (a neighbour nudged) need not
+    recur for the plan to work. Reaching the goal ends the plan early.
+
+    Args:
+        steps: the plan.
+        store: store each step as a ``plan`` trial (False: nothing is stored, e.g. to
+            find where a plan fails).
+        record: the knowledge base the plan was made with: count each step in
+            ``experience`` as an execution of its operator in its context (success or
+            failure), which sets the operator's cost by experience. None: count nothing.
+    """
+    scenario = executor.scenario
+    state = executor.perceive()
+    for index, step in enumerate(steps):
+        spec = executor.controller_call(step)
+        if store:
+            stored = executor.snapshot()
+            physics = executor.snapshot_state(stored)
+        else:
+            stored, physics = None, executor.checkpoint()
+        trial, trial_record = executor.execute(spec, source="plan", snapshot_id=stored)
+        reached = scenario.goal_reached(trial.after)
+        failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], scenario), trial.after)
+        if record is not None and experience is not None and store:
+            context = record.context(step, trial.before)
+            experience.record(step.name, context, failure is None, trial_record.id if trial_record is not None else None)
+        if reached:
+            return PlanRun(trial.after)
+        if failure is not None:
+            return PlanRun(trial.after, Failure(step, failure, trial.before, physics, stored))
+        state = trial.after
+    return PlanRun(state)
+
+
+def _relied_on(step: GroundAction, later: Sequence[GroundAction], scenario: Scenario) -> GroundAction:
+    """``step`` with only the effects the goal or a later step's preconditions need."""
+    needed_true = set(scenario.goal_pos).union(*(s.preconditions for s in later))
+    needed_false = set(scenario.goal_neg).union(*(s.negative_preconditions for s in later))
+    return replace(step, add=step.add & needed_true, delete=step.delete & needed_false)
+
+
+def plan_and_repair(
+    executor: TrialExecutor,
+    experience: BranchExperience,
+    kb: KnowledgeBase,
+    state: State,
+    log: PlanLog,
+    *,
+    store: bool = True,
+) -> Failure | None:
+    """Execute K's plan; on a failed step re-plan without it, up to MAX_PLAN_REPAIRS times.
+
+    Every executed step is a stored ``plan`` trial and counts as an execution of its
+    operator, so a step that fails is demoted before the re-plan. Writes K's first plan,
+    the repairs, the first failure and whether a plan reached the goal to ``log``. With
+    ``store=False`` nothing is stored or counted (the path ``llcps inspect model`` takes
+    to the failure point); the failed steps are still left out of the re-plans.
+
+    Returns:
+        The first failure, or None when no step failed. Exploration looks for an
+        alternative to its step a_f from the state a_f was executed in.
+    """
+    first: Failure | None = None
+    excluded: set[tuple[str, tuple[str, ...]]] = set()
+    for attempt in range(1 + MAX_PLAN_REPAIRS):
+        executor.report("plan" if attempt == 0 else "re-plan")
+        known = experience.costed(kb)
+        steps = plan(known, executor.task(state), exclude=excluded)
+        if steps is None:
+            break
+        labels = [step.label for step in steps]
+        if attempt == 0:
+            log.plan = labels
+        run = run_plan(executor, steps, store=store, record=known, experience=experience)
+        state, failure = run.state, run.failure
+        if attempt > 0:
+            log.repairs.append(
+                {
+                    "plan": labels,
+                    "failed_action": failure.step.label if failure is not None else None,
+                    "missing_effects": failure.monitor.describe() if failure is not None else None,
+                }
+            )
+        if failure is None:
+            if executor.scenario.goal_reached(state):
+                log.solved = True
+            return first
+        if first is None:
+            log.failed_action = failure.step.label
+            log.missing_effects = failure.monitor.describe()
+            first = failure
+        excluded.add((failure.step.name, failure.step.args))
+    return first
+
+
+def resolves(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
+    """Did this trial resolve the novelty?
+
+    A trial resolves it if the goal now holds, or if K (costed by experience) plans from
+    the new state and that plan, executed, reaches the goal: a plan K made from the
+    failure point itself started with a_f, which failed there, so a plan that works now
+    works because of the trial. Only a trial that changed a fact about an entity of a_f
+    or of the goal is followed by a re-plan: other changes cannot have made a plan work
+    that did not before.
+    """
+    scenario = executor.scenario
+    if scenario.goal_reached(trial.after):
+        return True
+    focus = set(failure.step.args) | {t for atom in scenario.goal_pos | scenario.goal_neg for t in atom[1:]}
+    changed = trial.after ^ failure.state
+    if not any(focus.intersection(atom[1:]) for atom in changed):
+        return False
+    steps = plan(experience.costed(kb), executor.task(trial.after))
+    if not steps:
+        return False
+    executor.report("re-plan")
+    run = run_plan(executor, steps)
+    return run.failure is None and scenario.goal_reached(run.state)
