@@ -219,7 +219,7 @@ def warm_up(model: str) -> float:
     from llcps.models.registry import WORLD_MODELS
     from llcps.scenarios import SCENARIOS
     from llcps.sim.world import World
-    from llcps.symbolic.knowledge import KnowledgeBase
+    from llcps.symbolic.knowledge_base import KnowledgeBase
 
     start = time.process_time()
     WORLD_MODELS[model].model_class()

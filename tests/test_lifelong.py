@@ -19,7 +19,8 @@ from llcps.scenarios import SCENARIOS
 from llcps.store import Store
 from llcps.cps.knowledge import load_experience
 from llcps.symbolic.experience import Experience, experience_cost
-from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.knowledge_base import KnowledgeBase
+from llcps.symbolic.task import Task
 from llcps.symbolic.operators import learn_operator
 from llcps.symbolic.planner import plan
 

@@ -45,7 +45,8 @@ from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import SavedState, World
 from llcps.store import Store
 from llcps.symbolic.experience import Context, Experience
-from llcps.symbolic.knowledge import KnowledgeBase, Task
+from llcps.symbolic.knowledge_base import KnowledgeBase
+from llcps.symbolic.task import Task
 from llcps.symbolic.monitor import StepFailure, check_step
 from llcps.symbolic.operators import learn_operator
 from llcps.symbolic.planner import GroundAction, plan

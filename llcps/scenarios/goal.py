@@ -17,7 +17,7 @@ _ATOM = re.compile(r"^\((?P<atom>[^()]*)\)$")
 @lru_cache(maxsize=1)
 def predicate_arities() -> dict[str, int]:
     """The predicates of K's domain and their arities (the goal may use any of them)."""
-    from llcps.symbolic.knowledge import KnowledgeBase
+    from llcps.symbolic.knowledge_base import KnowledgeBase
 
     return dict(KnowledgeBase.default().predicates)
 

@@ -20,15 +20,11 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from typing import Callable, Iterable, Mapping
 
-from lark.exceptions import LarkError
-from pddl.core import Domain, Problem
+from pddl.core import Domain
 from pddl.exceptions import PDDLValidationError
-from pddl.logic.base import And, Formula, Not
-from pddl.logic.functions import EqualTo as NumericEqualTo
-from pddl.logic.functions import Metric, NumericFunction, NumericValue
+from pddl.logic.functions import NumericFunction
 from pddl.logic.predicates import Predicate
 from pddl.logic.terms import Constant, Variable
 from pddl.requirements import Requirements
@@ -37,9 +33,14 @@ from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, St
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.symbolic.experience import Context, Experience, step_context
 from llcps.symbolic.operators import LearnedOperator, parse_operator_name
-from llcps.symbolic.pddl_text import parse_domain_text
-from llcps.symbolic.schema import (
-    PDDL_NAME,
+from llcps.symbolic.pddl_domain import (
+    constant_types,
+    default_domain_pddl,
+    parse_domain,
+    predicate_signatures,
+    type_parents,
+)
+from llcps.symbolic.lifted import (
     TOTAL_COST,
     Controller,
     GroundAction,
@@ -47,24 +48,10 @@ from llcps.symbolic.schema import (
     operator_parts_from_pddl,
     is_variable,
     operator_to_pddl,
-    sort_fluents,
 )
 
 #: The requirements every knowledge base declares.
 REQUIREMENTS: tuple[str, ...] = ("strips", "typing", "negative-preconditions", "equality", "action-costs")
-
-
-def _parse_error(what: str, exc: Exception) -> LlcpsError:
-    first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    return LlcpsError(f"cannot read the PDDL {what}: {first_line}", hint="check the PDDL syntax and requirements")
-
-
-def parse_domain(text: str) -> Domain:
-    """Parse a PDDL domain with the `pddl` library, turning its errors into one project error."""
-    try:
-        return parse_domain_text(text)
-    except (LarkError, PDDLValidationError, ValueError, AssertionError) as exc:
-        raise _parse_error("domain", exc) from exc
 
 
 def _domain_action_operator(parts: dict[str, object]) -> Operator:
@@ -146,14 +133,9 @@ class KnowledgeBase:
         learned.sort(key=lambda op: op.name)
         return cls(
             name=str(domain.name),
-            type_parents=_type_parents(domain),
-            constant_types=tuple(sorted((str(c.name), str(c.type_tag) if c.type_tag else "object") for c in domain.constants)),
-            predicate_signatures=tuple(
-                sorted(
-                    (str(p.name), tuple((f"?{t.name}", str(sorted(t.type_tags)[0]) if t.type_tags else "object") for t in p.terms))
-                    for p in domain.predicates
-                )
-            ),
+            type_parents=type_parents(domain),
+            constant_types=constant_types(domain),
+            predicate_signatures=predicate_signatures(domain),
             actions=tuple(actions),
             learned=tuple(learned),
         )
@@ -393,25 +375,9 @@ class KnowledgeBase:
         return str(self.to_domain()) + "\n"
 
 
-def _type_parents(domain: Domain) -> tuple[tuple[str, str | None], ...]:
-    """Every type with its parent, implicit ``- object`` roots included, sorted."""
-    parents: dict[str, str | None] = {str(t): (str(p) if p is not None else None) for t, p in domain.types.items()}
-    for p in list(parents.values()):
-        if p is not None and p != "object":
-            parents.setdefault(p, None)
-    parents.pop("object", None)
-    return tuple(sorted(parents.items()))
-
-
 @functools.cache
 def _default_kb() -> KnowledgeBase:
-    text = resources.files("llcps.symbolic").joinpath("pddl/domain.pddl").read_text(encoding="utf-8")
-    return KnowledgeBase.from_pddl(text)
-
-
-def default_domain_pddl() -> str:
-    """The text of the package's naive domain, comments included."""
-    return resources.files("llcps.symbolic").joinpath("pddl/domain.pddl").read_text(encoding="utf-8")
+    return KnowledgeBase.from_pddl(default_domain_pddl())
 
 
 def _unifies(
@@ -439,101 +405,3 @@ def _unifies(
         else:
             return False
     return True
-
-
-def _symmetric_closure(state: Iterable[Fluent]) -> list[Fluent]:
-    out: set[Fluent] = set()
-    for atom in state:
-        out.add(atom)
-        if atom[0] in SYMMETRIC_PREDICATES:
-            out.add((atom[0], *reversed(atom[1:])))
-    return sort_fluents(out)
-
-
-@dataclass(frozen=True)
-class Task:
-    """T = (K, s0, sg) without K: the objects, the perceived initial state and the goal.
-
-    Attributes:
-        objects: object -> type (``item``, ``container``, ``surface``, ``entity``).
-        init: s0, the fluents that hold.
-        goal_pos: fluents the goal requires.
-        goal_neg: fluents the goal forbids.
-        name: the PDDL problem name.
-    """
-
-    objects: Mapping[str, str]
-    init: State
-    goal_pos: frozenset[Fluent] = frozenset()
-    goal_neg: frozenset[Fluent] = frozenset()
-    name: str = "task"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "objects", dict(self.objects))
-        for attr in ("init", "goal_pos", "goal_neg"):
-            object.__setattr__(self, attr, frozenset(fluent(a[0], *a[1:]) for a in getattr(self, attr)))
-
-    def satisfied_by(self, state: State) -> bool:
-        """Whether ``state`` is a goal state."""
-        return self.goal_pos <= state and self.goal_neg.isdisjoint(state)
-
-    def all_objects(self, kb: KnowledgeBase) -> dict[str, str]:
-        """The task's objects together with K's constants (object -> type)."""
-        return {**self.objects, **kb.constants}
-
-    def check(self, kb: KnowledgeBase) -> None:
-        """Check the task against K: known names, types and predicate arities.
-
-        Raises:
-            LlcpsError: naming the first problem found.
-        """
-        constants = kb.constants
-        types = kb.known_types()
-        lower: dict[str, str] = {}
-        for obj, kind in self.objects.items():
-            if not PDDL_NAME.fullmatch(obj):
-                raise LlcpsError(f"object name {obj!r} is not a PDDL name", hint="use letters, digits, '-' and '_', starting with a letter")
-            if kind not in types:
-                raise LlcpsError(f"object {obj} has unknown type {kind!r}", hint=f"known types: {', '.join(sorted(types))}")
-            if obj in constants and constants[obj] != kind:
-                raise LlcpsError(f"object {obj} is typed {kind} but is the domain constant of type {constants[obj]}")
-            if obj.lower() in lower:
-                raise LlcpsError(f"objects {lower[obj.lower()]} and {obj} differ only by case", hint="PDDL names are case-insensitive")
-            lower[obj.lower()] = obj
-        everything = self.all_objects(kb)
-        arities = kb.predicates
-        for what, atoms in (("initial state", self.init), ("goal", self.goal_pos | self.goal_neg)):
-            for atom in atoms:
-                if atom[0] not in arities:
-                    raise UnknownNameError("predicate", atom[0], sorted(arities))
-                if len(atom) - 1 != arities[atom[0]]:
-                    raise LlcpsError(f"{what}: {atom[0]} takes {arities[atom[0]]} argument(s), got {atom[1:]}")
-                unknown = [t for t in atom[1:] if t not in everything]
-                if unknown:
-                    raise LlcpsError(f"{what}: ({' '.join(atom)}) mentions unknown object(s) {', '.join(unknown)}", hint="list every entity in Task.objects")
-
-    def to_problem(self, kb: KnowledgeBase) -> Problem:
-        """T as a `pddl` library problem against K's domain (type-checked by the library)."""
-        self.check(kb)
-        everything = self.all_objects(kb)
-        constants = kb.constants
-
-        def atom(a: Fluent) -> Predicate:
-            return Predicate(a[0], *(Constant(t, everything[t]) for t in a[1:]))
-
-        goal: list[Formula] = [atom(a) for a in sort_fluents(self.goal_pos)]
-        goal += [Not(atom(a)) for a in sort_fluents(self.goal_neg)]
-        init: list[Formula] = [atom(a) for a in _symmetric_closure(self.init)]
-        init.append(NumericEqualTo(NumericFunction(TOTAL_COST), NumericValue(0)))
-        return Problem(
-            self.name,
-            domain=kb.to_domain(),
-            objects=[Constant(o, t) for o, t in sorted(self.objects.items()) if o not in constants],
-            init=init,
-            goal=And(*goal),
-            metric=Metric(NumericFunction(TOTAL_COST), Metric.MINIMIZE),
-        )
-
-    def problem_pddl(self, kb: KnowledgeBase) -> str:
-        """T as PDDL problem text for K's domain."""
-        return str(self.to_problem(kb)) + "\n"
