@@ -17,6 +17,10 @@ from llcps.errors import LlcpsError
 #: The four actions of Table 1, in the order of their encoding (1..4).
 ACTIONS: tuple[str, ...] = ("push", "push_together", "remove_from_container", "place_in_container")
 
+#: The two conditions of every CPS scenario (Figure 1): in the *original* one the nominal
+#: plan succeeds; in the *novelty* one the world has changed so that it fails.
+CONDITIONS: tuple[str, ...] = ("original", "novelty")
+
 #: Number of entity arguments each action controller takes.
 ACTION_ARITY: Mapping[str, int] = {
     "push": 1,
