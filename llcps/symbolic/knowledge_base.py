@@ -380,6 +380,10 @@ def _default_kb() -> KnowledgeBase:
     return KnowledgeBase.from_pddl(default_domain_pddl())
 
 
+def clear_caches() -> None:
+    _default_kb.cache_clear()
+
+
 def _unifies(
     effect: Fluent,
     atom: Fluent,

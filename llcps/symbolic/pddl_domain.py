@@ -73,6 +73,10 @@ def default_constants() -> dict[str, str]:
     return dict(constant_types(_default_domain()))
 
 
+def clear_caches() -> None:
+    _default_domain.cache_clear()
+
+
 def default_predicates() -> dict[str, int]:
     """Predicate -> arity of the naive domain (what ``KnowledgeBase.default().predicates`` gives)."""
     return {name: len(params) for name, params in predicate_signatures(_default_domain())}
