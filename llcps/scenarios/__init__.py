@@ -1,5 +1,13 @@
-"""The CPS scenarios: the paper's three (Figure 1) and more, each declared in a TOML
-file shipped in ``llcps/scenarios/shipped/``. ``SCENARIOS`` is the one list the CLI,
+"""The CPS scenarios as data: the paper's three (Figure 1) and more, each declared in a
+TOML file shipped in ``llcps/scenarios/shipped/``.
+
+A scenario holds one scene in two conditions, the *original* one, where the nominal
+plan from K succeeds, and the *novelty* one, where the world has changed so that it
+fails and the robot must solve the problem creatively; and the goal sg as PDDL atoms.
+The file format (:mod:`~llcps.scenarios.file_format`), its reading and checks
+(:mod:`~llcps.scenarios.loader`, :mod:`~llcps.scenarios.layout`) and the variants drawn
+from its ranges (:mod:`~llcps.scenarios.variants`) make every scenario plain data.
+ ``SCENARIOS`` is the one list the CLI,
 the experiments and the tests read; :func:`get_scenario` also reads a scenario
 straight from a file. See docs/scenarios.md for the file format and pictures.
 
@@ -32,14 +40,19 @@ def _shipped_files() -> list[Path]:
     return sorted(SHIPPED_DIR.glob("*.toml"))
 
 
-def _shipped() -> tuple[dict[str, Scenario], dict[str, str]]:
-    """Every shipped file read and checked, and the aliases the files declare."""
-    # The loader validates with pydantic: it loads when the registry is first used.
+def _read(path: Path, reserved: Mapping[str, str] | None = None) -> Scenario:
+    """The scenario of a file, read and checked."""
+    # The loader validates with pydantic: it loads when a scenario is first read.
     from llcps.scenarios.loader import read_file
 
+    return Scenario.from_source(read_file(path, reserved=reserved))
+
+
+def _shipped() -> tuple[dict[str, Scenario], dict[str, str]]:
+    """Every shipped file read and checked, and the aliases the files declare."""
     found: dict[str, Scenario] = {}
     for path in _shipped_files():
-        scenario = Scenario.from_source(read_file(path))
+        scenario = _read(path)
         found[scenario.name] = scenario
     return found, {s.alias: s.name for s in found.values() if s.alias}
 
@@ -100,9 +113,7 @@ def is_path(name: str) -> bool:
 @functools.lru_cache(maxsize=FILE_MEMO_SIZE)
 def _read_file(name: str, resolved: str, mtime_ns: int, size: int) -> Scenario:
     """The scenario of the file ``name`` as it is now (its resolved path, time and size are the key)."""
-    from llcps.scenarios.loader import read_file
-
-    return Scenario.from_source(read_file(Path(name), reserved=RESERVED))
+    return _read(Path(name), RESERVED)
 
 
 def get_scenario(name: str) -> Scenario:
@@ -118,9 +129,7 @@ def get_scenario(name: str) -> Scenario:
         stat = path.stat()
         resolved = str(path.resolve())
     except OSError:
-        from llcps.scenarios.loader import read_file
-
-        return Scenario.from_source(read_file(path, reserved=RESERVED))
+        return _read(path, RESERVED)
     return _read_file(name, resolved, stat.st_mtime_ns, stat.st_size)
 
 
