@@ -11,7 +11,7 @@ a known change. During exploration the agent calls :meth:`GoalHead.update` after
 trial; it does not retrain the learner (a refit on tens of thousands of examples would
 take many failures to move, and costs a second for some learners) but keeps
 *episode evidence*: every example of the trials the learner has not seen, grouped into
-families by :func:`~llcps.models.relational.family_keys` (action, predicate, sign and
+families by :func:`~llcps.models.families.family_keys` (action, predicate, sign and
 roles; and that with the same orientation, with the same movement magnitude, with the
 same rate; and the motion, the action with all three settings, whatever bodies it
 names). Physics is deterministic and every exploration trial
@@ -73,21 +73,23 @@ import numpy as np
 from llcps.domain import TrialChange, TrialRecord
 from llcps.models.artifact import array
 from llcps.models.measures import GOAL_FLOOR
-from llcps.models.relational import (
-    CONTINUOUS_MASK,
+from llcps.models.families import (
     N_ACTION_SIGNS,
     N_ACTION_STRATA,
-    N_GOAL_FEATURES,
     N_STRATA,
-    ExampleTable,
-    Examples,
-    GoalQuery,
     action_sign_of,
     action_sign_of_stratum,
     action_stratum_of,
-    encode_queries,
     family_keys,
     stratum_of,
+)
+from llcps.models.relational import (
+    CONTINUOUS_MASK,
+    N_GOAL_FEATURES,
+    ExampleTable,
+    Examples,
+    GoalQuery,
+    encode_queries,
 )
 
 #: Expected share of a family's members that change the atom when the family works in a scene.
