@@ -8,7 +8,7 @@ code fitted it: a stored model also carries :func:`model_code`, a digest of the
 source of :mod:`llcps.models`, and one fitted by other code (an older release, a
 changed encoder or learner) is refitted and replaced, so that what a model predicts
 never depends on when its store was made. Artifacts load without executing anything
-(see :mod:`llcps.models.base`); one that fails to load is refitted and replaced, with
+(see :mod:`llcps.models.artifact`); one that fails to load is refitted and replaced, with
 a warning.
 
 Within one process, fits are also remembered by the content of their training set
