@@ -1,5 +1,7 @@
-"""The paper's vocabulary as plain, frozen data: actions, controller parameters,
-entity features (Table 1), symbolic states and the meta-outcome Omega (Table 2).
+"""The paper's vocabulary as plain, frozen data: the actions of K and the settings of
+their controllers R, entity features X (Table 1), fluents and symbolic states s, the
+meta-outcome Omega (Table 2), a trial (the call a, r, nabla and what it changed), and
+the two conditions of a scenario.
 
 Every layer speaks these types: the simulator produces them, the store persists
 them, the world models learn from them and the agent reasons with them. Nothing
@@ -16,6 +18,10 @@ from llcps.errors import LlcpsError
 
 #: The four actions of Table 1, in the order of their encoding (1..4).
 ACTIONS: tuple[str, ...] = ("push", "push_together", "remove_from_container", "place_in_container")
+
+#: The two conditions of every CPS scenario (Figure 1): in the *original* one the nominal
+#: plan succeeds; in the *novelty* one the world has changed so that it fails.
+CONDITIONS: tuple[str, ...] = ("original", "novelty")
 
 #: Number of entity arguments each action controller takes.
 ACTION_ARITY: Mapping[str, int] = {

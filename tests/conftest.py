@@ -23,6 +23,10 @@ sys.path.insert(0, str(FIXTURES))
 
 from store_writer import sample_trial  # noqa: E402
 
+import llcps.models  # noqa: E402
+import llcps.scenarios  # noqa: E402
+import llcps.sim  # noqa: E402
+import llcps.symbolic  # noqa: E402
 from llcps.store import Store  # noqa: E402
 
 POSTGRES_URL = os.environ.get("LLCPS_TEST_POSTGRES_URL")
@@ -91,6 +95,16 @@ def sqlite_store(tmp_path: Path) -> Iterator[Store]:
     """A fresh SQLite store, for tests whose subject is not the store (simulation, models)."""
     with Store.open(str(tmp_path / "llcps.db"), create=True) as opened:
         yield opened
+
+
+@pytest.fixture
+def fresh_caches() -> Iterator[None]:
+    """The test starts with nothing remembered by the process: idle engines and their IK
+    solutions, trusted states, scenario files, remembered fits (what a new process knows).
+    Use it where a test counts what is computed, or make it autouse in a module."""
+    for package in (llcps.sim, llcps.symbolic, llcps.scenarios, llcps.models):
+        package.clear_caches()
+    yield
 
 
 @pytest.fixture

@@ -21,16 +21,13 @@ from llcps.errors import LlcpsError
 from llcps.models import WORLD_MODELS, load_world_model, make_world_model
 from llcps.models.goal import family_scale, joint_probability
 from llcps.models.measures import rank
+from llcps.models.families import action_sign_of, action_sign_of_stratum, action_stratum_of, family_keys
 from llcps.models.relational import (
     GOAL_FEATURES,
     N_GOAL_FEATURES,
     ExampleTable,
     GoalQuery,
-    action_sign_of,
-    action_sign_of_stratum,
-    action_stratum_of,
     encode_queries,
-    family_keys,
     trial_examples,
 )
 from llcps.models.synthetic import synthetic_changes, synthetic_trials

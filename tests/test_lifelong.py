@@ -17,7 +17,7 @@ from llcps.scenarios import SCENARIOS
 from llcps.store import Store
 from llcps.cps.branch_knowledge import load_experience, load_knowledge
 from llcps.symbolic.experience import Experience, experience_cost
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
 from llcps.symbolic.operators import learn_operator
 from llcps.symbolic.planner import plan

@@ -21,7 +21,8 @@ import pytest
 from llcps.domain import ACTIONS, OUTCOME_NAMES
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.models import WORLD_MODELS, load_world_model, make_world_model
-from llcps.models.base import label_prior, pack_arrays, unpack_arrays
+from llcps.models.artifact import pack_arrays, unpack_arrays
+from llcps.models.base import label_prior
 from llcps.models.features import encode_inputs, outcome_matrix
 from llcps.models.synthetic import synthetic_trials
 

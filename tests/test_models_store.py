@@ -68,7 +68,7 @@ def test_a_model_stored_by_other_model_code_is_refitted(store, candidates, monke
     fit_or_load(store, "main", "nb", 0)
     assert stored_ids(store, "main", "nb") == saved  # same code: loaded
     monkeypatch.setattr(persistence, "model_code", lambda: "another-release")
-    monkeypatch.setattr(persistence, "_FITS", type(persistence._FITS)())
+    persistence.clear_fits()
     again = fit_or_load(store, "main", "nb", 0)
     latest = store.latest_world_model("main", "nb", 0)
     assert latest.id != saved[0] and latest.watermark == saved[1] and latest.meta["code"] == "another-release"
@@ -137,7 +137,7 @@ def test_a_process_fits_one_training_set_once_across_stores(tmp_path, candidates
     fits = []
     real_fit = cls.fit
     monkeypatch.setattr(cls, "fit", lambda self, *a, **k: (fits.append(self.seed), real_fit(self, *a, **k))[1])
-    monkeypatch.setattr(persistence, "_FITS", type(persistence._FITS)())
+    persistence.clear_fits()
     stores = [Store.open(str(tmp_path / f"{i}.db"), create=True) for i in range(2)]
     try:
         for store in stores:
@@ -169,7 +169,7 @@ def test_a_model_fitted_without_its_goal_head_predicts_the_same_omega_and_is_ref
     fits: list[bool] = []
     real_fit = cls.fit
     monkeypatch.setattr(cls, "fit", lambda self, *a, **k: (fits.append(k.get("goal", True)), real_fit(self, *a, **k))[1])
-    monkeypatch.setattr(persistence, "_FITS", type(persistence._FITS)())
+    persistence.clear_fits()
     with Store.open(str(tmp_path / "goal.db"), create=True) as store:
         add_toy_trials(store, 30, seed=1)
         bare = fit_or_load(store, "main", name, 0, goal=False)

@@ -17,7 +17,7 @@ from llcps.domain import Body, ControllerParams, EntityFeatures, Outcome, TrialS
 from llcps.cps.pretraining import pretrain
 from llcps.sim.cache import decode_result, encode_result, trial_key
 from llcps.sim.trial import TrialResult
-from llcps.sim.world import PhysicsSettings
+from llcps.sim.settings import PhysicsSettings
 from llcps.store import Store
 from llcps.store import physics_cache as pc
 from llcps.store.tables import PhysicsCacheEntry
@@ -246,6 +246,7 @@ def test_episodes_record_the_same_trials_without_the_cache_from_a_cold_one_and_f
 
 def test_a_later_process_restores_sealed_end_states_without_checking_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from llcps.sim import snapshot
+    from llcps.sim import world as world_module
 
     config = SolveConfig(scenario="scenario2", budget=6, seed=2)
     with Store.open(str(tmp_path / "sealed.db"), create=True) as store:
@@ -258,7 +259,7 @@ def test_a_later_process_restores_sealed_end_states_without_checking_them(tmp_pa
         def no_probe(*args: object, **kwargs: object) -> None:
             raise AssertionError("a sealed end state was probed")
 
-        monkeypatch.setattr(snapshot, "probe_states", no_probe)
+        monkeypatch.setattr(world_module, "probe_states", no_probe)
         warm = solve(store, branch="warm", config=config, cache=pc.StorePhysicsCache(store.engine))
         trials = {n: [_row(t) for t in store.visible_trials(n) if t.source != "pretrain"] for n in ("cold", "warm")}
     assert warm.cache_hits == len(trials["warm"]) > 0

@@ -24,6 +24,7 @@ from llcps.cli.main import app
 from llcps.domain import EntityFeatures
 from llcps.cps.pretraining import pretrain
 from llcps.sim import snapshot as snapshots
+from llcps.sim.world import probe_states
 from llcps.store import Store
 from llcps.store.trials import pack_features
 
@@ -114,7 +115,7 @@ def test_the_engine_crashes_on_that_state_only_inside_the_probe(db: Path) -> Non
     scene, state = _snapshot(db)
     raw = zlib.decompress(_flip_at_90_percent(state))
     with pytest.raises(snapshots.StateError, match="crashed|cannot be restored"):
-        snapshots.probe_states(scene, [raw], check=False)
+        probe_states(scene, [raw], check=False)
 
 
 def _child(behaviour: str) -> tuple[int, int]:

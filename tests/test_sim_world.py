@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 import textwrap
+from typing import Any
 
 import numpy as np
 import pytest
@@ -183,18 +184,15 @@ def test_frames_render_headless(world, tmp_path) -> None:
     assert gif.size == (80, 60)  # identical frames of a scene at rest may be merged
 
 
-def _settled(scene: SceneSpec = SCENE) -> World:
-    w = World.from_scene(scene)
+def _settled(scene: SceneSpec = SCENE, **kwargs: Any) -> World:
+    w = World.from_scene(scene, **kwargs)
     w.settle(max_steps=120)
     return w
 
 
-def test_a_reach_probe_solves_its_ik_once_per_target_and_leaves_the_same_state(monkeypatch) -> None:
+def test_a_reach_probe_solves_its_ik_once_per_target_and_leaves_the_same_state(monkeypatch, fresh_caches) -> None:
     """`reach_error` remembers its IK solve by target; the probe still moves the joints
     (which changes what the world saves next), so a remembered probe saves the same bytes."""
-    from llcps.sim import robot as robot_module
-
-    monkeypatch.setattr(robot_module, "_REACH_IK", {})
     with _settled() as w:
         start = w.serialize_state()
         solve = w.client.calculateInverseKinematics
@@ -241,8 +239,8 @@ def test_a_state_checked_once_is_not_inflated_again(monkeypatch) -> None:
         assert len(inflated) == 2
 
 
-def test_a_closed_world_leaves_its_engine_to_the_next_world_which_behaves_as_fresh(monkeypatch) -> None:
-    from llcps.sim import world as world_module
+def test_a_closed_world_leaves_its_engine_to_the_next_world_which_behaves_as_fresh() -> None:
+    from llcps.sim.connection import ConnectionPool
 
     used = _settled()
     client = used.client
@@ -253,9 +251,7 @@ def test_a_closed_world_leaves_its_engine_to_the_next_world_which_behaves_as_fre
         assert reused.client is client
         trial = run_trial(reused, SPECS[1])
         reused_state = reused.save_state()
-    monkeypatch.setattr(world_module, "_IDLE_CLIENTS", [])
-    monkeypatch.setattr(world_module, "_IDLE_CLIENT_CAPACITY", 0)
-    with _settled() as fresh:
+    with _settled(pool=ConnectionPool(capacity=0)) as fresh:
         assert fresh.client is not client
         again = run_trial(fresh, SPECS[1])
         assert (again.outcome, again.sim_steps, again.after) == (trial.outcome, trial.sim_steps, trial.after)
@@ -373,7 +369,7 @@ def test_a_panda_directory_others_may_write_is_not_used(panda_files_in) -> None:
 
 def test_without_memory_files_states_go_through_a_private_directory_and_restore_the_same(monkeypatch) -> None:
     """Where the system has no anonymous in-memory files, a private temporary directory serves."""
-    from llcps.sim import state_files
+    from llcps.sim.connection import ConnectionPool
 
     with _settled() as w:
         states = []
@@ -382,9 +378,9 @@ def test_without_memory_files_states_go_through_a_private_directory_and_restore_
             states.append(w._save_raw())  # noqa: SLF001
         expected = [_state_after(w, raw) for raw in states]
         monkeypatch.delattr(os, "memfd_create")
-        monkeypatch.setattr(state_files, "_BY_CLIENT", type(state_files._BY_CLIENT)())
+    with _settled(pool=ConnectionPool(capacity=0)) as w:  # an engine of its own: its files are made now
         assert [_state_after(w, raw) for raw in states] == expected
-        files = state_files.state_files(w.client)
+        files = w._connection.files  # noqa: SLF001
         directory = files._directory  # noqa: SLF001
         assert directory is not None and os.stat(directory).st_mode & 0o077 == 0
         assert sorted(os.listdir(directory)) == ["save.bullet", "state-0.bullet", "state-1.bullet", "state-2.bullet"]

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from llcps.cps.exploration import MAX_SUBGOAL_ATOMS, SUBGOAL_TRUST, Subgoal, resolve_probability, subgoals
 from llcps.domain import fluent
 from llcps.models.measures import GOAL_FLOOR, rank
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
 from llcps.symbolic.monitor import check_step
 from llcps.symbolic.planner import ground

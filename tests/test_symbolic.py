@@ -7,7 +7,8 @@ from pddl.parser.domain import DomainParser
 
 from llcps.domain import ACTIONS, ControllerParams, TrialSpec, fluent
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.symbolic.knowledge import KnowledgeBase, default_domain_pddl
+from llcps.symbolic.knowledge_base import KnowledgeBase
+from llcps.symbolic.pddl_domain import default_domain_pddl
 from llcps.symbolic.task import Task
 from llcps.symbolic.monitor import check_step
 from llcps.symbolic.operators import (

@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from llcps.domain import ControllerParams, TrialSpec, fluent
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
 from llcps.symbolic.experience import Experience
 from llcps.symbolic.operators import learn_operator

@@ -28,7 +28,7 @@ from llcps.sim.motion import control_loop_rate
 from llcps.sim.robot import Robot
 from llcps.sim.world import World
 from llcps.store import Store
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 
 GROUP = "exploration"
 _figure = partial(figure, GROUP)

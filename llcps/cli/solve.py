@@ -10,7 +10,7 @@ import typer
 from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, cli_context, err_console, message, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
-from llcps.cps.episode import DEFAULT_BUDGET, DEFAULT_MEASURE, DEFAULT_MODEL, MAX_BUDGET
+from llcps.cps.episode import DEFAULT_BUDGET, MAX_BUDGET
 from llcps.domain import MAX_SEED
 from llcps.jobs.solve import solve
 from llcps.models import MEASURES, WORLD_MODELS
@@ -39,8 +39,8 @@ def solve_cli(
     ctx: typer.Context,
     scenario: Annotated[str, typer.Argument(metavar="SCENARIO", help=_SCENARIO_HELP, show_default=False)],
     condition: Annotated[Condition, typer.Option("--condition", help="Original (the plan works) or novelty (it fails).")] = "novelty",  # type: ignore[valid-type, assignment]
-    model: Annotated[ModelName, typer.Option("--model", help="World model that ranks exploration.")] = DEFAULT_MODEL,  # type: ignore[valid-type, assignment]
-    measure: Annotated[MeasureName, typer.Option("--measure", help="Measure that orders candidates by the model's prediction.")] = DEFAULT_MEASURE,  # type: ignore[valid-type, assignment]
+    model: Annotated[ModelName, typer.Option("--model", help="World model that ranks exploration.")] = WORLD_MODELS.default,  # type: ignore[valid-type, assignment]
+    measure: Annotated[MeasureName, typer.Option("--measure", help="Measure that orders candidates by the model's prediction.")] = MEASURES.default,  # type: ignore[valid-type, assignment]
     variant: Annotated[
         int,
         typer.Option(

@@ -6,7 +6,7 @@ from __future__ import annotations
 from llcps.errors import LlcpsError, StoreError
 from llcps.store import Store
 from llcps.symbolic.experience import Context, Experience
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 
 
 def load_knowledge(store: Store, branch: str) -> KnowledgeBase:

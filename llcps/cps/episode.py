@@ -42,10 +42,8 @@ if TYPE_CHECKING:
     from llcps.models.base import WorldModel
     from llcps.sim.cache import PhysicsCache
     from llcps.store import Store
-    from llcps.symbolic.knowledge import KnowledgeBase
+    from llcps.symbolic.knowledge_base import KnowledgeBase
 
-DEFAULT_MODEL = "nb"
-DEFAULT_MEASURE = "goal-directed"
 DEFAULT_BUDGET = 300
 #: Largest exploration budget (and refit interval) accepted: far beyond any candidate space.
 MAX_BUDGET = 1_000_000
@@ -57,8 +55,8 @@ class SolveConfig:
 
     scenario: str
     condition: str = "novelty"
-    model: str = DEFAULT_MODEL
-    measure: str = DEFAULT_MEASURE
+    model: str = WORLD_MODELS.default
+    measure: str = MEASURES.default
     seed: int = 0
     budget: int = DEFAULT_BUDGET
     refit_every: int = 1

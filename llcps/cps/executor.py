@@ -36,7 +36,7 @@ from llcps.sim.perception import perceive
 from llcps.sim.trial import TrialResult, run_trial
 from llcps.sim.world import SavedState, World
 from llcps.store import Store
-from llcps.symbolic.schema import GroundAction
+from llcps.symbolic.lifted import GroundAction
 from llcps.symbolic.task import Task
 
 #: Controller settings of K's own actions: the robot's nominal way of doing each.

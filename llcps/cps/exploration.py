@@ -37,7 +37,7 @@ from llcps.models.base import WorldModel
 from llcps.models.goal import joint_probability
 from llcps.models.measures import get_measure, rank
 from llcps.models.relational import GoalQuery
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
 from llcps.symbolic.monitor import StepFailure
 from llcps.symbolic.planner import GroundAction, ground

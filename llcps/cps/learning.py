@@ -12,7 +12,7 @@ from llcps.cps.executor import TrialExecutor
 from llcps.cps.plan_execution import Failure
 from llcps.domain import TrialRecord, TrialSpec
 from llcps.sim.trial import TrialResult
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.operators import learn_operator
 
 

@@ -4,7 +4,7 @@ Every step is executed as a trial (:class:`~llcps.cps.executor.TrialExecutor`) a
 checked by the monitor for the effects the rest of the plan relies on. When a step
 fails, the agent first tries what it already knows: it re-plans from the perceived state
 without that ground action (the operator that failed is demoted by its failure, see
-:func:`llcps.symbolic.knowledge.experience_cost`), executes the repaired plan, and
+:func:`llcps.symbolic.knowledge_base.experience_cost`), executes the repaired plan, and
 repeats up to :data:`MAX_PLAN_REPAIRS` times. The first step that failed, a_f, is where
 exploration starts (:mod:`llcps.cps.exploration`), from the snapshot stored before it.
 """
@@ -19,7 +19,7 @@ from llcps.cps.executor import TrialExecutor
 from llcps.domain import State
 from llcps.scenarios.base import Scenario
 from llcps.sim.trial import TrialResult
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.monitor import StepFailure, check_step
 from llcps.symbolic.planner import GroundAction, plan
 

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from typing import Iterable
 
 from llcps.cps.candidates import candidate_space_size
-from llcps.cps.episode import DEFAULT_MEASURE, DEFAULT_MODEL
 from llcps.domain import MAX_SEED
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.experiments.design import EXPERIMENT_CONDITIONS, RANDOM_ORDER_MODEL, Cell, Sequence, rank_by
@@ -128,7 +127,7 @@ PRESETS: Registry[Preset] = Registry(
         "full": Preset(
             "full",
             PAPER_MODELS + OTHER_MODELS,
-            PAPER_MEASURES + (DEFAULT_MEASURE,),
+            PAPER_MEASURES + (MEASURES.default,),
             PAPER_PRETRAIN_SIZES,
             default_seeds=20,
             refit_every=GRID_REFIT_EVERY,
@@ -138,8 +137,8 @@ PRESETS: Registry[Preset] = Registry(
         # whole candidate space as budget so that every episode that can be solved is.
         "vs_random": Preset(
             "vs_random",
-            (DEFAULT_MODEL, RANDOM_ORDER_MODEL),
-            (DEFAULT_MEASURE,),
+            (WORLD_MODELS.default, RANDOM_ORDER_MODEL),
+            (MEASURES.default,),
             (200,),
             conditions=("reset",),
             default_seeds=20,
@@ -151,8 +150,8 @@ PRESETS: Registry[Preset] = Registry(
         # (reset)? The whole candidate space as budget, 200 pretraining interactions.
         "lifelong": Preset(
             "lifelong",
-            (DEFAULT_MODEL,),
-            (DEFAULT_MEASURE,),
+            (WORLD_MODELS.default,),
+            (MEASURES.default,),
             (200,),
             default_seeds=20,
             budget=WHOLE_SPACE,
@@ -163,7 +162,7 @@ PRESETS: Registry[Preset] = Registry(
         "models": Preset(
             "models",
             PAPER_MODELS + OTHER_MODELS,
-            (DEFAULT_MEASURE,),
+            (MEASURES.default,),
             (200,),
             conditions=("reset",),
             default_seeds=5,

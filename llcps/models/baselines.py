@@ -15,7 +15,8 @@ from scipy.special import expit
 from sklearn.linear_model import LogisticRegression
 
 from llcps.domain import TrialRecord, WorldModelInput
-from llcps.models.base import WorldModel, array
+from llcps.models.artifact import array
+from llcps.models.base import WorldModel
 from llcps.models.features import encode_inputs
 from llcps.models.goal import GoalLearner, Standardizer, StratifiedLearner
 from llcps.models.relational import N_GOAL_FEATURES, GoalQuery, encode_queries

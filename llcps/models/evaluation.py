@@ -21,6 +21,7 @@ from sklearn.metrics import accuracy_score, f1_score, roc_auc_score
 from llcps.domain import OUTCOME_NAMES, TrialChange, TrialRecord
 from llcps.errors import LlcpsError
 from llcps.models.features import outcome_matrix
+from llcps.models.goal import examples_of
 from llcps.models.registry import make_world_model
 
 
@@ -161,8 +162,6 @@ def evaluate(
 
 
 def _goal_metrics(model: Any, test: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalMetrics | None:
-    from llcps.models.goal import examples_of
-
     examples = examples_of(test, changes)
     if not len(examples):
         return None

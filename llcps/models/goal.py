@@ -11,7 +11,7 @@ a known change. During exploration the agent calls :meth:`GoalHead.update` after
 trial; it does not retrain the learner (a refit on tens of thousands of examples would
 take many failures to move, and costs a second for some learners) but keeps
 *episode evidence*: every example of the trials the learner has not seen, grouped into
-families by :func:`~llcps.models.relational.family_keys` (action, predicate, sign and
+families by :func:`~llcps.models.families.family_keys` (action, predicate, sign and
 roles; and that with the same orientation, with the same movement magnitude, with the
 same rate; and the motion, the action with all three settings, whatever bodies it
 names). Physics is deterministic and every exploration trial
@@ -52,7 +52,7 @@ therefore the learner's mixed with a prior: ``(1 - e) p + e q`` with ``e`` =
 candidate's action has the effect (an operator of K whose controller is the candidate's
 action lists the atom among its effects, whatever the settings and preconditions:
 ``GoalQuery.claimed``, filled by the agent from
-:meth:`~llcps.symbolic.knowledge.KnowledgeBase.claims`), and otherwise the base rate
+:meth:`~llcps.symbolic.knowledge_base.KnowledgeBase.claims`), and otherwise the base rate
 ``r`` of its kind of change (predicate and sign) over the training set. So an action K
 believes can make the missing atom is tried early even where experience never saw it
 do so, and the learner orders everything else. A family that keeps failing falls below
@@ -71,22 +71,25 @@ from typing import Any, Callable, ClassVar, Mapping, Sequence
 import numpy as np
 
 from llcps.domain import TrialChange, TrialRecord
-from llcps.models.base import array
-from llcps.models.relational import (
-    CONTINUOUS_MASK,
+from llcps.models.artifact import array
+from llcps.models.measures import GOAL_FLOOR
+from llcps.models.families import (
     N_ACTION_SIGNS,
     N_ACTION_STRATA,
-    N_GOAL_FEATURES,
     N_STRATA,
-    ExampleTable,
-    Examples,
-    GoalQuery,
     action_sign_of,
     action_sign_of_stratum,
     action_stratum_of,
-    encode_queries,
     family_keys,
     stratum_of,
+)
+from llcps.models.relational import (
+    CONTINUOUS_MASK,
+    N_GOAL_FEATURES,
+    ExampleTable,
+    Examples,
+    GoalQuery,
+    encode_queries,
 )
 
 #: Expected share of a family's members that change the atom when the family works in a scene.
@@ -98,8 +101,6 @@ MAX_BELIEF = 0.5
 #: Share of the base rate of its kind of change mixed into every learned probability:
 #: in a novel scene no change is ruled out (see the module docstring).
 NOVELTY_MIX = 0.1
-#: Probabilities are kept inside [FLOOR, 1 - FLOOR] so that logs stay finite.
-FLOOR = 1e-12
 
 
 class GoalLearner(ABC):
@@ -396,7 +397,7 @@ class GoalHead:
                     scale[keys == key] *= family_scale(
                         int(tried.sum()), float(observed[tried].sum()), float(expected[tried].mean())
                     )
-        return np.clip(p * scale, FLOOR, 1.0 - FLOOR)
+        return np.clip(p * scale, GOAL_FLOOR, 1.0 - GOAL_FLOOR)
 
     def predict(self, query: GoalQuery) -> np.ndarray:
         """P(each atom changes as needed) per candidate: float64 (n_candidates, n_atoms) in [0, 1]."""

@@ -15,7 +15,8 @@ from typing import Any, ClassVar, Mapping, Sequence
 import numpy as np
 
 from llcps.domain import OUTCOME_NAMES, TrialRecord, WorldModelInput
-from llcps.models.base import WorldModel, array, label_prior, learnable_labels
+from llcps.models.artifact import array
+from llcps.models.base import WorldModel, label_prior, learnable_labels
 from llcps.models.features import (
     CONTINUOUS_COLUMNS,
     ENCODED_FEATURE_NAMES,

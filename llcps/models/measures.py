@@ -26,7 +26,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from llcps.domain import OUTCOME_NAMES
-from llcps.errors import LlcpsError, UnknownNameError
+from llcps.errors import LlcpsError
+from llcps.registry import Registry
 
 if TYPE_CHECKING:
     import numpy as np
@@ -82,20 +83,24 @@ def _entries(*measures: Measure) -> dict[str, Measure]:
     return {measure.name: measure for measure in measures}
 
 
-#: name -> measure, the one list of ranking measures.
-MEASURES: dict[str, Measure] = _entries(
-    Measure("least-destructive", "smallest P(negative reachability) first", ("negative_reachability",), False),
-    Measure("most-changes", "largest sum of all six predicted changes first", OUTCOME_NAMES, True),
-    Measure("most-positive-changes", "largest sum of the three positive changes first", _POSITIVE, True),
-    Measure("least-negative-changes", "smallest sum of the three negative changes first", _NEGATIVE, False),
-    Measure(
-        "goal-directed",
-        "largest predicted probability that the failure's missing atoms all change as needed",
-        _POSITIVE,
-        True,
-        uses_desired=True,
-        uses_goal=True,
+#: name -> measure, the one list of ranking measures; its default is ``goal-directed``.
+MEASURES: Registry[Measure] = Registry(
+    "measure",
+    _entries(
+        Measure("least-destructive", "smallest P(negative reachability) first", ("negative_reachability",), False),
+        Measure("most-changes", "largest sum of all six predicted changes first", OUTCOME_NAMES, True),
+        Measure("most-positive-changes", "largest sum of the three positive changes first", _POSITIVE, True),
+        Measure("least-negative-changes", "smallest sum of the three negative changes first", _NEGATIVE, False),
+        Measure(
+            "goal-directed",
+            "largest predicted probability that the failure's missing atoms all change as needed",
+            _POSITIVE,
+            True,
+            uses_desired=True,
+            uses_goal=True,
+        ),
     ),
+    default="goal-directed",
 )
 
 #: The paper's four measures, in the order of its Figure 2 (``goal-directed`` is this project's addition).
@@ -113,10 +118,7 @@ def get_measure(name: str) -> Measure:
     Raises:
         UnknownNameError: listing the known measures.
     """
-    try:
-        return MEASURES[name]
-    except KeyError:
-        raise UnknownNameError("measure", name, list(MEASURES)) from None
+    return MEASURES.get_entry(name)
 
 
 def check_proba(proba: np.ndarray) -> np.ndarray:
@@ -146,7 +148,8 @@ def _desired_weights(desired: np.ndarray | None) -> np.ndarray | None:
     return weights if weights.any() else None
 
 
-#: Atom probabilities are floored here before their logarithm (a zero would tie every such candidate).
+#: Atom probabilities are floored here before their logarithm (a zero would tie every such
+#: candidate); the goal-aware head keeps its predictions inside [GOAL_FLOOR, 1 - GOAL_FLOOR].
 GOAL_FLOOR = 1e-12
 
 

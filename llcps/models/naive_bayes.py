@@ -19,7 +19,7 @@ import numpy as np
 from scipy.special import expit
 from sklearn.linear_model import LogisticRegression
 
-from llcps.models.base import array
+from llcps.models.artifact import array
 from llcps.models.goal import GoalLearner, StratifiedLearner
 from llcps.models.learned import N_FEATURES, N_LABELS, EncodedWorldModel
 from llcps.models.relational import CONTINUOUS_MASK

@@ -21,10 +21,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from llcps.models.base import array
+from llcps.models.artifact import array
 from llcps.models.goal import GoalLearner, Standardizer
 from llcps.models.learned import N_FEATURES, N_LABELS, EncodedWorldModel
-from llcps.models.relational import N_GOAL_FEATURES, N_STRATA, stratum_of
+from llcps.models.families import N_STRATA, stratum_of
+from llcps.models.relational import N_GOAL_FEATURES
 
 
 @contextmanager

@@ -8,7 +8,7 @@ code fitted it: a stored model also carries :func:`model_code`, a digest of the
 source of :mod:`llcps.models`, and one fitted by other code (an older release, a
 changed encoder or learner) is refitted and replaced, so that what a model predicts
 never depends on when its store was made. Artifacts load without executing anything
-(see :mod:`llcps.models.base`); one that fails to load is refitted and replaced, with
+(see :mod:`llcps.models.artifact`); one that fails to load is refitted and replaced, with
 a warning.
 
 Within one process, fits are also remembered by the content of their training set
@@ -27,7 +27,6 @@ import hashlib
 import logging
 import struct
 import time
-from collections import OrderedDict
 from dataclasses import asdict, dataclass
 from importlib import resources
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
@@ -43,9 +42,7 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-#: Fitted models this process remembers by (name, seed, training digest, goal head), least recent first.
-_FITS: OrderedDict[tuple[str, int, str, bool], WorldModel] = OrderedDict()
-#: How many fitted models :data:`_FITS` keeps.
+#: How many fitted models this process remembers (:func:`_fit`), the least recently used dropped first.
 FIT_MEMO_SIZE = 8
 #: Between a trial's entity names in its digest (a control character, in no name).
 _SEPARATOR = "\x1f"
@@ -106,16 +103,23 @@ def _fit(
     entry: WorldModelEntry, seed: int, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange], goal: bool
 ) -> WorldModel:
     """A fresh fit, or a copy of this process's fit of the same training set."""
-    key = (entry.name, seed, training_digest(records, changes), goal)
-    remembered = _FITS.get(key)
-    if remembered is not None:
-        _FITS.move_to_end(key)
-        return copy.deepcopy(remembered)
+    slot = _remembered_fit(entry.name, seed, training_digest(records, changes), goal)
+    if slot:
+        return copy.deepcopy(slot[0])
     model = entry(seed).fit(records, changes, goal=goal)
-    _FITS[key] = copy.deepcopy(model)  # the caller updates its own model during exploration
-    while len(_FITS) > FIT_MEMO_SIZE:
-        _FITS.popitem(last=False)
+    slot.append(copy.deepcopy(model))  # the caller updates its own model during exploration
     return model
+
+
+@functools.lru_cache(maxsize=FIT_MEMO_SIZE)
+def _remembered_fit(name: str, seed: int, training: str, goal: bool) -> list[WorldModel]:
+    """Where this process keeps its fit of a model on a training set (by digest): empty until :func:`_fit` fills it."""
+    return []
+
+
+def clear_fits() -> None:
+    """Forget the fits this process remembers."""
+    _remembered_fit.cache_clear()
 
 
 def fit_or_load(

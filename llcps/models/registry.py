@@ -1,4 +1,5 @@
-"""WORLD_MODELS: the one list of world models (CLI choices, docs, test parameters).
+"""WORLD_MODELS: the one list of world models (CLI choices, docs, test parameters),
+with the default a command uses when given none.
 
 Entries import their module on first use, so ``import llcps.models`` (and every CLI
 command that only needs the names) does not pay for importing scikit-learn or torch.
@@ -10,7 +11,7 @@ import importlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Mapping
 
-from llcps.errors import UnknownNameError
+from llcps.registry import Registry
 
 if TYPE_CHECKING:
     from llcps.models.base import WorldModel
@@ -42,29 +43,29 @@ def _entries(*entries: WorldModelEntry) -> dict[str, WorldModelEntry]:
     return {entry.name: entry for entry in entries}
 
 
-#: name -> factory(seed) of every world model.
-WORLD_MODELS: dict[str, WorldModelEntry] = _entries(
-    WorldModelEntry(
-        "nb",
-        "llcps.models.naive_bayes",
-        "NaiveBayesModel",
-        "Bernoulli naive Bayes, one classifier per Omega bit (paper model 2)",
-        paper=2,
+#: name -> factory(seed) of every world model; its default is naive Bayes, the paper's model 2.
+WORLD_MODELS: Registry[WorldModelEntry] = Registry(
+    "world model",
+    _entries(
+        WorldModelEntry(
+            "nb",
+            "llcps.models.naive_bayes",
+            "NaiveBayesModel",
+            "Bernoulli naive Bayes, one classifier per Omega bit (paper model 2)",
+            paper=2,
+        ),
+        WorldModelEntry(
+            "nn",
+            "llcps.models.neural",
+            "NeuralNetworkModel",
+            "feed-forward network, 3 x 256 hidden, BCE loss, decaying learning rate (paper model 1)",
+            paper=1,
+        ),
+        WorldModelEntry("random", "llcps.models.baselines", "RandomModel", "no model: a seeded random exploration order"),
+        WorldModelEntry("logreg", "llcps.models.baselines", "LogisticRegressionModel", "logistic regression per Omega bit (linear)"),
+        WorldModelEntry("forest", "llcps.models.baselines", "RandomForestModel", "random forest over all Omega bits (non-linear)"),
     ),
-    WorldModelEntry(
-        "nn",
-        "llcps.models.neural",
-        "NeuralNetworkModel",
-        "feed-forward network, 3 x 256 hidden, BCE loss, decaying learning rate (paper model 1)",
-        paper=1,
-    ),
-    WorldModelEntry("random", "llcps.models.baselines", "RandomModel", "no model: a seeded random exploration order"),
-    WorldModelEntry(
-        "logreg", "llcps.models.baselines", "LogisticRegressionModel", "logistic regression per Omega bit (linear)"
-    ),
-    WorldModelEntry(
-        "forest", "llcps.models.baselines", "RandomForestModel", "random forest over all Omega bits (non-linear)"
-    ),
+    default="nb",
 )
 
 #: The paper's models, the default of commands that fit "the models".
@@ -77,10 +78,7 @@ def world_model_entry(name: str) -> WorldModelEntry:
     Raises:
         UnknownNameError: listing the known names.
     """
-    try:
-        return WORLD_MODELS[name]
-    except KeyError:
-        raise UnknownNameError("world model", name, list(WORLD_MODELS)) from None
+    return WORLD_MODELS.get_entry(name)
 
 
 def make_world_model(name: str, seed: int) -> WorldModel:

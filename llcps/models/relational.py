@@ -57,7 +57,7 @@ from llcps.errors import LlcpsError
 ROLES: tuple[str, ...] = ("arg1", "arg2", "object", "container", "table", "floor", "fixture")
 #: The second slot of a one-place predicate.
 NO_ROLE = "none"
-_ROLE2 = ROLES + (NO_ROLE,)
+SECOND_ROLES = ROLES + (NO_ROLE,)
 _ARG2_SHAPES = SHAPES + (NO_ROLE,)
 
 #: Unchanged atoms that involve no argument kept per trial (the rest stand behind them by weight).
@@ -66,19 +66,19 @@ OTHER_NEGATIVES = 8
 CLIP = 1.0
 
 
-def _onehot(prefix: str, values: Sequence[str]) -> tuple[str, ...]:
+def onehot(prefix: str, values: Sequence[str]) -> tuple[str, ...]:
     return tuple(f"{prefix}={v}" for v in values)
 
 
 CATEGORICAL_FEATURES: tuple[str, ...] = (
-    *_onehot("action", ACTIONS),
-    *_onehot("orientation", ORIENTATIONS),
-    *_onehot("predicate", PREDICATES),
+    *onehot("action", ACTIONS),
+    *onehot("orientation", ORIENTATIONS),
+    *onehot("predicate", PREDICATES),
     "add",
-    *_onehot("role1", ROLES),
-    *_onehot("role2", _ROLE2),
-    *_onehot("arg1_shape", SHAPES),
-    *_onehot("arg2_shape", _ARG2_SHAPES),
+    *onehot("role1", ROLES),
+    *onehot("role2", SECOND_ROLES),
+    *onehot("arg1_shape", SHAPES),
+    *onehot("arg2_shape", _ARG2_SHAPES),
 )
 
 _SLOT = ("dx", "dy", "dz", "distance", "size_x", "size_y", "size_z", "top_over_arg1", "distance_from_arg2")
@@ -112,8 +112,8 @@ N_GOAL_FEATURES = len(GOAL_FEATURES)
 #: True for the continuous columns (the ones a learner scales or bins).
 CONTINUOUS_MASK = np.array([False] * N_CATEGORICAL + [True] * len(CONTINUOUS_FEATURES))
 
-_INDEX = {name: i for i, name in enumerate(GOAL_FEATURES)}
-_ROLE_INDEX = {r: i for i, r in enumerate(_ROLE2)}
+FEATURE_INDEX = {name: i for i, name in enumerate(GOAL_FEATURES)}
+_ROLE_INDEX = {r: i for i, r in enumerate(SECOND_ROLES)}
 _FIRST_CONTINUOUS = N_CATEGORICAL
 _KIND_ROLE = {"object": "object", "container": "container", "table": "table", "floor": "floor", "fixture": "fixture"}
 
@@ -242,10 +242,10 @@ class _Candidate:
         arg1 = bodies[spec.arguments[0]]
         arg2 = bodies[spec.arguments[1]] if len(spec.arguments) > 1 else None
         head = [
-            _INDEX[f"action={spec.action}"],
-            _INDEX[f"orientation={spec.params.orientation}"],
-            _INDEX[f"arg1_shape={arg1.shape}"],
-            _INDEX[f"arg2_shape={arg2.shape if arg2 is not None else NO_ROLE}"],
+            FEATURE_INDEX[f"action={spec.action}"],
+            FEATURE_INDEX[f"orientation={spec.params.orientation}"],
+            FEATURE_INDEX[f"arg1_shape={arg1.shape}"],
+            FEATURE_INDEX[f"arg2_shape={arg2.shape if arg2 is not None else NO_ROLE}"],
         ]
         self.head = head
         a1 = arg1.centre
@@ -310,10 +310,10 @@ def _row(cand: _Candidate, scene: Scene, atom: Fluent, add: bool, out: np.ndarra
     args = cand.spec.arguments
     for i in cand.head:
         out[i] = 1.0
-    out[_INDEX[f"predicate={atom[0]}"]] = 1.0
-    out[_INDEX["add"]] = 1.0 if add else 0.0
-    out[_INDEX[f"role1={scene.role(names[0], args)}"]] = 1.0
-    out[_INDEX[f"role2={scene.role(names[1], args) if len(names) > 1 else NO_ROLE}"]] = 1.0
+    out[FEATURE_INDEX[f"predicate={atom[0]}"]] = 1.0
+    out[FEATURE_INDEX["add"]] = 1.0 if add else 0.0
+    out[FEATURE_INDEX[f"role1={scene.role(names[0], args)}"]] = 1.0
+    out[FEATURE_INDEX[f"role2={scene.role(names[1], args) if len(names) > 1 else NO_ROLE}"]] = 1.0
     slot1, p1 = _slot_values(cand, scene, names[0])
     slot2, p2 = _slot_values(cand, scene, names[1]) if len(names) > 1 else (_ZERO_SLOT, None)
     # The motion is judged against the atom's first body that is not argument 1.
@@ -475,83 +475,3 @@ class ExampleTable:
                 self._cache[record.id] = found  # type: ignore[index]
             parts.append(found)
         return Examples.concatenate(parts)
-
-
-#: The columns that say which change is asked of which controller: (action, predicate, sign).
-_KIND_COLUMNS: tuple[str, ...] = _onehot("action", ACTIONS) + _onehot("predicate", PREDICATES) + ("add",)
-#: Columns of the evidence keys: what makes two (candidate, atom) pairs one *family*,
-#: and the one-hot setting that narrows it (the orientation).
-FAMILY_COLUMNS: tuple[tuple[str, ...], ...] = (
-    _KIND_COLUMNS + _onehot("role1", ROLES) + _onehot("role2", _ROLE2),
-    _onehot("orientation", ORIENTATIONS),
-)
-
-
-def family_keys(features: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Five family keys per row: (action, predicate, sign, roles); that and the
-    orientation; that and the movement magnitude; that and the rate; and the motion
-    itself, (action, predicate, sign) with all three settings, whatever the roles.
-
-    Within one episode, pairs of a family share what matters physically: a family the
-    robot keeps failing with drops, and so, once more for each setting it shares with
-    a failure, does each of its parameterizations: exploration moves away from what
-    failed in every setting (see :mod:`llcps.models.goal`). The last key carries a
-    failed motion over to the action's other bodies: the same stroke with the same
-    settings from the same start state tends to do the same thing whichever of the
-    scene's bodies it names.
-    """
-    coarse_cols = [_INDEX[c] for c in FAMILY_COLUMNS[0]]
-    orientation_cols = [_INDEX[c] for c in FAMILY_COLUMNS[1]]
-    bits = features[:, coarse_cols] > 0.5
-    coarse = (bits @ (1 << np.arange(len(coarse_cols), dtype=np.int64))).astype(np.int64)
-    kind = (bits[:, : len(_KIND_COLUMNS)] @ (1 << np.arange(len(_KIND_COLUMNS), dtype=np.int64))).astype(np.int64)
-    orientation = (features[:, orientation_cols] > 0.5) @ np.arange(1, len(orientation_cols) + 1, dtype=np.int64)
-    magnitude = np.round(features[:, _INDEX["movement_magnitude"]] * 1e4).astype(np.int64)  # 0.1 mm steps
-    rate = np.round(features[:, _INDEX["rate"]] * 1e4).astype(np.int64)  # 0.1 mm/s steps
-    motion = ((kind * (len(orientation_cols) + 1) + orientation) * 100_003 + magnitude) * 100_003 + rate
-    return (
-        coarse,
-        coarse * (len(orientation_cols) + 1) + orientation,
-        coarse * 100_003 + magnitude,
-        coarse * 100_003 + rate,
-        motion,
-    )
-
-
-#: (predicate, sign) strata of the rows: what kind of change is asked.
-N_STRATA = 2 * len(PREDICATES)
-_PREDICATE_COLUMNS = [_INDEX[f"predicate={p}"] for p in PREDICATES]
-
-
-def stratum_of(features: np.ndarray) -> np.ndarray:
-    """Each row's (predicate, sign) stratum: ``2 * predicate index + add``."""
-    predicate = np.argmax(features[:, _PREDICATE_COLUMNS], axis=1)
-    return (2 * predicate + (features[:, _INDEX["add"]] > 0.5)).astype(np.int64)
-
-
-#: (action, predicate, sign) strata of the rows: which change is asked of which controller.
-N_ACTION_STRATA = len(ACTIONS) * N_STRATA
-_ACTION_COLUMNS = [_INDEX[f"action={a}"] for a in ACTIONS]
-
-
-def action_stratum_of(features: np.ndarray) -> np.ndarray:
-    """Each row's (action, predicate, sign) stratum: ``N_STRATA * action index + stratum_of``."""
-    action = np.argmax(features[:, _ACTION_COLUMNS], axis=1)
-    return (N_STRATA * action + stratum_of(features)).astype(np.int64)
-
-
-#: (action, sign) strata: which kind of change (adding or deleting any atom) of which controller.
-N_ACTION_SIGNS = 2 * len(ACTIONS)
-
-
-def action_sign_of(features: np.ndarray) -> np.ndarray:
-    """Each row's (action, sign) stratum: ``2 * action index + add``."""
-    action = np.argmax(features[:, _ACTION_COLUMNS], axis=1)
-    return (2 * action + (features[:, _INDEX["add"]] > 0.5)).astype(np.int64)
-
-
-def action_sign_of_stratum(strata: np.ndarray) -> np.ndarray:
-    """The (action, sign) stratum of each (action, predicate, sign) stratum: what
-    :func:`action_sign_of` gives for a row whose :func:`action_stratum_of` is ``strata``."""
-    strata = np.asarray(strata, dtype=np.int64)
-    return 2 * (strata // N_STRATA) + strata % 2

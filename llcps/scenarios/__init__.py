@@ -1,20 +1,29 @@
-"""The CPS scenarios: the paper's three (Figure 1) and more, each declared in a TOML
-file shipped in ``llcps/scenarios/shipped/``. ``SCENARIOS`` is the one list the CLI,
+"""The CPS scenarios as data: the paper's three (Figure 1) and more, each declared in a
+TOML file shipped in ``llcps/scenarios/shipped/``.
+
+A scenario holds one scene in two conditions, the *original* one, where the nominal
+plan from K succeeds, and the *novelty* one, where the world has changed so that it
+fails and the robot must solve the problem creatively; and the goal sg as PDDL atoms.
+The file format (:mod:`~llcps.scenarios.file_format`), its reading and checks
+(:mod:`~llcps.scenarios.loader`, :mod:`~llcps.scenarios.layout`) and the variants drawn
+from its ranges (:mod:`~llcps.scenarios.variants`) make every scenario plain data.
+ ``SCENARIOS`` is the one list the CLI,
 the experiments and the tests read; :func:`get_scenario` also reads a scenario
 straight from a file. See docs/scenarios.md for the file format and pictures.
 
-Light to import: the shipped files are read and checked (pydantic, the knowledge
-base's PDDL) when ``SCENARIOS`` or ``RESERVED`` is first used, not at import, so
-commands that never touch a scenario do not pay for it.
+Light to import: ``SCENARIOS`` is a :class:`~llcps.registry.Registry` whose shipped
+files are read and checked (pydantic, the knowledge base's PDDL) when it is first
+used, not at import, so commands that never touch a scenario do not pay for it.
 """
 
 from __future__ import annotations
 
+import functools
 import os
-import threading
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Iterator, Mapping
 
+from llcps.registry import Registry
 from llcps.scenarios.base import CONDITIONS, Scenario, lookup
 
 if TYPE_CHECKING:
@@ -23,49 +32,59 @@ if TYPE_CHECKING:
 #: Where the shipped scenario files are (package data).
 SHIPPED_DIR = Path(__file__).parent / "shipped"
 
-# Bound on first use by __getattr__ (_registry): declared here, without a value.
-#: name -> scenario, every shipped file (read when first used).
-SCENARIOS: dict[str, Scenario]
-#: Names and aliases of the shipped scenarios: a file of one's own may not take them.
-RESERVED: dict[str, str]
-
-_LOCK = threading.Lock()
-_FILES: dict[tuple[str, int, int], Scenario] = {}
+#: Scenario files read from a path this process remembers (the same file unchanged is read once).
+FILE_MEMO_SIZE = 128
 
 
 def _shipped_files() -> list[Path]:
     return sorted(SHIPPED_DIR.glob("*.toml"))
 
 
-def _shipped() -> dict[str, Scenario]:
+def _read(path: Path, reserved: Mapping[str, str] | None = None) -> Scenario:
+    """The scenario of a file, read and checked."""
+    # The loader validates with pydantic: it loads when a scenario is first read.
     from llcps.scenarios.loader import read_file
 
+    return Scenario.from_source(read_file(path, reserved=reserved))
+
+
+def _shipped() -> tuple[dict[str, Scenario], dict[str, str]]:
+    """Every shipped file read and checked, and the aliases the files declare."""
     found: dict[str, Scenario] = {}
     for path in _shipped_files():
-        scenario = Scenario.from_source(read_file(path))
+        scenario = _read(path)
         found[scenario.name] = scenario
-    return found
+    return found, {s.alias: s.name for s in found.values() if s.alias}
 
 
-def _registry() -> tuple[dict[str, Scenario], dict[str, str]]:
-    """``SCENARIOS`` and ``RESERVED``, the shipped files read and checked the first time."""
-    names = globals()
-    with _LOCK:
-        if "SCENARIOS" not in names:
-            scenarios = _shipped()
-            names["RESERVED"] = {
-                **{s.name: s.name for s in scenarios.values()},
-                **{s.alias: s.name for s in scenarios.values() if s.alias},
-            }
-            names["SCENARIOS"] = scenarios
-    return names["SCENARIOS"], names["RESERVED"]
+#: name -> scenario, every shipped file (read and checked when first used), with the
+#: files' aliases (``container`` for ``scenario2``).
+SCENARIOS: Registry[Scenario] = Registry("scenario", loader=_shipped, hint_extra=("or a path to a .toml file",))
+
+
+class _Reserved(Mapping[str, str]):
+    """Names and aliases of the shipped scenarios, each to its scenario's name: a file
+    of one's own may not take them (read from ``SCENARIOS`` when first used)."""
+
+    def _names(self) -> dict[str, str]:
+        return {**{name: name for name in SCENARIOS}, **SCENARIOS.aliases}
+
+    def __getitem__(self, name: str) -> str:
+        return self._names()[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names())
+
+    def __len__(self) -> int:
+        return len(self._names())
+
+
+#: Names and aliases of the shipped scenarios: a file of one's own may not take them.
+RESERVED: Mapping[str, str] = _Reserved()
 
 
 def __getattr__(name: str) -> Any:
-    if name in ("SCENARIOS", "RESERVED"):
-        _registry()
-        return globals()[name]
-    if name == "ScenarioSource":
+    if name == "ScenarioSource":  # the loader validates with pydantic: loaded when asked for
         from llcps.scenarios.loader import ScenarioSource
 
         return ScenarioSource
@@ -91,29 +110,44 @@ def is_path(name: str) -> bool:
     return name.endswith(".toml") or os.sep in name or "/" in name
 
 
+@functools.lru_cache(maxsize=FILE_MEMO_SIZE)
+def _read_file(name: str, resolved: str, mtime_ns: int, size: int) -> Scenario:
+    """The scenario of the file ``name`` as it is now (its resolved path, time and size are the key)."""
+    return _read(Path(name), RESERVED)
+
+
 def get_scenario(name: str) -> Scenario:
     """A scenario by name or alias (``scenario2`` or ``container``), or from a ``.toml`` file."""
-    scenarios, reserved = _registry()
     if not is_path(name):
-        return lookup(scenarios, name)
-    from llcps.scenarios.loader import read_file
-
+        return SCENARIOS.get_entry(name)
     path = Path(name)
-    for scenario in scenarios.values():
+    for scenario in SCENARIOS.values():
         if scenario.source is not None and scenario.source.path is not None and path.exists():
             if path.resolve() == scenario.source.path.resolve():
                 return scenario
     try:
         stat = path.stat()
-        key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+        resolved = str(path.resolve())
     except OSError:
-        key = None
-    if key is not None and key in _FILES:
-        return _FILES[key]
-    scenario = Scenario.from_source(read_file(path, reserved=reserved))
-    if key is not None:
-        _FILES[key] = scenario
-    return scenario
+        return _read(path, RESERVED)
+    return _read_file(name, resolved, stat.st_mtime_ns, stat.st_size)
 
 
-__all__ = ["CONDITIONS", "RESERVED", "SCENARIOS", "SHIPPED_DIR", "Scenario", "ScenarioSource", "get_scenario", "is_path", "shipped_names"]
+def clear_caches() -> None:
+    """Forget the scenario files read from paths (the shipped scenarios stay: they are package data)."""
+    _read_file.cache_clear()
+
+
+__all__ = [
+    "CONDITIONS",
+    "RESERVED",
+    "SCENARIOS",
+    "SHIPPED_DIR",
+    "Scenario",
+    "ScenarioSource",
+    "clear_caches",
+    "get_scenario",
+    "is_path",
+    "lookup",
+    "shipped_names",
+]

@@ -13,15 +13,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Mapping
 
-from llcps.domain import Fluent, State
+from llcps.domain import CONDITIONS, Fluent, State
 from llcps.errors import UnknownNameError
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the loader validates with pydantic: it loads when a scenario is first read
     from llcps.scenarios.loader import ScenarioSource
     from llcps.sim.specs import SceneSpec
 
-#: Names of the two conditions every scenario has (the file format's too: llcps.scenarios.schema).
-CONDITIONS: tuple[str, ...] = ("original", "novelty")
+__all__ = ["CONDITIONS", "Scenario", "lookup"]
 
 
 @dataclass(frozen=True)

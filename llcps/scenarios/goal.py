@@ -9,6 +9,7 @@ from functools import lru_cache
 from typing import Iterable
 
 from llcps.domain import Fluent, fluent, format_fluent
+from llcps.symbolic.pddl_domain import default_predicates
 
 _NEGATED = re.compile(r"^\(\s*not\s*\((?P<atom>[^()]*)\)\s*\)$")
 _ATOM = re.compile(r"^\((?P<atom>[^()]*)\)$")
@@ -17,9 +18,7 @@ _ATOM = re.compile(r"^\((?P<atom>[^()]*)\)$")
 @lru_cache(maxsize=1)
 def predicate_arities() -> dict[str, int]:
     """The predicates of K's domain and their arities (the goal may use any of them)."""
-    from llcps.symbolic.knowledge import KnowledgeBase
-
-    return dict(KnowledgeBase.default().predicates)
+    return default_predicates()
 
 
 def parse_atom(text: str, names: Iterable[str]) -> tuple[bool, Fluent]:

@@ -2,7 +2,7 @@
 concrete scene of any condition and variant from it.
 
 Everything a file can get wrong is caught here, before anything is simulated or
-stored: the format (:mod:`llcps.scenarios.schema`), names that do not exist (goal
+stored: the format (:mod:`llcps.scenarios.file_format`), names that do not exist (goal
 atoms, containers, condition changes), and the canonical layout itself
 (:mod:`llcps.scenarios.layout`). Each error names the file and the field.
 """
@@ -18,10 +18,12 @@ from typing import Any, Mapping
 
 from llcps.domain import Fluent
 from llcps.errors import LlcpsError
-from llcps.scenarios import layout, schema
+from llcps.scenarios import file_format, layout
 from llcps.scenarios.goal import parse_atom
-from llcps.scenarios.schema import CONDITION_NAMES, EntityModel, ScenarioModel, file_error
+from llcps.scenarios.file_format import CONDITION_NAMES, EntityModel, ScenarioModel, file_error
 from llcps.scenarios.variants import MAX_ATTEMPTS, Draws, check_variant
+from llcps.sim.builders import bucket, edge_lip, inside, open_box, shelf, solid, stacked
+from llcps.sim.specs import FixtureSpec, SceneSpec, TableSpec
 
 #: Fields whose value is a number or a range.
 _NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half"})
@@ -131,8 +133,6 @@ class ScenarioSource:
         return name
 
     def _build(self, condition: str, draws: Draws) -> tuple[Any, dict[str, layout.Declared]]:
-        from llcps.sim.specs import SceneSpec, TableSpec
-
         table_fields = dict(self.model.table.model_dump(exclude_none=True))
         changes = self.model.conditions.get(condition)
         if changes is not None and changes.table is not None:
@@ -167,8 +167,6 @@ class ScenarioSource:
 
 def _entity_spec(m: EntityModel, d: Draws, built: Mapping[str, Any], floor_z: float) -> Any:
     """The spec of one entity, through the same builders hand-written scenes use."""
-    from llcps.sim.builders import bucket, inside, open_box, solid, stacked
-
     key = f"entities.{m.name}"
     size = [d.number(v, f"{key}.size[{i}]") for i, v in enumerate(m.size)]
     color = d.choice(m.color, f"{key}.color")
@@ -196,9 +194,6 @@ def _entity_spec(m: EntityModel, d: Draws, built: Mapping[str, Any], floor_z: fl
 
 
 def _fixture_specs(f: Any, d: Draws, table: Any) -> tuple[Any, ...]:
-    from llcps.sim.builders import edge_lip, shelf
-    from llcps.sim.specs import FixtureSpec
-
     key = f"fixtures.{f.name}"
     if f.type == "lip":
         return (
@@ -273,7 +268,7 @@ def read_text(text: str, *, where: str, path: Path | None = None, reserved: Mapp
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise file_error(where, "", f"not valid TOML: {exc}", hint="check the line named above against docs/scenarios.md") from None
-    model = schema.validate(where, data)
+    model = file_format.validate(where, data)
     for key in ("name", "alias"):
         value = getattr(model, key)
         if value is not None and reserved and value in reserved:
@@ -332,7 +327,7 @@ def _merged_entities(where: str, data: Mapping[str, Any], model: ScenarioModel, 
             continue
         blame: dict[str, tuple[Any, ...]] = {k: ("entities", index, k) for k in raw}
         blame.update({k: ("conditions", condition, "entities", entity.name, k) for k in patch})
-        merged.append(schema.validate_entity(where, {**raw, **patch}, blame))
+        merged.append(file_format.validate_entity(where, {**raw, **patch}, blame))
     return tuple(merged)
 
 

@@ -20,8 +20,10 @@ from __future__ import annotations
 import hashlib
 from typing import TYPE_CHECKING, Any, Callable
 
+from llcps.errors import LlcpsError
+
 if TYPE_CHECKING:
-    from llcps.scenarios.schema import Scalar
+    from llcps.scenarios.file_format import Scalar
 
 #: Decimals of every drawn value (0.1 mm, 0.1 g, 0.0001 rad).
 DIGITS = 4
@@ -74,8 +76,6 @@ class Draws:
 
 def check_variant(variant: object) -> int:
     """A variant number, or an error saying what one is."""
-    from llcps.errors import LlcpsError
-
     if isinstance(variant, bool) or not isinstance(variant, int) or not 0 <= variant <= MAX_VARIANT:
         raise LlcpsError(
             f"a variant is a number from 0 to {MAX_VARIANT}, not {variant!r}", hint="variant 0 is the canonical scene"
@@ -85,8 +85,6 @@ def check_variant(variant: object) -> int:
 
 def parse_range(text: str) -> range:
     """A range of variants from the command line: ``A:B`` is A..B-1, ``N`` is N alone."""
-    from llcps.errors import LlcpsError
-
     parts = text.strip().split(":")
     try:
         bounds = [int(p) for p in parts]

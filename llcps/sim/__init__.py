@@ -1,6 +1,19 @@
-"""The sub-symbolic knowledge base Psi: a PyBullet world, the Panda arm, entities,
-the four action controllers R, perception of the symbolic state, Table-1 features,
-and random pretraining interactions. See docs/world.md and docs/controllers.md."""
+"""The world and the robot's hands and eyes: the sub-symbolic knowledge base Psi of the paper.
+
+- The world: a PyBullet simulation of the table, the Panda arm and the scenario's
+  entities (:mod:`~llcps.sim.world`, built from plain scene descriptions in
+  :mod:`~llcps.sim.specs`), with exact snapshots (:mod:`~llcps.sim.snapshot`).
+- The action controllers R, one per action of K (push, push_together,
+  remove_from_container, place_in_container), each with its continuous settings
+  (:mod:`~llcps.sim.controllers`, on the motions of :mod:`~llcps.sim.motion`).
+- Perception of fluents: the symbolic state s (visible, reachable, touching, on, in,
+  holding, near) read from the simulation, and the entity features X of Table 1
+  (:mod:`~llcps.sim.perception`); a trial runs a controller between two perceptions
+  and yields its meta-outcome Omega (:mod:`~llcps.sim.trial`).
+- Random pretraining interactions (:mod:`~llcps.sim.sampler`).
+
+See docs/world.md and docs/controllers.md.
+"""
 
 from __future__ import annotations
 
@@ -41,3 +54,15 @@ def native_output_silenced() -> Iterator[None]:
         for fd in (*saved, devnull):
             os.close(fd)
 
+
+def clear_caches() -> None:
+    """Forget everything this process remembers about the simulator: idle connections
+    (and the IK solutions of their robots), trusted states, parsed reference states and
+    the Panda's files. What follows computes the same, only slower at first."""
+    # Imported here: importing llcps.sim must not load the physics engine.
+    from llcps.sim import connection, robot, snapshot, state_check
+
+    connection.POOL.clear()
+    snapshot.TRUSTED.clear()
+    state_check.clear_caches()
+    robot.panda_urdf.cache_clear()

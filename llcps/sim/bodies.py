@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from llcps.sim.engine import pybullet as p
+from llcps.sim.bullet import pybullet as p
 
 from llcps.sim.specs import FIXTURE_RGBA, RGBA, EntitySpec, FixtureSpec
 

@@ -28,7 +28,7 @@ from llcps.domain import ACTIONS, ORIENTATIONS, Body, ControllerParams, EntityFe
 from llcps.sim.result import TrialResult
 
 if TYPE_CHECKING:
-    from llcps.sim.world import PhysicsSettings
+    from llcps.sim.settings import PhysicsSettings
 
 #: Version of the key's layout; part of every key.
 KEY_VERSION = 2  # 2: a result holds the scene's bodies (its symbolic change needs them)

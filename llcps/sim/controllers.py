@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Callable, Mapping
 from llcps.domain import ACTIONS, PUSH_DIRECTION, SIDE, TrialSpec
 from llcps.errors import LlcpsError
 from llcps.sim import geometry as g
+from llcps.sim.contact import TOUCH_DISTANCE, in_contact
 from llcps.sim.motion import TRANSIT_SPEED, VERTICAL_SPEED, CapReached, Motion
 from llcps.sim.robot import FINGER_OPEN, RAY_MASK, TOOL_ABOVE_TIPS
 
@@ -101,7 +102,7 @@ def _blocked(world: "World", target: str) -> Callable[[], bool]:
     c, robot, body = world.client, world.robot.body_id, world.body(target)
 
     def touching_other() -> bool:
-        return any(cp[2] != body and cp[8] <= g.TOUCH_DISTANCE for cp in c.getContactPoints(bodyA=robot))
+        return any(cp[2] != body and cp[8] <= TOUCH_DISTANCE for cp in c.getContactPoints(bodyA=robot))
 
     return touching_other
 
@@ -156,7 +157,7 @@ def push_together(world: "World", m: Motion, args: tuple[str, ...], params: "Con
     robot_id, body_a, body_b = world.robot.body_id, world.body(a), world.body(b)
 
     def pushed_into_contact() -> bool:
-        return g.in_contact(c, robot_id, body_a) and g.in_contact(c, body_a, body_b)
+        return in_contact(c, robot_id, body_a) and in_contact(c, body_a, body_b)
 
     if m.move_to(end, params.rate, until=pushed_into_contact):
         x, y, z = m.target

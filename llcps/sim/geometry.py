@@ -1,26 +1,15 @@
-"""Measurements on bodies shared by the controllers and perception: extents,
-tops and bottoms, footprints, and containers' interior volumes."""
+"""Measurements on the bodies of a world shared by the controllers and perception:
+extents, tops and bottoms, footprints, and containers' interior volumes."""
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Sequence
 
 if TYPE_CHECKING:
     from llcps.sim.world import World
 
 Vec3 = tuple[float, float, float]
-
-
-#: Contact distance below which two bodies touch (m); manifolds also keep points
-#: a little apart, so every contact query filters on distance.
-TOUCH_DISTANCE = 0.002
-
-
-def in_contact(client: Any, a: int, b: int, link_a: int = -2) -> bool:
-    """Whether bodies ``a`` (optionally only its link ``link_a``) and ``b`` touch now."""
-    points = client.getContactPoints(a, b) if link_a == -2 else client.getContactPoints(a, b, link_a)
-    return any(cp[8] <= TOUCH_DISTANCE for cp in points)
 
 
 def unit2(dx: float, dy: float, default: tuple[float, float] = (1.0, 0.0)) -> tuple[float, float]:

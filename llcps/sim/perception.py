@@ -28,9 +28,9 @@ from typing import TYPE_CHECKING
 
 from llcps.domain import Body, EntityFeatures, State, fluent
 from llcps.sim import geometry as g
-from llcps.sim.geometry import TOUCH_DISTANCE
+from llcps.sim.contact import TOUCH_DISTANCE
 from llcps.sim.robot import RAY_MASK
-from llcps.sim.world import FLOOR, TABLE
+from llcps.sim.specs import FLOOR, TABLE
 
 if TYPE_CHECKING:
     from llcps.sim.world import World

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
-from llcps.sim.engine import pybullet as p
+from llcps.sim.bullet import pybullet as p
 from PIL import Image, ImageDraw, ImageFont
 
 from llcps.outputs import write_error

@@ -25,14 +25,14 @@ import shutil
 import stat
 import tempfile
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
-from llcps.sim.engine import pybullet as p
+from llcps.sim.bullet import pybullet as p
 import pybullet_data
 from scipy.spatial import ConvexHull
 
-from llcps.sim.geometry import TOUCH_DISTANCE
+from llcps.sim.contact import TOUCH_DISTANCE
 
 #: Movable arm joints, finger joints, hand link and tool link of panda.urdf.
 ARM_JOINTS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6)
@@ -60,9 +60,7 @@ RAY_MASK = ~ROBOT_GROUP & 0xFFFF
 #: Grasp constraint strength (N): enough for every catalog object, not for a table.
 GRASP_FORCE = 60.0
 
-#: The IK solutions of :meth:`Robot.reach_error` by target (position, yaw), per process:
-#: a solve from HOME depends on the target alone.
-_REACH_IK: dict[tuple[float, float, float, float], tuple[float, ...]] = {}
+#: IK solutions a :class:`ReachSolutions` keeps.
 REACH_IK_CAPACITY = 8192
 
 
@@ -133,6 +131,29 @@ def _write_panda_files(src: Path, dst: Path) -> None:
     shutil.copy(src / "panda.urdf", dst / "panda.urdf")  # last: a directory with the URDF is complete
 
 
+class ReachSolutions:
+    """The IK solutions of :meth:`Robot.reach_error` by target (position, yaw), least
+    recently used dropped first, for the robots built in one engine (each rebuild of a
+    scene builds a new robot): a solve from HOME depends on the target alone.
+    """
+
+    def __init__(self, capacity: int = REACH_IK_CAPACITY) -> None:
+        # key -> a slot holding its solution once solved (an lru_cache bounds and orders the slots)
+        self._slot: Callable[[tuple[float, float, float, float]], list[tuple[float, ...]]] = functools.lru_cache(maxsize=capacity)(
+            lambda key: []
+        )
+
+    def get(self, robot: "Robot", key: tuple[float, float, float, float]) -> tuple[float, ...]:
+        """The arm joints of ``key``'s solve from HOME, solved by ``robot`` unless remembered."""
+        slot = self._slot(key)
+        if not slot:
+            slot.append(robot._home_ik(key))  # noqa: SLF001
+        return slot[0]
+
+    def cache_clear(self) -> None:
+        self._slot.cache_clear()  # type: ignore[attr-defined]
+
+
 def top_down(yaw: float) -> tuple[float, float, float, float]:
     """Quaternion of a tool pointing straight down, fingers closing across ``yaw``.
 
@@ -149,8 +170,10 @@ class Robot:
         grasped: body id of the object held by the grasp constraint, if any.
     """
 
-    def __init__(self, client: Any, *, visuals: bool = True) -> None:
+    def __init__(self, client: Any, *, visuals: bool = True, reach: ReachSolutions | None = None) -> None:
         self.client = client
+        #: The IK solutions of :meth:`reach_error`, shared by the robots of one engine.
+        self.reach = reach if reach is not None else ReachSolutions()
         cid = client._client
         # hot-path calls bound to the client once (BulletClient re-binds on every call)
         self._ik = functools.partial(p.calculateInverseKinematics, physicsClientId=cid)
@@ -300,36 +323,20 @@ class Robot:
         """How closely the arm can put its tool at a top-down pose, by IK then FK.
 
         The IK starts from HOME whatever the arm is doing, so the answer depends on
-        the target alone, and each target's solve is remembered per process. The
+        the target alone, and each target's solve is remembered (:attr:`reach`). The
         joints still go to HOME, to the solution and back on every call (what the
         world saves next depends on those moves); no time passes and no body moves.
 
         Returns:
             (position error in m, angle between the tool axis and straight down in rad).
         """
-        c, body, reset = self.client, self.body_id, self._reset_joint
+        body, reset = self.body_id, self._reset_joint
         joints = ARM_JOINTS + FINGER_JOINTS
         saved = self._joint_states(body, joints)
         for j, q in zip(joints, self.rest):
             reset(body, j, q, 0.0)
         key = (float(position[0]), float(position[1]), float(position[2]), float(yaw))
-        q = _REACH_IK.get(key)
-        if q is None:
-            q = c.calculateInverseKinematics(
-                body,
-                TOOL_LINK,
-                position,
-                top_down(yaw),
-                lowerLimits=self.lower,
-                upperLimits=self.upper,
-                jointRanges=self.ranges,
-                restPoses=self.rest,
-                maxNumIterations=100,
-                residualThreshold=1e-5,
-            )[:7]
-            if len(_REACH_IK) >= REACH_IK_CAPACITY:
-                _REACH_IK.pop(next(iter(_REACH_IK)))
-            _REACH_IK[key] = q
+        q = self.reach.get(self, key)
         for j, qj in zip(ARM_JOINTS, q):
             reset(body, j, min(max(qj, self.lower[j]), self.upper[j]), 0.0)
         state = self._link_state(body, TOOL_LINK, computeForwardKinematics=1)
@@ -342,3 +349,18 @@ class Robot:
         axis_z = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))
         angle = math.acos(max(-1.0, min(1.0, -axis_z[2])))
         return err, angle
+
+    def _home_ik(self, key: tuple[float, float, float, float]) -> tuple[float, ...]:
+        """The arm joints of a top-down tool pose solved from HOME (the joints are at HOME)."""
+        return self.client.calculateInverseKinematics(
+            self.body_id,
+            TOOL_LINK,
+            key[:3],
+            top_down(key[3]),
+            lowerLimits=self.lower,
+            upperLimits=self.upper,
+            jointRanges=self.ranges,
+            restPoses=self.rest,
+            maxNumIterations=100,
+            residualThreshold=1e-5,
+        )[:7]

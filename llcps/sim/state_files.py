@@ -6,7 +6,8 @@ state from a new temporary file therefore keeps every state ever restored in
 memory (about 90 kB each, so a worker grew by gigabytes over a long grid), and
 restoring new bytes under a name the engine has read restores the old bytes.
 
-:class:`StateFiles` gives each distinct state restored a file of its own. A state
+:class:`StateFiles` gives each distinct state restored a file of its own; a
+:class:`~llcps.sim.connection.Connection` holds the one of its engine. A state
 the engine holds is restored without writing or reading anything; when
 :data:`CAPACITY` states are held, the engine's file cache is cleared (file caching
 off and on again: the robot's mesh files are read again on the next build).
@@ -93,13 +94,3 @@ def _close(*groups: list[tuple[int, str]]) -> None:
         for fd, _ in files:
             os.close(fd)
 
-
-_BY_CLIENT: "weakref.WeakKeyDictionary[Any, StateFiles]" = weakref.WeakKeyDictionary()
-
-
-def state_files(client: Any) -> StateFiles:
-    """The state files of ``client`` (a forked child makes its own)."""
-    files = _BY_CLIENT.get(client)
-    if files is None or files.pid != os.getpid():
-        files = _BY_CLIENT[client] = StateFiles(client)
-    return files

@@ -11,36 +11,27 @@ and stepping from it gives bit-identical results.
 from __future__ import annotations
 
 import functools
+import math
 import os
 import sys
 import zlib
-from dataclasses import asdict, dataclass, field
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as package_version
-from typing import Any, Callable, Mapping
-
-from llcps.sim.engine import pybullet as p
-from pybullet_utils import bullet_client
+from typing import Any, Callable, Mapping, Sequence
 
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.sim import CONTROLLERS_REVISION, native_output_silenced
 from llcps.sim import snapshot as snapshots
 from llcps.sim.bodies import Entity, build_entity, build_fixture
-from llcps.sim.specs import FIXTURE_RGBA, FLOOR, TABLE, FixtureSpec, SceneSpec
+from llcps.sim.bullet import pybullet as p
+from llcps.sim.connection import POOL, ConnectionPool
 from llcps.sim.robot import Robot
-from llcps.sim.state_files import state_files
+from llcps.sim.settings import PhysicsSettings
+from llcps.sim.specs import FIXTURE_RGBA, FLOOR, TABLE, FixtureSpec, SceneSpec
+from llcps.sim.state_check import check_state
 
 #: zlib level of serialized states (a scene's state shrinks from ~90 kB to ~40 kB in ~1 ms).
 STATE_COMPRESSION = 3
 
-#: Reference states (a freshly built scene, raw) by scene key, for checking stored states.
-_REFERENCES: dict[str, bytes] = {}
-_REFERENCE_CAPACITY = 32
-
-#: Headless engines of closed worlds, for the next world of this process: connecting
-#: one costs more than rebuilding a scene, and an episode builds a world.
-_IDLE_CLIENTS: list[Any] = []
-_IDLE_CLIENT_CAPACITY = 1
+#: Simulation steps a probe takes after restoring, to see that stepping survives too.
+PROBE_STEPS = 4
 
 #: Rest thresholds used by :meth:`World.settle` and the controllers.
 REST_LINEAR = 0.005  # m/s
@@ -50,15 +41,6 @@ REST_CHECKS = 3  # consecutive quiet checks that count as rest
 #: Cap on the steps a scene gets to settle (:meth:`World.settle`) before anything runs in it
 #: (2 s at 240 Hz): a solve, a scene picture and a pretraining layout settle alike.
 SETTLE_STEPS = 480
-
-
-def _engine_version() -> str:
-    """PyBullet's package version and API date: a new engine may compute other physics."""
-    try:
-        release = package_version("pybullet")
-    except PackageNotFoundError:  # pragma: no cover - a source build
-        release = "unknown"
-    return f"pybullet {release} api {p.getAPIVersion()}"
 
 
 class SavedState:
@@ -79,45 +61,13 @@ class SavedState:
         return self._serialized
 
 
-@dataclass(frozen=True)
-class PhysicsSettings:
-    """Everything besides the scene, the state and the call that a trial's physics depends on.
-
-    A :class:`World` owns one; the physics cache keys every trial by it, so a change
-    of any field (a new engine, other solver settings, a revised controller) can
-    never be answered from trials simulated under the old one.
-
-    Attributes:
-        time_step: seconds per simulation step.
-        solver_iterations: the constraint solver's iterations per step.
-        sub_steps: engine sub-steps per step (0: none).
-        deterministic_overlapping_pairs: sort broad-phase pairs (needed for bit-exact replay).
-        gravity: m/s^2 along x, y, z.
-        engine: the physics engine's version.
-        controllers: :data:`~llcps.sim.controllers.CONTROLLERS_REVISION`, the revision of
-            llcps's own controllers, motion primitives and perception.
-    """
-
-    time_step: float = 1.0 / 240.0
-    solver_iterations: int = 50
-    sub_steps: int = 0
-    deterministic_overlapping_pairs: bool = True
-    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
-    engine: str = field(default_factory=_engine_version)
-    controllers: int = CONTROLLERS_REVISION
-
-    def to_dict(self) -> dict[str, Any]:
-        """A JSON-able form (the cache key hashes it)."""
-        data = asdict(self)
-        data["gravity"] = list(self.gravity)
-        return data
-
-
 class World:
     """One PyBullet client and everything in it.
 
     Attributes:
-        client: the BulletClient (DIRECT unless ``gui``).
+        client: the BulletClient (DIRECT unless ``gui``) of the world's connection, taken
+            from ``pool`` (:data:`llcps.sim.connection.POOL` unless given) and given back
+            to it by :meth:`close`.
         scene: the description this world was built from.
         settings: the engine settings every rebuild applies.
         robot: the Panda.
@@ -133,16 +83,15 @@ class World:
         settings: PhysicsSettings | None = None,
         scene: SceneSpec | Mapping[str, Any] | None = None,
         visuals: bool = False,
+        pool: ConnectionPool | None = None,
     ) -> None:
         if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
             raise LlcpsError(
                 "cannot open a GUI window: no display", hint="unset --gui, or run under a desktop / xvfb-run"
             )
-        if not gui and _IDLE_CLIENTS:
-            self.client = _IDLE_CLIENTS.pop()
-        else:
-            with native_output_silenced():  # the engine prints a line on connect
-                self.client = bullet_client.BulletClient(connection_mode=p.GUI if gui else p.DIRECT)
+        self._pool = pool if pool is not None else POOL
+        self._connection = self._pool.connect(gui=gui)
+        self.client = self._connection.client
         cid = self.client._client
         self._step = functools.partial(p.stepSimulation, physicsClientId=cid)
         self._velocity = functools.partial(p.getBaseVelocity, physicsClientId=cid)
@@ -157,6 +106,8 @@ class World:
         self._snapshot_count = 0
         # (serialized state, scene key, raw bytes) of the last state check_serialized passed
         self._last_checked: tuple[bytes, str, bytes] | None = None
+        # (scene key, raw bytes) of the reference state last taken (reference_state)
+        self._reference: tuple[str, bytes] | None = None
         self._closed = False
         self.load(scene if scene is not None else SceneSpec())
 
@@ -168,13 +119,14 @@ class World:
         gui: bool = False,
         visuals: bool = False,
         settings: PhysicsSettings | None = None,
+        pool: ConnectionPool | None = None,
     ) -> "World":
         """Build a world from a scene description (deterministic: same scene, same bodies).
 
         ``visuals`` loads the robot's visual meshes now; rendering loads them on demand
         anyway (:meth:`ensure_visuals`), and skipping them makes rebuilds four times faster.
         """
-        return cls(gui=gui, scene=scene, visuals=visuals, settings=settings)
+        return cls(gui=gui, scene=scene, visuals=visuals, settings=settings, pool=pool)
 
     @property
     def time_step(self) -> float:
@@ -220,7 +172,7 @@ class World:
         c.changeDynamics(self.fixtures[FLOOR], -1, lateralFriction=0.6, restitution=0.0)
         for spec in scene.fixtures:
             self.fixtures[spec.name] = build_fixture(c, spec)
-        self.robot = Robot(c, visuals=self.visuals)
+        self.robot = Robot(c, visuals=self.visuals, reach=self._connection.reach)
         for link in (-1, 0):  # the base and shoulder stand on the table and never leave it
             c.setCollisionFilterPair(self.robot.body_id, self.fixtures[TABLE], link, -1, 0)
         for spec in scene.entities:
@@ -426,9 +378,9 @@ class World:
         raw = snapshots.decompress_state(state)
         key = (self._scene_key, snapshots.state_digest(raw))
         if key not in snapshots.TRUSTED:
-            snapshots.check_state(raw, self.reference_state())
+            check_state(raw, self.reference_state())
             if probe:
-                snapshots.probe_states(self.scene.to_dict(), [raw])
+                probe_states(self.scene.to_dict(), [raw])
             snapshots.TRUSTED.add(key)
         self._last_checked = (state, self._scene_key, raw)
         return raw
@@ -447,30 +399,27 @@ class World:
     def reference_state(self) -> bytes:
         """The raw state of this world's scene freshly built: what a stored state is checked against.
 
-        Taking it the first time rebuilds the world from its scene (the live state is lost).
+        Taking it the first time (in this world, for this scene) rebuilds the world from
+        its scene (the live state is lost).
         """
-        found = _REFERENCES.get(self._scene_key)
-        if found is None:
+        if self._reference is None or self._reference[0] != self._scene_key:
             self.load(self.scene)
-            found = self._save_raw()
-            _REFERENCES[self._scene_key] = found
-            while len(_REFERENCES) > _REFERENCE_CAPACITY:
-                _REFERENCES.pop(next(iter(_REFERENCES)))
-        return found
+            self._reference = (self._scene_key, self._save_raw())
+        return self._reference[1]
 
     def _trust(self, raw: bytes) -> None:
         """Remember a state this process saved: restoring it needs no checks."""
         snapshots.TRUSTED.add((self._scene_key, snapshots.state_digest(raw)))
 
     def _save_raw(self) -> bytes:
-        files = state_files(self.client)
+        files = self._connection.files
         self.client.saveBullet(files.save_path())
         return files.read_saved()
 
     def _restore_raw(self, raw: bytes) -> None:
         self.load(self.scene)
         try:
-            self.client.restoreState(fileName=state_files(self.client).restore_path(raw))
+            self.client.restoreState(fileName=self._connection.files.restore_path(raw))
         except p.error as exc:
             raise snapshots.StateError(
                 "cannot restore the physics state: it does not match this scene",
@@ -495,13 +444,7 @@ class World:
         process, which rebuilds it from its own scene (:meth:`load` resets it)."""
         if not self._closed:
             self._closed = True
-            if not self.gui and len(_IDLE_CLIENTS) < _IDLE_CLIENT_CAPACITY:
-                _IDLE_CLIENTS.append(self.client)
-                return
-            try:
-                self.client.disconnect()
-            except p.error:
-                pass
+            self._pool.release(self._connection)
 
     def __enter__(self) -> "World":
         return self
@@ -514,3 +457,38 @@ class World:
             self.close()
         except Exception:
             pass
+
+
+def probe_states(
+    scene: Mapping[str, Any], states: Sequence[bytes], *, timeout: float = snapshots.PROBE_TIMEOUT, check: bool = True
+) -> None:
+    """Restore each raw state into ``scene`` in a child process and step it a little
+    (the third gate of :mod:`llcps.sim.snapshot`); one child serves every state given.
+
+    Args:
+        check: run :func:`~llcps.sim.state_check.check_state` in the child too (False
+            only to test the probe itself).
+
+    Raises:
+        StateError: the child crashed, hung, ran out of memory or refused a state.
+    """
+    snapshots.probe(lambda: _restore_each(scene, states, check=check), timeout=timeout)
+
+
+def _restore_each(scene: Mapping[str, Any], states: Sequence[bytes], *, check: bool) -> str:  # pragma: no cover
+    """What the probe's child does: "" when every state restores and steps soundly, else why not."""
+    world = World.from_scene(scene)
+    for raw in states:
+        try:
+            if check:
+                check_state(raw, world.reference_state())
+            world._restore_raw(raw)  # noqa: SLF001 - the unchecked restore is what is probed
+            world.step(PROBE_STEPS)
+        except LlcpsError as exc:
+            return exc.message
+        for name in world.entities:
+            position, orientation = world.client.getBasePositionAndOrientation(world.body(name))
+            if not all(math.isfinite(v) for v in (*position, *orientation)):
+                return f"entity {name} has no finite pose after the restore"
+    world.close()
+    return ""

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Collection, Iterable, Iterator, Mapping, Sequence
 
 from llcps.domain import Fluent, State
-from llcps.symbolic.schema import substitute
+from llcps.symbolic.lifted import substitute
 
 Context = frozenset[Fluent]
 """Lifted facts over a step's arguments before it ran (variables of its operator)."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from llcps.domain import Fluent, State, format_fluent
-from llcps.symbolic.schema import GroundAction, sort_fluents
+from llcps.symbolic.lifted import GroundAction, sort_fluents
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ entities) becomes a :class:`LearnedOperator`: its effects are what the trial was
 to change, and its preconditions the *context* it was observed in (see
 :func:`learn_operator`), so that it is chosen only where its effect on its arguments was
 seen. The planner uses it like any action of K at a cost set by experience
-(:mod:`llcps.symbolic.knowledge`), and the executor maps it back to the controller
+(:mod:`llcps.symbolic.knowledge_base`), and the executor maps it back to the controller
 settings that produced it.
 
 Where a_f itself failed is remembered by experience (:mod:`llcps.symbolic.experience`):
@@ -22,8 +22,8 @@ from typing import Collection, Mapping, Sequence
 
 from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, TrialSpec, fluent
 from llcps.errors import LlcpsError
-from llcps.symbolic.naive_domain import default_constants, default_predicates
-from llcps.symbolic.schema import (
+from llcps.symbolic.pddl_domain import default_constants, default_predicates
+from llcps.symbolic.lifted import (
     EQUALITY,
     Controller,
     Operator,
@@ -350,8 +350,9 @@ def learn_operator(
         predicates: predicate -> arity of the knowledge base the context is written in;
             defaults to the default domain's predicates.
     """
-    constants = default_constants() if constants is None else constants
-    predicates = default_predicates() if predicates is None else predicates
+    if constants is None or predicates is None:
+        constants = default_constants().keys() if constants is None else constants
+        predicates = default_predicates() if predicates is None else predicates
     constants = set(constants)
     before, after = frozenset(before), frozenset(after)
     changed = (after - before) | (before - after)

@@ -21,9 +21,9 @@ import itertools
 from typing import Collection
 
 from llcps.errors import LlcpsError
-from llcps.symbolic.knowledge import KnowledgeBase
+from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
-from llcps.symbolic.schema import GroundAction
+from llcps.symbolic.lifted import GroundAction
 
 Plan = tuple[GroundAction, ...]
 """A plan pi = [a_1, ..., a_n]: ground actions in execution order."""

@@ -1,5 +1,5 @@
-"""Tasks T = (K, s0, sg) without K: the objects, the perceived initial state and the goal,
-and the PDDL problem they make against a knowledge base."""
+"""Tasks T = (K, s0, sg) without K: the objects, the perceived initial state and the
+goal, checked against a knowledge base and written as a PDDL problem for its domain."""
 
 from __future__ import annotations
 
@@ -15,11 +15,9 @@ from pddl.logic.terms import Constant
 
 from llcps.domain import SYMMETRIC_PREDICATES, Fluent, State, fluent
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.symbolic.knowledge import KnowledgeBase
-from llcps.symbolic.schema import PDDL_NAME, TOTAL_COST, sort_fluents
-
-#: The fixture every scene has: the domain constant ``table``, never a task object.
-TABLE = "table"
+from llcps.symbolic.knowledge_base import KnowledgeBase
+from llcps.symbolic.pddl_domain import default_constants
+from llcps.symbolic.lifted import PDDL_NAME, TOTAL_COST, sort_fluents
 
 
 def _symmetric_closure(state: Iterable[Fluent]) -> list[Fluent]:
@@ -69,13 +67,14 @@ class Task:
         Args:
             entities: entity name -> kind (``object`` becomes an ``item``, any other kind
                 a ``container``).
-            fixtures: the scene's fixtures; each but the table (a domain constant) is a
-                ``surface``.
+            fixtures: the scene's fixtures; each is a ``surface``, but those the
+                domain declares as constants (the table) are no task objects.
             init: the perceived state.
             goal_pos, goal_neg: the goal's fluents that must hold, and must not.
         """
         objects = {name: ("item" if kind == "object" else "container") for name, kind in entities.items()}
-        objects.update({name: "surface" for name in fixtures if name != TABLE})
+        constants = default_constants()
+        objects.update({name: "surface" for name in fixtures if name not in constants})
         return cls(objects=objects, init=init, goal_pos=frozenset(goal_pos), goal_neg=frozenset(goal_neg))
 
     def satisfied_by(self, state: State) -> bool:

@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, PlainValidator, ValidationErr
 
 from llcps.domain import COLORS, ORIENTATIONS
 from llcps.errors import LlcpsError
-from llcps.scenarios.base import CONDITIONS as CONDITION_NAMES
+from llcps.domain import CONDITIONS as CONDITION_NAMES
 
 #: What an entity, fixture, scenario or alias name may look like (a PDDL object name).
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")

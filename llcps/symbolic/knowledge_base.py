@@ -22,7 +22,6 @@ import functools
 from dataclasses import dataclass, field, replace
 from typing import Callable, Iterable, Mapping
 
-from lark.exceptions import LarkError
 from pddl.core import Domain
 from pddl.exceptions import PDDLValidationError
 from pddl.logic.functions import NumericFunction
@@ -33,10 +32,15 @@ from pddl.requirements import Requirements
 from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, State, TrialSpec, fluent
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.symbolic.experience import Context, Experience, step_context
-from llcps.symbolic.naive_domain import default_domain_pddl
 from llcps.symbolic.operators import LearnedOperator, parse_operator_name
-from llcps.symbolic.pddl_text import parse_domain_text
-from llcps.symbolic.schema import (
+from llcps.symbolic.pddl_domain import (
+    constant_types,
+    default_domain_pddl,
+    parse_domain,
+    predicate_signatures,
+    type_parents,
+)
+from llcps.symbolic.lifted import (
     TOTAL_COST,
     Controller,
     GroundAction,
@@ -48,19 +52,6 @@ from llcps.symbolic.schema import (
 
 #: The requirements every knowledge base declares.
 REQUIREMENTS: tuple[str, ...] = ("strips", "typing", "negative-preconditions", "equality", "action-costs")
-
-
-def _parse_error(what: str, exc: Exception) -> LlcpsError:
-    first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    return LlcpsError(f"cannot read the PDDL {what}: {first_line}", hint="check the PDDL syntax and requirements")
-
-
-def parse_domain(text: str) -> Domain:
-    """Parse a PDDL domain with the `pddl` library, turning its errors into one project error."""
-    try:
-        return parse_domain_text(text)
-    except (LarkError, PDDLValidationError, ValueError, AssertionError) as exc:
-        raise _parse_error("domain", exc) from exc
 
 
 def _domain_action_operator(parts: dict[str, object]) -> Operator:
@@ -142,14 +133,9 @@ class KnowledgeBase:
         learned.sort(key=lambda op: op.name)
         return cls(
             name=str(domain.name),
-            type_parents=_type_parents(domain),
-            constant_types=tuple(sorted((str(c.name), str(c.type_tag) if c.type_tag else "object") for c in domain.constants)),
-            predicate_signatures=tuple(
-                sorted(
-                    (str(p.name), tuple((f"?{t.name}", str(sorted(t.type_tags)[0]) if t.type_tags else "object") for t in p.terms))
-                    for p in domain.predicates
-                )
-            ),
+            type_parents=type_parents(domain),
+            constant_types=constant_types(domain),
+            predicate_signatures=predicate_signatures(domain),
             actions=tuple(actions),
             learned=tuple(learned),
         )
@@ -389,19 +375,13 @@ class KnowledgeBase:
         return str(self.to_domain()) + "\n"
 
 
-def _type_parents(domain: Domain) -> tuple[tuple[str, str | None], ...]:
-    """Every type with its parent, implicit ``- object`` roots included, sorted."""
-    parents: dict[str, str | None] = {str(t): (str(p) if p is not None else None) for t, p in domain.types.items()}
-    for p in list(parents.values()):
-        if p is not None and p != "object":
-            parents.setdefault(p, None)
-    parents.pop("object", None)
-    return tuple(sorted(parents.items()))
-
-
 @functools.cache
 def _default_kb() -> KnowledgeBase:
     return KnowledgeBase.from_pddl(default_domain_pddl())
+
+
+def clear_caches() -> None:
+    _default_kb.cache_clear()
 
 
 def _unifies(
