@@ -102,8 +102,12 @@ def fresh_caches() -> Iterator[None]:
     """The test starts with nothing remembered by the process: idle engines and their IK
     solutions, trusted states, scenario files, remembered fits (what a new process knows).
     Use it where a test counts what is computed, or make it autouse in a module."""
-    for package in (llcps.sim, llcps.symbolic, llcps.scenarios, llcps.models):
-        package.clear_caches()
+    from llcps.models import persistence
+    from llcps.sim import caches
+    from llcps.symbolic import knowledge_base, pddl_domain
+
+    for clear in (caches.clear_caches, knowledge_base.clear_caches, pddl_domain.clear_caches, llcps.scenarios.clear_caches, persistence.clear_fits):
+        clear()
     yield
 
 

@@ -39,13 +39,6 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def clear_caches() -> None:
-    """Forget the fits this process remembers (the next fit of a training set fits again)."""
-    # Imported here: importing llcps.models must not load numpy or the store.
-    from llcps.models import persistence
-
-    persistence.clear_fits()
-
 
 __all__ = [
     "MEASURES",
@@ -53,7 +46,6 @@ __all__ = [
     "PAPER_MODELS",
     "WORLD_MODELS",
     "WorldModel",
-    "clear_caches",
     "fit_or_load",
     "load_world_model",
     "make_world_model",

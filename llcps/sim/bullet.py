@@ -7,7 +7,7 @@ scenes (``specs``) do not, so reading a scenario file or a results table never l
 
 from __future__ import annotations
 
-from llcps.sim import native_output_silenced
+from llcps.sim.native import native_output_silenced
 
 with native_output_silenced():
     import pybullet

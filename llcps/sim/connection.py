@@ -16,7 +16,7 @@ import os
 
 from pybullet_utils import bullet_client
 
-from llcps.sim import native_output_silenced
+from llcps.sim.native import native_output_silenced
 from llcps.sim.bullet import pybullet as p
 from llcps.sim.robot import ReachSolutions
 from llcps.sim.state_files import StateFiles

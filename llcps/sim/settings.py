@@ -8,7 +8,6 @@ from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as package_version
 from typing import Any
 
-from llcps.sim import CONTROLLERS_REVISION
 from llcps.sim.bullet import pybullet as p
 
 
@@ -19,6 +18,13 @@ def _engine_version() -> str:
     except PackageNotFoundError:  # pragma: no cover - a source build
         release = "unknown"
     return f"pybullet {release} api {p.getAPIVersion()}"
+
+
+#: Revision of llcps's own controllers, motion primitives, robot model and perception.
+#: Raise it with any change that alters what a trial computes from the same scene,
+#: state and call: the physics cache keys every trial by it (together with the
+#: engine's settings), so trials simulated by older code are never reused.
+CONTROLLERS_REVISION = 1
 
 
 @dataclass(frozen=True)
@@ -36,7 +42,7 @@ class PhysicsSettings:
         deterministic_overlapping_pairs: sort broad-phase pairs (needed for bit-exact replay).
         gravity: m/s^2 along x, y, z.
         engine: the physics engine's version.
-        controllers: :data:`~llcps.sim.controllers.CONTROLLERS_REVISION`, the revision of
+        controllers: :data:`CONTROLLERS_REVISION`, the revision of
             llcps's own controllers, motion primitives and perception.
     """
 

@@ -15,12 +15,3 @@ See docs/knowledge.md.
 """
 
 from __future__ import annotations
-
-
-def clear_caches() -> None:
-    """Forget the naive domain read from the package (it is read again when next used)."""
-    # Imported here: importing llcps.symbolic must not load the PDDL parser (lark).
-    from llcps.symbolic import knowledge_base, pddl_domain
-
-    knowledge_base.clear_caches()
-    pddl_domain.clear_caches()
