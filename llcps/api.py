@@ -262,9 +262,13 @@ class Workbench:
         branch: str | None = None,
         models: Sequence[str] | None = None,
         model_seed: int = 0,
+        again: bool = False,
         progress: Callable[[int, int], None] | None = None,
     ) -> tuple[PretrainSummary, list[FittedModel]]:
-        """``llcps pretrain``: random interactions stored as trials, then world models fitted."""
+        """``llcps pretrain``: random interactions stored as trials, then world models fitted.
+
+        A finished pretraining with the same ``trials`` and ``seed`` already on the branch is
+        not run again (the summary is that run's) unless ``again``."""
         from llcps.jobs.pretrain import INTERACTIONS, pretrain
 
         def report(phase: str, done: int = 0, total: int | None = None) -> None:
@@ -272,7 +276,14 @@ class Workbench:
                 progress(done, total or 0)
 
         result = pretrain(
-            store=self.store, branch=branch, trials=trials, seed=seed, models=models, model_seed=model_seed, progress=report
+            store=self.store,
+            branch=branch,
+            trials=trials,
+            seed=seed,
+            models=models,
+            model_seed=model_seed,
+            again=again,
+            progress=report,
         )
         return result.summary, list(result.models)
 

@@ -70,3 +70,35 @@ def test_cli_prints_one_json_document(tmp_path) -> None:
     }
     bad = runner.invoke(app, ["--db", db, "pretrain", "--n", "-3"])
     assert bad.exit_code == 2
+
+
+def test_the_same_pretraining_again_is_skipped_unless_again(tmp_path) -> None:
+    """`make run` twice: the second `pretrain --trials N --seed S` finds the first on the
+    branch, runs nothing and says so; the models are fitted (or loaded) as before.
+    --again, or another seed, runs the interactions."""
+    db = str(tmp_path / "twice.db")
+    runner = CliRunner()
+
+    def run(*args: str):  # noqa: ANN202 - click Result
+        result = runner.invoke(app, ["--db", db, "pretrain", "--trials", "2", "--model", "nb", *args])
+        assert result.exit_code == 0, result.output
+        return result
+
+    first = json.loads(run("--seed", "1", "--create", "--json").stdout)
+    assert first["skipped"] is False
+    second = run("--seed", "1")
+    assert (
+        f"pretraining with --trials 2 --seed 1 is already on branch main (run {first['run_id']}): skipped; --again to add more"
+        in second.stderr
+    )
+    assert "world models fitted" in second.stdout
+    again = json.loads(run("--seed", "1", "--json").stdout)
+    assert again["skipped"] is True and again["run_id"] == first["run_id"] and again["trial_ids"] == first["trial_ids"]
+    assert again["outcome_counts"] == first["outcome_counts"] and again["models"][0]["trials"] == 2
+    with Store.open(db) as store:
+        assert store.count_visible_trials("main") == 2
+    assert json.loads(run("--seed", "1", "--again", "--json").stdout)["skipped"] is False
+    assert json.loads(run("--seed", "2", "--json").stdout)["skipped"] is False
+    with Store.open(db) as store:
+        assert store.count_visible_trials("main") == 6
+        assert [r.config["n"] for r in store.list_runs() if r.command == "pretrain"] == [2, 2, 2]

@@ -36,19 +36,33 @@ def test_shipped_names_are_the_registrys() -> None:
 
 @pytest.mark.parametrize("name", NAMES)
 def test_shipped_file_round_trips_through_show(tmp_path: Path, name: str) -> None:
-    """What `scenario show` prints loads back to the same file, goal and scenes."""
+    """What `scenario show` prints loads back to the same goal and scenes: as TOML under
+    the name of the file it is saved to (the shipped name and alias are commented out),
+    as JSON with every key."""
     original = SCENARIOS[name]
     assert original.source is not None
     for fmt in ("toml", "json"):
         text = show(name, "--format", fmt)
         data = json.loads(text) if fmt == "json" else tomllib.loads(text)
-        assert data == dict(original.source.data)
-        again = read_text(tomli_w.dumps(data), where=f"{name}.{fmt}")
-        assert again.model == original.source.model
+        unnamed = {k: v for k, v in original.source.data.items() if k not in ("name", "alias")}
+        if fmt == "json":
+            assert data == dict(original.source.data)
+            again = read_text(tomli_w.dumps(data), where=f"{name}.{fmt}")
+            assert again.model == original.source.model
+        else:
+            assert data == unnamed
+            assert f'# name = "{name}"' in text
+            path = tmp_path / "my_copy.toml"
+            path.write_text(text)
+            mine = get_scenario(str(path))
+            assert mine.name == "my_copy" and not mine.alias
+            again = mine.source  # type: ignore[assignment]
+            assert again.model.model_copy(update={"name": name, "alias": original.alias}) == original.source.model
         assert (again.goal_pos, again.goal_neg) == (original.goal_pos, original.goal_neg)
         for condition in CONDITIONS:
-            assert again.scene(condition, 0) == original.scene(condition, 0)
-            assert again.scene(condition, 3) == original.scene(condition, 3)
+            for variant in (0, 3):
+                mine_scene, shipped = again.scene(condition, variant), original.scene(condition, variant)
+                assert (mine_scene.entities, mine_scene.fixtures, mine_scene.table) == (shipped.entities, shipped.fixtures, shipped.table)
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -179,6 +193,19 @@ def test_bad_file_stores_nothing(tmp_path: Path) -> None:
     result = runner.invoke(app, ["--db", str(db), "solve", str(path)])
     _assert_one_error(result, path, BAD["overlapping bodies"][1])
     assert db.read_bytes() == before
+
+
+def test_a_file_without_a_name_takes_its_file_name(tmp_path: Path) -> None:
+    """No two scenarios share a name: a nameless copy saved under a shipped name is refused,
+    and a file name that is no scenario name asks for one."""
+    text = show("scenario2")
+    good = tmp_path / "My-Bin.toml"
+    good.write_text(text)
+    assert get_scenario(str(good)).name == "my_bin"
+    for stem, field in (("scenario2", "its file name gives it 'scenario2'"), ("container", "'container'"), ("2nd", "is not one")):
+        path = tmp_path / f"{stem}.toml"
+        path.write_text(text)
+        _assert_one_error(runner.invoke(app, ["scenario", "show", str(path)]), path, field)
 
 
 def test_a_file_may_not_take_a_shipped_name(tmp_path: Path) -> None:

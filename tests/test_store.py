@@ -107,6 +107,25 @@ def test_fork_points(store: Store, new_trial) -> None:  # noqa: ANN001
     assert store.branch_names()[0] == MAIN_BRANCH and "grandchild" in store.branch_names()
 
 
+def test_pretrain_fork_point_is_the_end_of_the_first_pretraining(store: Store, new_trial) -> None:  # noqa: ANN001
+    """`make run` twice: pretraining, a solve that learns an operator, pretraining again and
+    another solve. `--at pretrain` forks after the first pretraining: the branch sees none
+    of the exploration, nor the operator learned from it; `reset --to pretrain` keeps as much."""
+    first = store.add_trials([new_trial(i) for i in range(3)])
+    explored = store.add_trials([new_trial(10 + i, source="exploration") for i in range(2)])
+    store.add_operator(branch="main", name="learned", pddl="", definition={}, scenario=None, episode_id=None)
+    store.add_trials([new_trial(20 + i) for i in range(3)])
+    store.add_trials([new_trial(30, source="plan")])
+    fresh = store.create_branch("fresh", at="pretrain")
+    assert fresh.fork_point == first[-1] and fresh.visible_trials == len(first)
+    seen = store.visible_trials("fresh")
+    assert [t.id for t in seen] == first and {t.source for t in seen} == {"pretrain"}
+    assert not store.visible_operators("fresh") and store.visible_operators("main")
+    assert explored[0] > fresh.fork_point
+    change = store.reset_branch("main", to="pretrain", dry_run=True)
+    assert change.trials == 2 + 3 + 1 and change.operators == 1
+
+
 def test_interleaved_branch_ranges_still_come_back_in_id_order(tmp_path, new_trial) -> None:  # noqa: ANN001
     """A branch's visible trials are read link by link; if a changed fork point makes the
     links' id ranges interleave, the store falls back to one sorted query."""

@@ -41,6 +41,18 @@ class Model:
         ids = [i for i in self.visible(branch, self.trials) if source is None or self.trials[i][1] == source]
         return max(ids, default=0)
 
+    def pretrain_point(self, branch: str) -> int:
+        """The last pretraining trial before the first trial of another source that follows
+        the first pretraining trial (0: none visible)."""
+        seen = sorted(self.visible(branch, self.trials))
+        point = 0
+        for i in seen:
+            if self.trials[i][1] == "pretrain":
+                point = i
+            elif point:
+                break
+        return point
+
     def children(self, branch: str) -> list[str]:
         return [b for b, p in self.parent.items() if p == branch]
 
@@ -99,7 +111,7 @@ class BranchMachine(RuleBasedStateMachine):
             at: int | str | None = data.draw(st.sampled_from(visible))
             expected = at
         elif how == "pretrain":
-            at, expected = "pretrain", self.model.max_visible(parent, "pretrain")
+            at, expected = "pretrain", self.model.pretrain_point(parent)
         elif how == "zero":
             at, expected = 0, 0
         else:
@@ -125,7 +137,7 @@ class BranchMachine(RuleBasedStateMachine):
     @rule(data=st.data(), to=st.sampled_from(["pretrain", "empty"]))
     def reset(self, data: st.DataObject, to: str) -> None:
         branch = self._branch(data)
-        keep = self.model.max_visible(branch, "pretrain") if to == "pretrain" else 0
+        keep = self.model.pretrain_point(branch) if to == "pretrain" else 0
         trials = [i for i, (b, _) in self.model.trials.items() if b == branch and i > keep]
         ops = [i for i, (b, w) in self.model.operators.items() if b == branch and (to == "empty" or w > keep)]
         first = min([*trials, *(self.model.operators[i][1] for i in ops)], default=None)

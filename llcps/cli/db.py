@@ -170,7 +170,8 @@ def branch_cli(
         typer.Option(
             "--at",
             metavar="TRIAL_ID|pretrain",
-            help="Fork point: a trial id the parent sees, or 'pretrain' for its last pretraining trial "
+            help="Fork point: a trial id the parent sees, or 'pretrain' for its pretraining point, the last trial "
+            "of the first unbroken run of pretraining trials (no exploration, no learned operator; docs/store.md) "
             "(default: the parent's latest trial).",
             show_default=False,
             callback=_fork_point,
@@ -214,7 +215,8 @@ def reset_cli(
     ctx: typer.Context,
     to: Annotated[
         ResetTarget,  # type: ignore[valid-type]
-        typer.Option("--to", help="'pretrain' keeps the branch's trials up to its last pretraining trial; 'empty' removes all it owns."),
+        typer.Option("--to", help="'pretrain' keeps the branch's trials up to its pretraining point (the end of its first unbroken run "
+            "of pretraining trials); 'empty' removes all it owns."),
     ] = DEFAULT_RESET_TARGET,  # type: ignore[assignment]
     yes: YesFlag = False,
     as_json: JsonFlag = False,

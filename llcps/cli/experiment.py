@@ -172,6 +172,7 @@ def run_cli(
 @app.command(
     "report",
     epilog=examples(
+        "llcps experiment report --html                              # results/paper, with report.html",
         "llcps experiment report results/paper                       # rebuild from results.csv",
         "llcps --db runs.db experiment report --from-db --preset paper --html",
         "llcps --db runs.db experiment report --from-db --preset paper --baseline-preset random --out-dir results/paper",
@@ -182,7 +183,12 @@ def report_cli(
     ctx: typer.Context,
     source: Annotated[
         Optional[Path],
-        typer.Argument(metavar="[DIR]", help="A results directory (its results.csv) or a results .csv/.json file.", show_default=False),
+        typer.Argument(
+            metavar="[DIR]",
+            help="A results directory (its results.csv) or a results .csv/.json file "
+            "(default: results/<preset>, that of --preset or of the default preset, when it holds results).",
+            show_default=False,
+        ),
     ] = None,
     from_db: Annotated[bool, typer.Option("--from-db", help="Read the results from the store's episodes instead (see --db).")] = False,
     preset: Annotated[
@@ -219,12 +225,15 @@ def report_cli(
     """Rebuild the tables, CSV/JSON, plots and report.md (and report.html) from stored results,
     running no experiment; prints where the runs ran and our Figure 2.
 
-    From a results directory, the provenance and films it already holds are used; with
-    --from-db they are read (and filmed) from the store."""
+    Without DIR or --from-db, the results directory of the preset (results/paper by
+    default) is read. From a results directory, the provenance and films it already holds
+    are used (`experiment run --html` films them); the films of report.html are made only
+    with --from-db, which reads the results, and films a resolving trial per scenario,
+    from the store (--db)."""
     from llcps.jobs.experiment import report_experiment_job  # the analysis and the plots load here, not at start
 
-    if (source is None) == (not from_db):
-        raise LlcpsError("give a results directory or --from-db (one of them)", hint="e.g. `llcps experiment report results/paper`")
+    if source is not None and from_db:
+        raise LlcpsError("give a results directory or --from-db, not both", hint="e.g. `llcps experiment report results/paper`")
     scenes = None if variants is None else parse_range(variants)
 
     def build(results: Any, bar: Any) -> Any:
@@ -233,7 +242,7 @@ def report_cli(
         )
 
     with progress_display("report", "reading the results") as bar:
-        if source is not None:
+        if not from_db:
             result = build(source, bar)
         else:
             with open_store(ctx) as store:
@@ -244,6 +253,8 @@ def report_cli(
             + ("" if scenes is not None else " (report scene variants with --variants A:B)")
         )
     written, analysis = result.report_dir, dict(result.analysis)
+    if html and not from_db and not analysis.get("films"):
+        message(f"report.html has no films: {written} holds none; --from-db films a resolving trial per scenario from the store")
     if as_json:
         print_json({"report_dir": str(written), **analysis})
     else:

@@ -33,6 +33,7 @@ _SHORT = {name: ("+" if name.startswith("positive") else "-") + name.split("_", 
         "llcps inspect model                                   # nb and nn: held-out metrics",
         "llcps inspect model --scenario scenario2 --limit 3    # and each measure's top 3 candidates",
         "llcps inspect model --scenario scenario3 --variant 7  # ranked in another layout of the scene",
+        "llcps db branch before --at pretrain && llcps --branch before inspect model --scenario scenario2   # after a solve",
         "llcps inspect model --model forest --model logreg --seed 1 --json",
     ),
 )
@@ -65,7 +66,13 @@ def model_cli(
     test_fraction: Annotated[float, typer.Option("--test-fraction", min=0.01, max=0.99, help="Share of trials held out.")] = 0.25,
     as_json: JsonFlag = False,
 ) -> None:
-    """Evaluate world models on the branch's trials (held-out split) next to the majority baseline."""
+    """Evaluate world models on the branch's trials (held-out split) next to the majority baseline.
+
+    With --scenario, its novelty plan runs first, before any model is fitted: when the plan
+    (or a repair) succeeds on the branch, as after a solve that learned an operator, the
+    metrics are printed with a note and no ranking; fork a branch at the pretraining point
+    (`llcps db branch before --at pretrain`) and inspect it (`--branch before`) to rank.
+    """
     with progress_display("inspect model", "loading the world models") as progress:
         report = inspect_model(
             store=db_location(ctx),
@@ -122,6 +129,10 @@ def show(report: "ModelInspection") -> None:
             ("model", "examples", "changed", "Brier", "ROC AUC"),
             goal_rows,
         )
+    if report.ranking_note is not None:
+        message(f"no candidates ranked: {report.ranking_note}")
+        if report.ranking_hint:
+            message(report.ranking_hint)
     if report.failure is None:
         return
     failure = report.failure

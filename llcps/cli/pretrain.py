@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, db_location, print_json, print_table, selected_branch
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, db_location, message, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_PRETRAIN_TRIALS, MAX_SEED, OUTCOME_NAMES
@@ -40,13 +40,23 @@ def pretrain_cli(
             "--model-seed", min=0, max=MAX_SEED, help="Seed of the fitted models (`llcps solve --model-seed` reuses a model fitted with it)."
         ),
     ] = 0,
+    again: Annotated[
+        bool,
+        typer.Option(
+            "--again",
+            help="Run the interactions even when a finished pretraining with the same --trials and --seed is on the branch "
+            "(it adds the same trials once more).",
+        ),
+    ] = False,
     create: CreateFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Run N random interactions in settled random scenes, store each as a trial, then
     fit the world models on every trial the branch sees (stored for `llcps solve`).
 
-    The same seed writes the same trials (features, outcome, sim steps) bit for bit.
+    The same seed writes the same trials (features, outcome, sim steps) bit for bit, so a
+    pretraining with the same --trials and --seed already on the branch is skipped (and
+    the models fitted or loaded as before); --again runs it once more.
     """
     names = [str(m.value) for m in model] if model else list(PAPER_MODELS)  # type: ignore[attr-defined]
     with progress_display("pretrain", "loading the simulator") as progress:
@@ -57,10 +67,16 @@ def pretrain_cli(
             seed=seed,
             models=names,
             model_seed=model_seed,
+            again=again,
             create=create,
             progress=progress,
         )
     summary, fitted = result.summary, result.models
+    if result.skipped:
+        message(
+            f"pretraining with --trials {trials} --seed {seed} is already on branch {summary.branch} "
+            f"(run {summary.run_id}): skipped; --again to add more"
+        )
     if as_json:
         print_json(result.as_json())
     else:
@@ -71,6 +87,7 @@ def pretrain_cli(
 EXAMPLES = examples(
     "llcps pretrain                                 # 200 random interactions, nb and nn fitted",
     "llcps pretrain --trials 50 --seed 3 --model nb",
+    "llcps pretrain --trials 200 --seed 1 --again          # the same 200 trials once more",
     "llcps --branch exp pretrain --trials 200 --model-seed 1 --json",
 )
 

@@ -52,6 +52,7 @@ def list_cli(as_json: JsonFlag = False) -> None:
     "show",
     epilog=examples(
         "llcps scenario show scenario2                        # the shipped file, as TOML",
+        "llcps scenario show scenario2 > my.toml && llcps solve my.toml   # a copy of your own, named my",
         "llcps scenario show bucket --format json",
         "llcps scenario show scenario1 --variant 3            # variant 3 as a file of its own",
     ),
@@ -63,7 +64,10 @@ def show_cli(
 ) -> None:
     """Print a scenario file on stdout; with --variant, the file with every range drawn.
 
-    A shown file loads back to the same scenario (and a shown variant to that variant's scene).
+    Saved as TOML, a shown file loads back to the same scenes (a shown variant to that
+    variant's scene) as a scenario of its own: a shipped scenario's name and alias are
+    commented out, so `llcps solve my.toml` names it after the file ("my") unless you set
+    a name in it; no two scenarios share a name.
     """
     text = jobs.show_scenario(name=name, fmt=str(fmt.value), variant=variant)  # type: ignore[attr-defined]
     typer.echo(text, nl=False)

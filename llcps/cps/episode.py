@@ -22,6 +22,7 @@ loads, so the loop loads the simulator, the planner and numpy when it runs.
 from __future__ import annotations
 
 import time
+from datetime import datetime, timezone
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -214,6 +215,8 @@ def solve(
         check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
     branch_name = store.resolve_branch(branch).name
     started = time.perf_counter()
+    # The run starts with the command: reading the trials and fitting the model count.
+    started_at = datetime.now(timezone.utc).replace(tzinfo=None)
     # What the store holds is read (and checked) first: a malformed row stops the
     # episode before it records a run.
     if progress is not None:
@@ -223,7 +226,9 @@ def solve(
     goal = get_measure(config.measure).uses_goal  # a measure ranking by Omega alone needs no goal head
     model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes, goal=goal)
     kb = load_knowledge(store, branch_name)
-    run_id = store.start_run(command=command, seed=config.seed, config=_config_json(config), branch=branch_name)
+    run_id = store.start_run(
+        command=command, seed=config.seed, config=_config_json(config), branch=branch_name, started_at=started_at
+    )
     episode_id = store.start_episode(
         run_id=run_id,
         branch=branch_name,

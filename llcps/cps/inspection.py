@@ -31,6 +31,11 @@ if TYPE_CHECKING:
     from llcps.store import Store
 
 
+class PlanSucceeds(LlcpsError):
+    """The scenario's novelty plan reaches the goal on the branch: there is no failure
+    state whose candidates could be ranked."""
+
+
 @dataclass(frozen=True)
 class RankedCandidate:
     """One candidate trial in a measure's order, with the predictions it was ranked by.
@@ -75,6 +80,10 @@ class ModelInspection:
     n_changes: int = 0
     #: The scene variant the failure point was reached in.
     variant: int = 0
+    #: Why a scenario asked for has no ranking (its plan succeeds on the branch), and
+    #: how to rank it anyway.
+    ranking_note: str | None = None
+    ranking_hint: str | None = None
 
     def as_json(self) -> dict[str, Any]:
         data: dict[str, Any] = {
@@ -86,6 +95,9 @@ class ModelInspection:
             "evaluations": [report.as_json() for report in self.evaluations],
             "evaluation_note": self.evaluation_note,
         }
+        if self.ranking_note is not None:
+            data["ranking_note"] = self.ranking_note
+            data["ranking_hint"] = self.ranking_hint
         if self.failure is not None:
             data["scenario"] = {
                 "name": self.failure.scenario,
@@ -132,7 +144,8 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, varian
     to the failure exploration starts from, as the agent does.
 
     Raises:
-        LlcpsError: unknown scenario, no plan, or a plan (or a repair) that reaches the goal.
+        LlcpsError: unknown scenario or no plan; :class:`PlanSucceeds` for a plan (or a
+            repair) that reaches the goal.
     """
     # The agent's machinery (PyBullet, planner) loads only when a scenario is asked for.
     from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
@@ -156,9 +169,11 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, varian
             raise LlcpsError(f"the knowledge base of {branch!r} has no plan for {spec.name}'s novelty condition")
         if failure is None or log.solved:
             learned = bool(store.visible_operators(branch))
-            raise LlcpsError(
+            raise PlanSucceeds(
                 f"the plan for {spec.name}'s novelty condition succeeds on {branch!r}: no failure state to rank",
-                hint="the branch has learned operators that resolve it; inspect a branch that has not"
+                hint="the branch has learned operators that resolve it; to rank anyway, fork a branch at the "
+                "pretraining point and inspect it: `llcps db branch before --at pretrain`, then "
+                f"`llcps --branch before inspect model --scenario {spec.name}`"
                 if learned
                 else "the novelty does not make the nominal plan fail (see docs/scenarios.md)",
             )
@@ -208,6 +223,14 @@ def inspect_models(
         world_model_entry(name)
     if top < 1:
         raise LlcpsError(f"--top must be at least 1, got {top}")
+    failure = None
+    ranking_note = ranking_hint = None
+    if scenario is not None:  # before any fit: a plan that succeeds has nothing to rank
+        say(f"{scenario}: running the plan to its failure")
+        try:
+            failure = reach_failure(store, branch=branch, scenario=scenario, seed=seed, variant=variant)
+        except PlanSucceeds as exc:
+            ranking_note, ranking_hint = exc.message, exc.hint
     say("loading trials")
     records = store.visible_trials(branch)
     changes = store.visible_changes(branch)
@@ -225,11 +248,8 @@ def inspect_models(
         evaluations = tuple(done)
     except LlcpsError as exc:
         note = exc.message
-    failure = None
     rankings: dict[str, dict[str, list[RankedCandidate]]] = {}
-    if scenario is not None:
-        say(f"{scenario}: running the plan to its failure")
-        failure = reach_failure(store, branch=branch, scenario=scenario, seed=seed, variant=variant)
+    if failure is not None:
         for index, name in enumerate(models):
             say(f"ranking {len(failure.candidates)} candidates with {name}", index, len(models))
             model = fit_or_load(store, branch, name, fit_seed, records=records, changes=changes)
@@ -247,4 +267,6 @@ def inspect_models(
         evaluation_note=note,
         n_changes=len(changes),
         variant=variant if scenario is not None else 0,
+        ranking_note=ranking_note,
+        ranking_hint=ranking_hint,
     )

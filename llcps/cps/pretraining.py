@@ -159,6 +159,37 @@ def random_trials(
             w.close()
 
 
+def finished_pretraining(store: "Store", *, branch: str | None, n: int, seed: int) -> PretrainSummary | None:
+    """A pretraining run with ``n`` trials and ``seed`` that finished (status ``ok``) and
+    whose ``n`` trials ``branch`` still sees, summed up from its stored trials; None when
+    there is none (or ``n`` is 0). Such a run would be written again bit for bit, so
+    ``llcps pretrain`` skips it.
+    """
+    if n <= 0:
+        return None
+    name = store.resolve_branch(branch).name
+    by_run: dict[int, list[TrialRecord]] = {}
+    for record in store.visible_trials(name, source="pretrain"):
+        if record.run_id is not None:
+            by_run.setdefault(record.run_id, []).append(record)
+    if not by_run:
+        return None
+    for run in sorted(store.list_runs(ids=list(by_run)), key=lambda r: r.id):
+        records = by_run[run.id]
+        if run.command != "pretrain" or run.status != "ok" or run.seed != seed or run.config.get("n") != n or len(records) != n:
+            continue
+        summary = PretrainSummary(branch=name, seed=seed, requested=n, run_id=run.id)
+        for record in records:
+            summary.trial_ids.append(int(record.id))  # type: ignore[arg-type]
+            for key, bit in record.outcome.as_dict().items():
+                summary.outcome_counts[key] += bit
+            summary.action_counts[record.spec.action] += 1
+            summary.sim_steps += record.sim_steps
+            summary.wall_seconds += record.wall_seconds
+        return summary
+    return None
+
+
 def pretrain(
     store: "Store",
     *,

@@ -79,7 +79,8 @@ def list_branches(*, store: StoreRef) -> list[BranchInfo]:
 
 def create_branch(*, store: StoreRef, name: str, parent: str | None = None, at: int | str | None = None) -> BranchInfo:
     """A branch ``name`` that sees ``parent``'s trials (None: the current branch) up to ``at``:
-    a trial id, ``"pretrain"`` (its last pretraining trial) or None (its latest trial)."""
+    a trial id, ``"pretrain"`` (its pretraining point: the end of the first unbroken run of
+    pretraining trials it sees) or None (its latest trial)."""
     with opened(store) as s:
         return s.create_branch(name, from_branch=parent, at=at)
 

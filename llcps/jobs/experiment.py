@@ -17,6 +17,7 @@ from llcps.analysis.selection import one_preset, results_table, select_scenes, w
 from llcps.experiments.presets import Preset, get_preset, run_seeds
 from llcps.experiments.runner import run_experiment
 from llcps.experiments.scheduler import ProgressCallback, RunSummary
+from llcps.errors import LlcpsError
 from llcps.outputs import check_output_dir
 from llcps.report.build import default_out_dir, write_report
 from llcps.store import Store
@@ -106,9 +107,30 @@ class ExperimentReport:
     left_out: int
 
 
+def default_results_dir(preset: str | None = None) -> Path:
+    """The results directory ``experiment report`` reads when given none: that of ``preset``
+    (None: the default preset), ``results/<preset>``, when it holds a results.csv.
+
+    Raises:
+        LlcpsError: it holds none, naming what to pass instead.
+    """
+    from llcps.experiments.presets import PRESETS
+
+    name = preset or PRESETS.default
+    path = default_out_dir(name)
+    if not (path / "results.csv").is_file():
+        raise LlcpsError(
+            f"no results directory given, and {path} holds no results.csv",
+            hint=f"pass a results directory (`llcps experiment report DIR`), run the grid first "
+            f"(`llcps experiment run --preset {name}`), or read the store's episodes with --from-db "
+            f"(`llcps --db runs.db experiment report --from-db --preset {name}`)",
+        )
+    return path
+
+
 def report_experiment_job(
     *,
-    source: str | Path | Store,
+    source: str | Path | Store | None = None,
     preset: str | None = None,
     baseline_preset: str | None = None,
     variants: range | None = None,
@@ -121,7 +143,8 @@ def report_experiment_job(
     Args:
         source: a results directory (its results.csv), a results .csv/.json file, or a
             store (its episodes; provenance and films come from it too). From a
-            directory, the provenance and films it already holds are kept.
+            directory, the provenance and films it already holds are kept. None: the
+            default results directory of ``preset`` (:func:`default_results_dir`).
         preset: the preset to report on (needed when the results hold several).
         baseline_preset: add the random-model results of this preset (run on the same store).
         variants: report on the sequences run on these scene variants (default: the
@@ -131,6 +154,8 @@ def report_experiment_job(
         html: also write report.html.
         progress: called as ``(phase, done, total)`` while the report is built.
     """
+    if source is None:
+        source = default_results_dir(preset)
     store = source if isinstance(source, Store) else None
     path = None if store is not None else Path(source)  # type: ignore[arg-type]
     source_dir = None if path is None else (path if path.is_dir() else path.parent)
@@ -145,4 +170,4 @@ def report_experiment_job(
     return ExperimentReport(name, report_dir, analysis, left_out)
 
 
-__all__ = ["ExperimentReport", "ExperimentRun", "report_experiment_job", "run_experiment_job"]
+__all__ = ["ExperimentReport", "ExperimentRun", "default_results_dir", "report_experiment_job", "run_experiment_job"]

@@ -21,9 +21,12 @@ class PretrainResult:
 
     summary: PretrainSummary
     models: tuple[FittedModel, ...]
+    #: The same pretraining (trials, seed) was already on the branch: nothing was run,
+    #: ``summary`` sums up that earlier run (its ``run_id``).
+    skipped: bool = False
 
     def as_json(self) -> dict[str, Any]:
-        return {**self.summary.as_json(), "models": [f.as_json() for f in self.models]}
+        return {**self.summary.as_json(), "skipped": self.skipped, "models": [f.as_json() for f in self.models]}
 
 
 def pretrain(
@@ -34,6 +37,7 @@ def pretrain(
     seed: int = 0,
     models: Sequence[str] | None = None,
     model_seed: int = 0,
+    again: bool = False,
     create: bool = False,
     progress: Progress | None = None,
 ) -> PretrainResult:
@@ -41,17 +45,25 @@ def pretrain(
     as a ``pretrain`` trial (with the run), then fit ``models`` (default: the paper's nb and nn)
     on every trial the branch sees, with ``model_seed``.
 
+    When a finished pretraining run with the same ``trials`` and ``seed`` is already on the
+    branch (its trials all visible), it would write the same trials again: nothing is run
+    (``skipped``) unless ``again``; the models are fitted (or loaded) all the same.
     ``create`` makes the store when ``store`` names none yet.
     """
     from llcps.models import PAPER_MODELS
+    from llcps.cps.pretraining import finished_pretraining
     from llcps.cps.pretraining import pretrain as run_pretrain  # the simulator loads only when a job needs it
 
     report = progress or no_progress
     names = list(models) if models else list(PAPER_MODELS)
     with opened(store, create=create) as s:
-        summary = run_pretrain(
-            s, branch=branch, n=trials, seed=seed, progress=lambda done, total: report(INTERACTIONS, done, total)
-        )
+        earlier = None if again else finished_pretraining(s, branch=branch, n=trials, seed=seed)
+        if earlier is not None:
+            summary = earlier
+        else:
+            summary = run_pretrain(
+                s, branch=branch, n=trials, seed=seed, progress=lambda done, total: report(INTERACTIONS, done, total)
+            )
         from llcps.models.persistence import fit_models  # torch / sklearn load only here
 
         fitted = fit_models(
@@ -61,4 +73,4 @@ def pretrain(
             model_seed,
             progress=lambda name, done, total: report(f"fitting world model {name}", done, total),
         )
-    return PretrainResult(summary=summary, models=tuple(fitted))
+    return PretrainResult(summary=summary, models=tuple(fitted), skipped=earlier is not None)

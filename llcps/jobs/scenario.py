@@ -74,13 +74,15 @@ def list_scenarios() -> list[ScenarioInfo]:
 
 def show_scenario(*, name: str, fmt: str = "toml", variant: int | None = None) -> str:
     """The text of scenario ``name``'s file as ``fmt`` (toml or json); with ``variant``, the file
-    with every range drawn for that variant. It loads back to the same scenario."""
-    from llcps.scenarios import get_scenario
+    with every range drawn for that variant. Saved as TOML it loads back to the same scenes;
+    a shipped scenario's name and alias are commented out, so that the copy is a scenario of
+    its own, named by its file name (``my.toml``: ``my``) unless a name is set in it."""
+    from llcps.scenarios import RESERVED, get_scenario
     from llcps.scenarios.loader import dump
 
     scenario = get_scenario(name)
     assert scenario.source is not None
-    return dump(scenario.source, fmt=fmt, variant=variant)
+    return dump(scenario.source, fmt=fmt, variant=variant, reserved=RESERVED)
 
 
 def render_scenario(

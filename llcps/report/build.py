@@ -196,6 +196,7 @@ def write_report(
     analysis = json.loads(paths.figure2_json.read_text(encoding="utf-8"))
     analysis["provenance"] = provenance if provenance is not None else artifacts.read_provenance(paths.out_dir)
     analysis["report_html"] = None if paths.report_html is None else str(paths.report_html)
+    analysis["films"] = sorted(paths.films)
     return paths.out_dir, analysis
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import json
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -268,10 +269,20 @@ def read_text(text: str, *, where: str, path: Path | None = None, reserved: Mapp
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise file_error(where, "", f"not valid TOML: {exc}", hint="check the line named above against docs/scenarios.md") from None
+    named = "name" in data
+    if not named:
+        data = {"name": _stem_name(where, path), **data}
     model = file_format.validate(where, data)
     for key in ("name", "alias"):
         value = getattr(model, key)
         if value is not None and reserved and value in reserved:
+            if key == "name" and not named:
+                raise file_error(
+                    where,
+                    key,
+                    f"the file has no name, and its file name gives it {value!r}, the shipped scenario {reserved[value]}'s name",
+                    hint='rename the file (my.toml names the scenario "my") or set name = "..." in it',
+                )
             raise file_error(where, key, f"{value!r} is the shipped scenario {reserved[value]}'s name", hint=f"give the file a {key} of its own")
     entities = {condition: _merged_entities(where, data, model, condition) for condition in CONDITION_NAMES}
     names = _check_names(where, model, entities)
@@ -295,6 +306,43 @@ def read_text(text: str, *, where: str, path: Path | None = None, reserved: Mapp
     )
     source.attempt(0)  # the canonical layout must be valid
     return source
+
+
+def _stem_name(where: str, path: Path | None) -> str:
+    """The name of a file that declares none: its file name without ``.toml``, lower-case,
+    with ``-`` and spaces as ``_`` (``My-Bin.toml`` names ``my_bin``)."""
+    hint = 'set name = "..." in the file (lower-case letters, digits and _, starting with a letter)'
+    if path is None:
+        raise file_error(where, "name", "the scenario has no name", hint=hint)
+    name = path.stem.lower().replace("-", "_").replace(" ", "_")
+    if not file_format.NAME.match(name) or name in file_format.RESERVED_NAMES:
+        raise file_error(where, "name", f"the file has no name, and its file name {path.stem!r} is not one", hint=f"rename the file or {hint}")
+    return name
+
+
+#: Top-level ``name`` and ``alias`` lines of a scenario file.
+_NAME_LINE = re.compile(r"^(name|alias)\s*=")
+
+
+def without_shipped_names(text: str) -> str:
+    """A shipped file's text with its ``name`` and ``alias`` commented out, for a copy of
+    one's own: the copy then takes its name from its file name (or from a name set in it),
+    as two scenarios may not share a name."""
+    out: list[str] = []
+    top, noted = True, False
+    for line in text.splitlines(keepends=True):
+        if line.lstrip().startswith("["):  # the top-level keys end at the first table
+            top = False
+        if top and _NAME_LINE.match(line):
+            if not noted:
+                out.append(
+                    "# The shipped scenario's name and alias, left for you to set: a file without a name\n"
+                    '# takes its file name (my.toml names the scenario "my"); no two scenarios share one.\n'
+                )
+                noted = True
+            line = f"# {line}"
+        out.append(line)
+    return "".join(out)
 
 
 def read_file(path: str | Path, *, reserved: Mapping[str, str] | None = None) -> ScenarioSource:
@@ -370,22 +418,30 @@ def _check_names(where: str, model: ScenarioModel, entities: Mapping[str, tuple[
     return names
 
 
-def dump(source: ScenarioSource, *, fmt: str, variant: int | None = None) -> str:
-    """The file as TOML (its own text, or a variant's concrete file) or as JSON."""
+def dump(source: ScenarioSource, *, fmt: str, variant: int | None = None, reserved: Mapping[str, str] | None = None) -> str:
+    """The file as TOML (its own text, or a variant's concrete file) or as JSON.
+
+    A TOML file whose name is in ``reserved`` (a shipped scenario's) has its ``name`` and
+    ``alias`` commented out, so that the copy loads back as a scenario of its own, named
+    by its file name; JSON, for scripts, keeps every key."""
     if fmt not in ("toml", "json"):
         raise LlcpsError(f"unknown format {fmt!r}", hint="choose toml or json")
     data = source.concrete(variant) if variant is not None else dict(source.data)
     if fmt == "json":
         return json.dumps(data, indent=2) + "\n"
+    shipped = reserved is not None and data.get("name") in reserved
     if variant is None:
-        return source.text
+        return without_shipped_names(source.text) if shipped else source.text
     import tomli_w
 
     header = (
         f"# Variant {variant} of {source.name} ({Path(source.where).name}) with every range drawn:\n"
         f"# its variant 0 is that scene (`llcps scenario show {source.name} --variant {variant}`).\n"
     )
+    if shipped:
+        data = {k: v for k, v in data.items() if k not in ("name", "alias")}
+        header += '# No name: the file takes its file name (my.toml names the scenario "my"), or set one.\n'
     return header + tomli_w.dumps(data)
 
 
-__all__ = ["ScenarioSource", "dump", "read_file", "read_text"]
+__all__ = ["ScenarioSource", "dump", "read_file", "read_text", "without_shipped_names"]

@@ -103,15 +103,34 @@ def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
         return ImageFont.load_default()
 
 
+#: Caption font sizes, largest first: a line too wide for the frame takes a smaller one.
+CAPTION_SIZES = (12, 11, 10, 9, 8)
+#: Pixels left free at each side of a caption line.
+CAPTION_MARGIN = 6
+
+
+def _fitted(draw: ImageDraw.ImageDraw, line: str, width: int) -> tuple[str, ImageFont.ImageFont | ImageFont.FreeTypeFont]:
+    """``line`` and the largest caption font it fits ``width`` pixels in; a line too wide
+    even at the smallest size is cut, with an ellipsis."""
+    for size in CAPTION_SIZES:
+        font = _font(size)
+        if draw.textlength(line, font=font) <= width:
+            return line, font
+    while line and draw.textlength(line + "…", font=font) > width:
+        line = line[:-1]
+    return line.rstrip() + "…", font
+
+
 def captioned(frame: np.ndarray, caption: Sequence[str]) -> Image.Image:
-    """``frame`` with up to two caption lines in a band beneath it."""
+    """``frame`` with up to two caption lines in a band beneath it, each within the
+    frame's width (in a smaller font when it must)."""
     image = Image.fromarray(frame)
     out = Image.new("RGB", (image.width, image.height + CAPTION_HEIGHT), (250, 250, 250))
     out.paste(image, (0, 0))
     draw = ImageDraw.Draw(out)
-    font = _font(12)
     for i, line in enumerate(list(caption)[:2]):
-        draw.text((6, image.height + 3 + 15 * i), line, fill=(20, 20, 20), font=font)
+        text, font = _fitted(draw, line, image.width - 2 * CAPTION_MARGIN)
+        draw.text((CAPTION_MARGIN, image.height + 3 + 15 * i), text, fill=(20, 20, 20), font=font)
     return out
 
 

@@ -30,7 +30,8 @@ MAIN_BRANCH = "main"
 
 CURRENT_BRANCH_KEY = "current_branch"
 
-#: ``at=`` / ``to=`` value meaning "the last visible pretraining trial".
+#: ``at=`` / ``to=`` value meaning "the pretraining point": the last trial of the first
+#: unbroken run of pretraining trials a branch sees (:meth:`BranchQueries._pretrain_point`).
 PRETRAIN = "pretrain"
 
 RESET_TARGETS: tuple[str, ...] = (PRETRAIN, "empty")
@@ -115,6 +116,33 @@ class BranchQueries(SettingQueries):
             best = max(best, conn.scalar(stmt) or 0)
         return best
 
+    def _min_visible(self, conn: Connection, chain: Sequence[Link], *extra: ColumnElement[bool]) -> int | None:
+        found: list[int] = []
+        for link in chain:
+            stmt = select(func.min(Trial.id)).where(Trial.branch_id == link.branch_id, *extra)
+            if link.limit is not None:
+                stmt = stmt.where(Trial.id <= link.limit)
+            value = conn.scalar(stmt)
+            if value is not None:
+                found.append(int(value))
+        return min(found) if found else None
+
+    def _pretrain_point(self, conn: Connection, chain: Sequence[Link]) -> int:
+        """The paper's "reset to the pretraining data": the last trial of the first unbroken
+        run of pretraining trials the chain sees, in id order (0 when it sees none).
+
+        A trial of any other source (plan, exploration, replay) ends the run, so a branch
+        forked here sees no exploration trial, nor an operator or model learned after
+        one, even when more pretraining came later (``make run`` run twice).
+        """
+        first = self._min_visible(conn, chain, Trial.source == PRETRAIN)
+        if first is None:
+            return 0
+        other = self._min_visible(conn, chain, Trial.source != PRETRAIN, Trial.id > first)
+        if other is None:
+            return self._max_visible(conn, chain, Trial.source == PRETRAIN)
+        return self._max_visible(conn, chain, Trial.source == PRETRAIN, Trial.id < other)
+
     def _info(
         self,
         conn: Connection,
@@ -170,7 +198,8 @@ class BranchQueries(SettingQueries):
         Args:
             from_branch: the parent (default: the current branch).
             at: the fork point: a trial id visible on the parent, ``"pretrain"`` for
-                the parent's last visible pretraining trial (0 if it has none), or
+                the parent's pretraining point (the last trial of the first unbroken
+                run of pretraining trials it sees; 0 if it sees none), or
                 None for its latest visible trial.
         """
         validate_branch_name(name)
@@ -189,7 +218,7 @@ class BranchQueries(SettingQueries):
             return self._max_visible(conn, chain)
         if isinstance(at, str):
             if at == PRETRAIN:
-                return self._max_visible(conn, chain, Trial.source == PRETRAIN)
+                return self._pretrain_point(conn, chain)
             if not at.strip().isdigit():
                 raise LlcpsError(f"invalid fork point {at!r}", hint="pass a trial id or 'pretrain'")
             at = int(at)
@@ -210,7 +239,7 @@ class BranchQueries(SettingQueries):
         bid = chain[0].branch_id
         keep = 0
         if to == PRETRAIN:
-            keep = self._max_visible(conn, chain, Trial.source == PRETRAIN)
+            keep = self._pretrain_point(conn, chain)
             trial_clause = and_(Trial.branch_id == bid, Trial.id > keep)
             op_clause = and_(Operator.branch_id == bid, Operator.watermark > keep)
             execution_clause = and_(OperatorExecution.branch_id == bid, OperatorExecution.watermark > keep)
@@ -307,8 +336,9 @@ class BranchQueries(SettingQueries):
 
         Args:
             name: the branch (None: the current one).
-            to: ``"pretrain"`` keeps its own trials up to the last visible
-                pretraining trial (and operators/models with a watermark up to it);
+            to: ``"pretrain"`` keeps its own trials up to its pretraining point (the
+                last trial of the first unbroken run of pretraining trials it sees)
+                and operators/models with a watermark up to it;
                 ``"empty"`` removes all it owns.
             dry_run: only count what would go.
         """

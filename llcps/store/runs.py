@@ -96,11 +96,15 @@ class RunQueries(BranchQueries):
         config: Mapping[str, Any],
         branch: str,
         provenance: Provenance | None = None,
+        started_at: datetime | None = None,
     ) -> int:
         """Record the start of a CLI invocation or experiment sequence.
 
         Args:
             provenance: where the run runs (default: this process, :func:`llcps.provenance.current`).
+            started_at: when the command started, in UTC without a time zone (default:
+                now); a command that reads and fits before it records its run passes
+                its own start, so the run's time is the command's.
         """
         env = provenance_of_process() if provenance is None else provenance
         with self._write() as conn:
@@ -112,7 +116,7 @@ class RunQueries(BranchQueries):
                     config=dict(config),
                     branch=branch,
                     status="running",
-                    started_at=utc_now(),
+                    started_at=utc_now() if started_at is None else started_at,
                     **run_provenance_values(env),
                 )
             ).inserted_primary_key[0]
