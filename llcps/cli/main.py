@@ -34,7 +34,7 @@ app = new_app(
         "llcps pretrain --trials 200 --seed 1            # random interactions, models fitted",
         "llcps solve scenario2                           # plan, explore, learn an operator",
         "llcps --db runs.db --branch exp inspect trials  # global options, before or after the command",
-        "llcps pretrain --trials 200 2>&1 | tee log      # piped: a progress line every 5 s",
+        "llcps pretrain > out.txt 2> progress.log        # off a terminal: a progress line every 5 s",
         "llcps --quiet solve scenario2 --json            # only the result (and any error)",
         "llcps --version",
     ),
