@@ -35,9 +35,16 @@ interval, then a heartbeat at most every 5 s (`LLCPS_HEARTBEAT_SECONDS`) and a l
 a phase starts and ends:
 
 ```
-llcps pretrain [0:00:05] random interactions: 12/200 (6%), eta 0:01:20
-llcps pretrain [0:01:27] random interactions: done in 0:01:25, 200/200
-llcps pretrain [0:01:27] fitting world model nb: started
+$ llcps pretrain --trials 30 --seed 1 --create 2>&1 | cat
+llcps pretrain [0:00:05] random interactions: 5/30 (17%), eta 0:00:14
+llcps pretrain [0:00:10] random interactions: 18/30 (60%), eta 0:00:06
+llcps pretrain [0:00:15] random interactions: 26/30 (87%), eta 0:00:02
+llcps pretrain [0:00:16] random interactions: done in 0:00:13, 30/30
+llcps pretrain [0:00:16] fitting world model nn: started
+llcps pretrain [0:00:21] fitting world model nn: 0/2 (0%), eta unknown
+llcps pretrain [0:00:26] fitting world model nb: 1/2 (50%), eta 0:00:11
+llcps pretrain [0:00:31] fitting world models: done in 0:00:14, 2/2
+llcps pretrain [0:00:31] finished
 ```
 
 `--quiet` (`-q`, env `LLCPS_QUIET`) silences progress and messages; errors, warnings,
