@@ -176,3 +176,13 @@ def test_the_sweep_estimate_is_candidates_times_a_time_per_trial() -> None:
     assert "467 candidates x ~0.5 s a trial (the first 3 took 0.02 s each" in text
     assert text.endswith("the sweep may take ~4 min; 5 variants, if alike: ~19 min")
     assert sweep_estimate_text(slow, range(0, 5)).endswith("~3 min at most (--quick stops at the first resolving candidate)")
+
+
+def test_quiet_drops_the_early_starting_line_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
+    from llcps.cli.entry import _quiet
+
+    monkeypatch.delenv("LLCPS_QUIET", raising=False)
+    assert _quiet(["--db", "x.db", "pretrain", "-q"]) and _quiet(["--quiet", "solve", "scenario2"])
+    assert not _quiet(["solve", "scenario2"]) and not _quiet(["solve", "--", "--quiet"])
+    monkeypatch.setenv("LLCPS_QUIET", "yes")
+    assert _quiet(["solve", "scenario2"])
