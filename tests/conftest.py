@@ -33,6 +33,11 @@ POSTGRES_URL = os.environ.get("LLCPS_TEST_POSTGRES_URL")
 
 # Physics cache seals under a secret of this test process (and the commands it starts), never the user's.
 os.environ["LLCPS_CACHE_KEY"] = str(Path(tempfile.mkdtemp(prefix="llcps-test-key-")) / "physics-cache.key")
+# Off a terminal (CliRunner, subprocess pipes) progress lines begin after one heartbeat
+# interval; a long one keeps the tests' stderr independent of the machine's speed (the
+# tests of the heartbeat set their own), and a user's LLCPS_QUIET does not reach them.
+os.environ["LLCPS_HEARTBEAT_SECONDS"] = "3600"
+os.environ.pop("LLCPS_QUIET", None)
 
 
 def _postgres_unavailable() -> str | None:

@@ -317,3 +317,5 @@ def test_check_passes_on_every_shipped_scenario_at_variant_zero(name: str) -> No
     assert result.exit_code == 0, result.stdout + result.stderr
     report = json.loads(result.stdout)
     assert report["passed"] and report["shares"] == {p: 1.0 for p in report["properties"]}
+    candidates = report["variants"][0]["candidates"]
+    assert f"variant 0: {candidates} candidates x ~" in result.stderr and "the sweep may take" in result.stderr  # said up front

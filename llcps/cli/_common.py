@@ -2,7 +2,9 @@
 opening, output checks, output helpers and the error contract.
 
 Output rules: data goes to stdout (a table, or with ``--json`` exactly one JSON
-document); messages and progress go to stderr. Every error, argument parsing
+document); messages and progress go to stderr. ``--quiet`` silences progress and
+:func:`message` lines, never :func:`notice` lines (a result said on stderr, a warning, a
+failure), errors or stdout. Every error, argument parsing
 included, becomes ``error: ...`` / ``hint: ...`` on stderr and exit code 2 (130 for
 Ctrl-C), never a traceback (see :class:`LlcpsGroup`). Text from the store (branch
 names, scenarios) is printed literally, never as rich markup.
@@ -29,8 +31,10 @@ from llcps.store import Store
 
 try:  # recent typer carries its own copy of click, whose exceptions the parser raises
     from typer._click import exceptions as click_exceptions
+    from typer._click.globals import get_current_context
 except ImportError:  # pragma: no cover - older typer uses click itself
     from click import exceptions as click_exceptions
+    from click import get_current_context
 
 #: Human messages and progress.
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
@@ -124,10 +128,13 @@ class LlcpsGroup(ConventionGroup):
 
 #: Global options that may also follow the subcommand: ``llcps inspect trials --branch exp``.
 GLOBAL_OPTIONS = ("--db", "--branch")
+#: Global flags (no value) that may also follow the subcommand: ``llcps pretrain --quiet``.
+GLOBAL_FLAGS = ("--quiet", "-q")
 
 
 def hoist_global_options(args: list[str]) -> list[str]:
-    """Move ``--db``/``--branch`` (and their values) given after the subcommand to the front.
+    """Move ``--db``/``--branch`` (and their values) and ``--quiet`` given after the
+    subcommand to the front.
 
     Click only knows a group's options before its subcommand; moving them keeps one
     definition (with its environment variable) for both places. Tokens after ``--``
@@ -142,7 +149,9 @@ def hoist_global_options(args: list[str]) -> list[str]:
             rest.extend(args[i:])
             break
         name = token.split("=", 1)[0]
-        if name in GLOBAL_OPTIONS:
+        if token in GLOBAL_FLAGS:
+            front.append(token)
+        elif name in GLOBAL_OPTIONS:
             if "=" in token:
                 front.append(token)
             elif i + 1 < len(args):
@@ -182,11 +191,23 @@ class CliContext:
 
     db: str = DEFAULT_DB
     branch: str | None = None
+    quiet: bool = False
 
 
 def cli_context(ctx: typer.Context) -> CliContext:
     obj = ctx.find_object(CliContext)
     return obj if obj is not None else CliContext()
+
+
+def quiet() -> bool:
+    """Whether the command running now was given ``--quiet`` (or ``LLCPS_QUIET``).
+
+    Read from the running command's context, so it holds for one invocation only;
+    outside a command (a library caller, a test of the display) it is False.
+    """
+    ctx = get_current_context(silent=True)
+    obj = ctx.find_object(CliContext) if ctx is not None else None
+    return obj is not None and obj.quiet
 
 
 def db_location(ctx: typer.Context) -> str:
@@ -211,7 +232,15 @@ def print_json(data: Any) -> None:
 
 
 def message(text: str) -> None:
-    """A line for people, on stderr."""
+    """A line for people, on stderr, that ``--quiet`` silences: what was written where,
+    what changed, what comes next."""
+    if not quiet():
+        err_console.print(text, markup=False)
+
+
+def notice(text: str) -> None:
+    """A line for people, on stderr, that ``--quiet`` keeps: part of a command's result
+    (``match``, a failed property), a warning, or a task that failed."""
     err_console.print(text, markup=False)
 
 

@@ -10,7 +10,7 @@ from llcps.bench import GROUPS, SLOW_GROUPS, Figure, run_bench, unsteady
 from llcps.cli._common import (
     JsonFlag,
     choice_enum,
-    message,
+    notice,
     print_json,
     print_table,
 )
@@ -54,9 +54,9 @@ def bench_cli(
         print_table("llcps bench" + (" --quick" if quick else ""), ("figure", "value", "unit", "target", "met"), [_row(f) for f in figures])
         missed = [f.name for f in figures if f.met is False]
         if missed:
-            message(f"targets missed: {', '.join(missed)} (see docs/performance.md)")
+            notice(f"targets missed: {', '.join(missed)} (see docs/performance.md)")
     for caution in unsteady(figures):  # on stderr, beside the JSON too
-        message(f"warning: {caution}")
+        notice(f"warning: {caution}")
 
 
 def _row(f: Figure) -> tuple[str, str, str, str, str]:

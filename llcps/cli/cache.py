@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, db_location, human_bytes, message, new_app, print_json, print_table
+from llcps.cli._common import JsonFlag, db_location, human_bytes, message, new_app, notice, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.errors import LlcpsError
 from llcps.jobs import cache as jobs
@@ -75,7 +75,7 @@ def prune_cli(
     if as_json:
         print_json(result.as_json())
     verb = "would remove" if dry_run else "removed"
-    message(f"{verb} {result.removed} entries ({human_bytes(result.removed_bytes)}); {result.kept} kept ({human_bytes(result.kept_bytes)})")
+    (notice if dry_run else message)(f"{verb} {result.removed} entries ({human_bytes(result.removed_bytes)}); {result.kept} kept ({human_bytes(result.kept_bytes)})")
 
 
 @app.command("limit", epilog=examples("llcps cache limit 4GB && llcps cache prune"))

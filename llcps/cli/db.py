@@ -16,6 +16,7 @@ from llcps.cli._common import (
     human_bytes,
     message,
     new_app,
+    notice,
     print_json,
     print_table,
     selected_branch,
@@ -85,7 +86,10 @@ def _report_removal(change: BranchChange, as_json: bool) -> None:
     """Report a removal, or what a dry run of it would do (exit 0: a dry run is not an error)."""
     if as_json:
         print_json(change.as_json())
-    message(f"{change.summary}; nothing changed (rerun with --yes to do it)" if change.dry_run else change.summary)
+    if change.dry_run:  # what a dry run would do is its result: --quiet keeps it
+        notice(f"{change.summary}; nothing changed (rerun with --yes to do it)")
+    else:
+        message(change.summary)
 
 
 def _fork_point(value: Optional[str]) -> Optional[str]:

@@ -14,7 +14,7 @@ import typer
 HEADER = """# CLI reference
 
 Generated from the command tree by `python -m llcps.cli.docs > docs/cli.md`; a test keeps it in sync.
-The global options `--db` and `--branch` go before or after the command:
+The global options `--db`, `--branch` and `--quiet` go before or after the command:
 `llcps --db runs.db inspect trials --branch exp`.
 With `--json` a command prints exactly one JSON document on stdout; messages and progress go to stderr.
 Every error, a mistyped option included, prints `error: ...` and `hint: ...` on stderr and
@@ -25,8 +25,31 @@ An option name means the same in every command: `--seed` seeds the command's own
 choices and is recorded with its run, `--model-seed` seeds the world models; `--limit N`
 is how many rows to show, `--trials N` / `--seeds N` / `--budget N` how many to make;
 `--out FILE` is a file, `--out-dir DIR` a directory; `--scenario`, `--source`,
-`--episode` and `--run` filter. Long commands show their phase, counts and an ETA on
-stderr (on a terminal).
+`--episode` and `--run` filter.
+
+Long commands (`pretrain`, `solve`, `replay`, `inspect model`, `scenario check`,
+`scenario render`, `experiment run`, `experiment report`, `db upgrade`, `db compact`,
+`bench`) show their phase, counts, elapsed time and an ETA on stderr: on a terminal a
+live display; otherwise (a pipe, a file, CI, `nohup`) plain lines, none in the first
+interval, then a heartbeat at most every 5 s (`LLCPS_HEARTBEAT_SECONDS`) and a line when
+a phase starts and ends:
+
+```
+$ llcps pretrain --trials 30 --seed 1 --create 2>&1 | cat
+llcps pretrain [0:00:05] random interactions: 5/30 (17%), eta 0:00:14
+llcps pretrain [0:00:10] random interactions: 18/30 (60%), eta 0:00:06
+llcps pretrain [0:00:15] random interactions: 26/30 (87%), eta 0:00:02
+llcps pretrain [0:00:16] random interactions: done in 0:00:13, 30/30
+llcps pretrain [0:00:16] fitting world model nn: started
+llcps pretrain [0:00:21] fitting world model nn: 0/2 (0%), eta unknown
+llcps pretrain [0:00:26] fitting world model nb: 1/2 (50%), eta 0:00:11
+llcps pretrain [0:00:31] fitting world models: done in 0:00:14, 2/2
+llcps pretrain [0:00:31] finished
+```
+
+`--quiet` (`-q`, env `LLCPS_QUIET`) silences progress and messages; errors, warnings,
+results said on stderr (`replay`'s match, `scenario check`'s failed properties, what a
+dry run would do) and stdout (`--json` included) are unchanged.
 """
 
 

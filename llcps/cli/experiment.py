@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
 
-from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, message, new_app, open_store, print_json, print_table
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, message, new_app, notice, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_SEED
@@ -126,7 +126,7 @@ def run_cli(
     run_seeds(get_preset(name), seeds=seeds, first_seed=first_seed, variants=scenes)
     try:
         with open_store(ctx, create=create) as store:
-            with progress_display(f"experiment {name}", "planning the tasks") as bar:
+            with progress_display(f"experiment run {name}", "planning the tasks") as bar:
 
                 def report(done: int, total: int, label: str) -> None:
                     bar(f"tasks (last: {label})" if label else "tasks", done, total)
@@ -147,16 +147,16 @@ def run_cli(
                     report_progress=bar,
                 )
     except KeyboardInterrupt:
-        message("interrupted: every task imported so far is kept; run the same command to resume")
+        notice("interrupted: every task imported so far is kept; run the same command to resume")
         raise typer.Exit(EXIT_INTERRUPTED) from None
     summary = result.summary
     if summary.status == "interrupted":
-        message(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
+        notice(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
         raise typer.Exit(EXIT_INTERRUPTED)
     for label, error in summary.failed:
-        message(f"task {label} failed: {error}")
+        notice(f"task {label} failed: {error}")
     if summary.blocked:
-        message(f"{summary.blocked} sequence(s) not run: their pretraining failed")
+        notice(f"{summary.blocked} sequence(s) not run: their pretraining failed")
     if result.report_dir is None or result.analysis is None:
         raise LlcpsError("no results to report", hint="see the failed tasks above")
     out_dir, analysis = result.report_dir, dict(result.analysis)
@@ -241,14 +241,14 @@ def report_cli(
             source=results, preset=preset, baseline_preset=baseline_preset, variants=scenes, out_dir=out_dir, html=html, progress=bar
         )
 
-    with progress_display("report", "reading the results") as bar:
+    with progress_display("experiment report", "reading the results") as bar:
         if not from_db:
             result = build(source, bar)
         else:
             with open_store(ctx) as store:
                 result = build(store, bar)
     if result.left_out:
-        message(
+        notice(
             f"{result.left_out} episode(s) on other scenes left out: a report pairs seeds over one set of scenes"
             + ("" if scenes is not None else " (report scene variants with --variants A:B)")
         )
@@ -315,7 +315,7 @@ def show_results(analysis: dict[str, Any]) -> None:
     if analysis.get("random_comparison"):
         show_random(analysis)
     if not analysis.get("figure2") and not analysis.get("random_comparison"):
-        message("no update/reset pairs and no random-order results to compare: see the report's tables")
+        notice("no update/reset pairs and no random-order results to compare: see the report's tables")
 
 
 def show_random(analysis: dict[str, Any]) -> None:

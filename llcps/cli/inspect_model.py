@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, choice_enum, db_location, message, print_json, print_table, selected_branch
+from llcps.cli._common import JsonFlag, choice_enum, db_location, notice, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.cli.inspect import app
@@ -100,7 +100,7 @@ def show(report: "ModelInspection") -> None:
         [[f"{report.label_frequencies[name]:.3f}" for name in OUTCOME_NAMES]],
     )
     if report.evaluation_note:
-        message(f"no held-out metrics: {report.evaluation_note}")
+        notice(f"no held-out metrics: {report.evaluation_note}")
     for evaluation in report.evaluations:
         print_table(
             f"{evaluation.model}: {evaluation.n_train} training / {evaluation.n_test} held-out trials "
@@ -137,9 +137,9 @@ def show(report: "ModelInspection") -> None:
         return
     failure = report.failure
     where = f" (variant {report.variant})" if report.variant else ""
-    message(f"{failure.scenario}{where}: {failure.missing_effects}; {len(failure.candidates)} candidates")
+    notice(f"{failure.scenario}{where}: {failure.missing_effects}; {len(failure.candidates)} candidates")
     for k, subgoal in enumerate(failure.subgoals, start=1):
-        message(f"subgoal S{k}: {subgoal.label} (a trial that meets it lets K's step finish the job)")
+        notice(f"subgoal S{k}: {subgoal.label} (a trial that meets it lets K's step finish the job)")
     for model, by_measure in report.rankings.items():
         for measure, ranked in by_measure.items():
             atoms = list(ranked[0].goal) if ranked else []

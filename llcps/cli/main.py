@@ -34,6 +34,8 @@ app = new_app(
         "llcps pretrain --trials 200 --seed 1            # random interactions, models fitted",
         "llcps solve scenario2                           # plan, explore, learn an operator",
         "llcps --db runs.db --branch exp inspect trials  # global options, before or after the command",
+        "llcps pretrain > out.txt 2> progress.log        # off a terminal: a progress line every 5 s",
+        "llcps --quiet solve scenario2 --json            # only the result (and any error)",
         "llcps --version",
     ),
 )
@@ -71,6 +73,15 @@ def _global_options(
             show_default=False,
         ),
     ] = None,
+    quiet: Annotated[
+        bool,
+        typer.Option(
+            "--quiet",
+            "-q",
+            envvar="LLCPS_QUIET",
+            help="No progress and no messages on stderr; errors, warnings and the result still print (before or after the command).",
+        ),
+    ] = False,
     version: Annotated[
         bool,
         typer.Option("--version", is_eager=True, callback=_show_version, help="Print the llcps version and exit."),
@@ -78,9 +89,12 @@ def _global_options(
 ) -> None:
     """Life-long creative problem solving with world models trained on an experience store.
 
-    Every error prints `error:` and `hint:` lines on stderr and exits 2.
+    Every error prints `error:` and `hint:` lines on stderr and exits 2. Long commands
+    show their phase, counts and ETA on stderr: a live display on a terminal, otherwise
+    a plain line when a phase starts and ends and a heartbeat every 5 s
+    (LLCPS_HEARTBEAT_SECONDS); --quiet silences them.
     """
-    ctx.obj = CliContext(db=db_location, branch=branch)
+    ctx.obj = CliContext(db=db_location, branch=branch, quiet=quiet)
 
 
 # Command registry: one line per module.

@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, db_location, message, print_json, print_table
+from llcps.cli._common import JsonFlag, db_location, message, notice, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_ID
@@ -58,7 +58,7 @@ def replay_cli(
                 ("sim steps", rec.sim_steps, rep.sim_steps),
             ],
         )
-        message("match" if report.matches else "MISMATCH: the replay differs from the recorded trial")
+        notice("match" if report.matches else "MISMATCH: the replay differs from the recorded trial")
         if gif is not None:
             message(f"wrote {gif}")
     raise typer.Exit(0 if report.matches else 1)

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Optional, Sequence
 
 import typer
 
-from llcps.cli._common import JsonFlag, choice_enum, message, new_app, print_json, print_table
+from llcps.cli._common import JsonFlag, choice_enum, message, new_app, notice, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.jobs import scenario as jobs
@@ -93,7 +93,7 @@ def render_cli(
 ) -> None:
     """Render the scenes of a variant (after they settle) to PNG, one per condition."""
     chosen = CONDITIONS if condition is None else (str(condition.value),)  # type: ignore[attr-defined]
-    with progress_display("render", "loading the simulator") as progress:
+    with progress_display("scenario render", "loading the simulator") as progress:
         result = jobs.render_scenario(name=name, out_dir=out_dir, variant=variant, conditions=chosen, progress=progress)
     if as_json:
         print_json(result.as_json())
@@ -128,17 +128,54 @@ def check_cli(
     candidate; the first resolving candidate is not first in the default order.
     Prints candidates, resolving candidates and the first position per variant and,
     over a range, the share of variants where each property holds. Nothing is stored.
+    A full sweep tries every candidate in physics, minutes per variant: once a sweep's
+    first 3 trials are timed, a line on stderr says how long it may take (candidates x
+    the larger of their time and a typical 0.5 s a trial).
     Exit code 0 when every property holds on every variant, 1 when one does not.
     """
     chosen = parse_range(variants)
     label = get_scenario(name).name
-    with progress_display(f"check {label}", "loading the simulator") as progress:
-        report = jobs.check_scenario(name=name, variants=chosen, quick=quick, progress=progress)
+    from llcps.cps.check import TIMED_TRIALS  # the simulator loads here, not at start
+
+    sweeps = "stopping at the first resolving candidate" if quick else "every candidate, often minutes"
+    message(
+        f"checking {label}, {len(chosen)} variant(s): for each a solve of the original condition and a sweep of the "
+        f"novelty's candidates ({sweeps}); how long a sweep may take follows once its first {TIMED_TRIALS} trials are timed"
+    )
+    with progress_display(f"scenario check {label}", "loading the simulator") as progress:
+        report = jobs.check_scenario(
+            name=name, variants=chosen, quick=quick, progress=progress, estimate=lambda e: message(sweep_estimate_text(e, chosen))
+        )
     if as_json:
         print_json({**report.as_json(), "variant_range": range_text(chosen)})
     else:
         show_check(report, range_text(chosen))
     raise typer.Exit(0 if report.passed else 1)
+
+
+def sweep_estimate_text(estimate: object, variants: Sequence[int]) -> str:
+    """How long a variant's sweep may take, for people (and the whole check, at the first variant)."""
+    from llcps.cps.check import TYPICAL_SECONDS_PER_TRIAL, SweepEstimate
+
+    assert isinstance(estimate, SweepEstimate)
+    text = (
+        f"variant {estimate.variant}: {estimate.candidates} candidates x ~{estimate.seconds_per_trial:.1f} s a trial "
+        f"(the first {estimate.timed} took {estimate.measured:.2f} s each, a typical trial {TYPICAL_SECONDS_PER_TRIAL} s): "
+        f"the sweep may take {about(estimate.seconds)}"
+    )
+    if estimate.quick:
+        text += " at most (--quick stops at the first resolving candidate)"
+    if len(variants) > 1 and estimate.variant == variants[0]:
+        text += f"; {len(variants)} variants, if alike: {about(estimate.seconds * len(variants))}"
+    return text
+
+
+def about(seconds: float) -> str:
+    """A rough duration for people: ``under a minute``, ``~7 min``, ``~2 h 5 min``."""
+    if seconds < 60:
+        return "under a minute"
+    minutes = round(seconds / 60)
+    return f"~{minutes} min" if minutes < 60 else f"~{minutes // 60} h {minutes % 60} min"
 
 
 def show_check(report: object, span: str) -> None:
@@ -164,5 +201,5 @@ def show_check(report: object, span: str) -> None:
         )
     for v in report.variants:
         for prop, reason in v.reasons.items():
-            message(f"variant {v.variant}: {prop} does not hold: {reason}")
-    message("every property holds" if report.passed else "some property does not hold (exit 1)")
+            notice(f"variant {v.variant}: {prop} does not hold: {reason}")
+    notice("every property holds" if report.passed else "some property does not hold (exit 1)")

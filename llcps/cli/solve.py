@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, cli_context, err_console, message, print_json, print_table, selected_branch
+from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, cli_context, err_console, message, notice, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.cps.episode import DEFAULT_BUDGET, MAX_BUDGET
@@ -162,5 +162,5 @@ def show(result: "SolveResult") -> None:
         show_header=False,
     )
     for pddl in result.learned_operators:
-        message("learned operator:")
+        notice("learned operator:")
         err_console.print(Syntax(pddl, "lisp", theme="ansi_dark", background_color="default"))

@@ -12,10 +12,15 @@
 Everything runs in throwaway in-memory stores: nothing reaches the experience store.
 A *quick* check stops each sweep at the first resolving candidate: it decides every
 property, but counts resolving candidates only as "at least one".
+
+A full sweep runs every candidate in physics (minutes per variant), so a check can say
+how long each sweep may take once its first :data:`TIMED_TRIALS` candidates are timed
+(:class:`SweepEstimate`).
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -35,6 +40,50 @@ PROPERTIES: dict[str, str] = {
 ProgressCallback = Callable[[str, int, int], None]
 """Called as ``progress(phase, done, total)``: phase names the variant and what runs;
 done and total count candidates while sweeping (total 0: not known yet)."""
+
+#: Candidates a sweep times before it estimates how long the whole sweep takes.
+TIMED_TRIALS = 3
+#: A rough wall time of one sweep trial. The shipped scenarios' full sweeps of 467
+#: candidates took 115-708 s (0.25-1.5 s a trial; docs/scenarios.md), and the default order
+#: puts cheap candidates first (scenario2's first 50 took 0.02 s each), so the first
+#: trials alone under-estimate a sweep: the estimate takes the larger of the two.
+TYPICAL_SECONDS_PER_TRIAL = 0.5
+
+
+@dataclass(frozen=True)
+class SweepEstimate:
+    """How long a variant's sweep may take: its candidates times a wall time per trial,
+    the larger of its first trials' and :data:`TYPICAL_SECONDS_PER_TRIAL`. Wall time
+    only; nothing of it is stored.
+
+    Attributes:
+        variant: the variant swept.
+        candidates: the size of its candidate space.
+        timed: the trials timed.
+        measured: their mean wall time, in seconds.
+        quick: the sweep stops at the first resolving candidate (the estimate is then a bound).
+    """
+
+    variant: int
+    candidates: int
+    timed: int
+    measured: float
+    quick: bool
+
+    @property
+    def seconds_per_trial(self) -> float:
+        """The wall time per trial the estimate assumes."""
+        return max(self.measured, TYPICAL_SECONDS_PER_TRIAL)
+
+    @property
+    def seconds(self) -> float:
+        """The whole sweep, every candidate tried."""
+        return self.candidates * self.seconds_per_trial
+
+
+EstimateCallback = Callable[[SweepEstimate], None]
+"""Called once per variant with the :class:`SweepEstimate` of its sweep (when the sweep
+lasts beyond its first timed trials)."""
 
 
 @dataclass
@@ -115,7 +164,15 @@ class CheckReport:
         }
 
 
-def check_variant(scenario: Scenario, ref: str, variant: int, *, quick: bool, progress: ProgressCallback | None = None) -> VariantCheck:
+def check_variant(
+    scenario: Scenario,
+    ref: str,
+    variant: int,
+    *,
+    quick: bool,
+    progress: ProgressCallback | None = None,
+    estimate: EstimateCallback | None = None,
+) -> VariantCheck:
     """Check the four properties of one variant (see the module docstring).
 
     Args:
@@ -124,15 +181,24 @@ def check_variant(scenario: Scenario, ref: str, variant: int, *, quick: bool, pr
         variant: the scene variant.
         quick: stop the sweep at the first resolving candidate.
         progress: see :data:`ProgressCallback`.
+        estimate: see :data:`EstimateCallback`.
     """
     if progress is not None:
         progress(f"variant {variant}: original condition", 0, 0)
     with Store.open("sqlite://", create=True) as store:
         original = solve(store, branch=None, config=SolveConfig(scenario=ref, condition="original", budget=0, variant=variant))
 
+    first_trial: list[float] = []  # when the first candidate began
+
     def swept(done: int, total: int) -> None:
         if progress is not None:
             progress(f"variant {variant}: novelty sweep", done, total)
+        if estimate is None or not total:
+            return
+        if done == 0:
+            first_trial.append(time.perf_counter())
+        elif first_trial and done == min(TIMED_TRIALS, total):
+            estimate(SweepEstimate(variant, total, done, (time.perf_counter() - first_trial[0]) / done, quick))
 
     swept(0, 0)
     found = sweep(scenario, variant=variant, stop_at_first=quick, progress=swept)
@@ -174,13 +240,14 @@ def check_scenario(
     variants: Sequence[int] = (0,),
     quick: bool = False,
     progress: ProgressCallback | None = None,
+    estimate: EstimateCallback | None = None,
 ) -> CheckReport:
     """Check every variant of ``variants`` in turn (see :func:`check_variant`)."""
     return CheckReport(
         scenario=scenario.name,
-        variants=[check_variant(scenario, ref, v, quick=quick, progress=progress) for v in variants],
+        variants=[check_variant(scenario, ref, v, quick=quick, progress=progress, estimate=estimate) for v in variants],
         quick=quick,
     )
 
 
-__all__ = ["PROPERTIES", "CheckReport", "VariantCheck", "check_scenario", "check_variant", "judge"]
+__all__ = ["PROPERTIES", "TIMED_TRIALS", "TYPICAL_SECONDS_PER_TRIAL", "CheckReport", "SweepEstimate", "VariantCheck", "check_scenario", "check_variant", "judge"]

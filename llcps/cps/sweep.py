@@ -79,7 +79,8 @@ def sweep(
         scenario: the scenario (its novelty condition is swept).
         variant: the scene variant (0: the canonical scene).
         stop_at_first: stop at the first resolving candidate.
-        progress: called as ``progress(done, total)`` after every candidate.
+        progress: called as ``progress(done, total)`` once the candidates are known (done 0)
+            and after every candidate.
     """
     config = SolveConfig(scenario=scenario.name, variant=variant)
     found = Sweep(scenario=scenario.name)
@@ -100,6 +101,8 @@ def sweep(
                 failed=executor.controller_call(failure.step), entities=executor.kinds, grid=config.candidate_grid(scenario)
             )
             found.candidates = len(candidates)
+            if progress is not None:
+                progress(0, len(candidates))
             for index, spec in enumerate(candidates):
                 trial, _ = executor.execute(spec, source="exploration", snapshot_id=failure.snapshot, start=failure.snapshot)
                 found.tried += 1

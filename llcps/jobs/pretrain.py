@@ -71,6 +71,8 @@ def pretrain(
             summary.branch,
             names,
             model_seed,
-            progress=lambda name, done, total: report(f"fitting world model {name}", done, total),
+            progress=lambda name, done, total: report(
+                "fitting world models" if done == total else f"fitting world model {name}", done, total
+            ),
         )
     return PretrainResult(summary=summary, models=tuple(fitted), skipped=earlier is not None)

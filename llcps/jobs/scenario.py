@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
 from llcps.jobs._common import Progress
 
 if TYPE_CHECKING:
-    from llcps.cps.check import CheckReport
+    from llcps.cps.check import CheckReport, SweepEstimate
 
 
 @dataclass(frozen=True)
@@ -107,13 +107,23 @@ def render_scenario(
     return RenderResult(scenario=scenario.name, variant=variant or 0, files=tuple(written))
 
 
-def check_scenario(*, name: str, variants: Sequence[int] = (0,), quick: bool = False, progress: Progress | None = None) -> CheckReport:
+def check_scenario(
+    *,
+    name: str,
+    variants: Sequence[int] = (0,),
+    quick: bool = False,
+    progress: Progress | None = None,
+    estimate: Callable[[SweepEstimate], None] | None = None,
+) -> CheckReport:
     """Check, in physics, the properties every scenario must have on each of ``variants``
-    (``quick``: stop each sweep at the first resolving candidate). Nothing is stored."""
+    (``quick``: stop each sweep at the first resolving candidate). Nothing is stored.
+
+    ``estimate`` hears how long each variant's sweep may take, once its first trials are timed.
+    """
     from llcps.scenarios import get_scenario
 
     ref = scenario_ref(name)
     scenario = get_scenario(ref)
     from llcps.cps.check import check_scenario as check  # the simulator loads only here
 
-    return check(scenario, ref, variants=variants, quick=quick, progress=progress)
+    return check(scenario, ref, variants=variants, quick=quick, progress=progress, estimate=estimate)
