@@ -130,9 +130,9 @@ def show(report: "ModelInspection") -> None:
             goal_rows,
         )
     if report.ranking_note is not None:
-        message(f"no candidates ranked: {report.ranking_note}")
+        notice(f"no candidates ranked: {report.ranking_note}")
         if report.ranking_hint:
-            message(report.ranking_hint)
+            notice(report.ranking_hint)
     if report.failure is None:
         return
     failure = report.failure
