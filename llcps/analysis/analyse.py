@@ -16,12 +16,12 @@ from typing import Any, Mapping
 from llcps.analysis.cumulative import CumulativePoint, cumulative_exploration
 from llcps.analysis.figure2 import Figure2Row, Reduction, figure2_table, our_cells, reduction_summary
 from llcps.analysis.paper import PAPER_CAPTION_FRACTION_REDUCED, paper_cells
-from llcps.analysis.results import ResultsTable
+from llcps.analysis.results import ResultsTable, group_rows
 from llcps.analysis.stats import ALPHA, DEFAULT_RESAMPLES, adjust
 from llcps.analysis.survival import SurvivalComparison, SurvivalCurve, survival_curves, survival_table
 from llcps.analysis.versus_random import RandomComparison, best_versus_random, random_comparison
 from llcps.errors import LlcpsError
-from llcps.experiments.design import SCENARIO_SEQUENCE, condition_rank
+from llcps.experiments.design import condition_rank, scenario_rank
 from llcps.experiments.presets import measure_rank, model_rank
 from llcps.experiments.rows import check_metric
 
@@ -77,7 +77,7 @@ def per_variant(table: ResultsTable, metric: str) -> tuple[VariantResult, ...]:
     )
     by_key = {(r.scenario, r.variant, r.cell): r for r in table}
     out = []
-    for scenario in [s for s in SCENARIO_SEQUENCE if s in table.unique("scenario")]:
+    for scenario in sorted(table.unique("scenario"), key=scenario_rank):
         for variant in variants:
             rows = [by_key.get((scenario, variant, c)) for c in cells]
             seed = next((r.seed for r in rows if r is not None), None)
@@ -95,6 +95,24 @@ def per_variant(table: ResultsTable, metric: str) -> tuple[VariantResult, ...]:
 
 
 
+def solve_order(table: ResultsTable) -> list[str]:
+    """The table's scenarios in the order its sequences solved them.
+
+    Under ``update`` one branch holds a sequence's episodes in order (episode ids grow);
+    the order most sequences show wins. Without update rows (or episode ids), the
+    paper's scenarios first, then the rest by name.
+    """
+    ranked = sorted(table.unique("scenario"), key=scenario_rank)
+    orders: dict[tuple[str, ...], int] = {}
+    for rows in group_rows((r for r in table if r.condition == "update" and r.episode_id is not None), lambda r: r.sequence).values():
+        key = tuple(r.scenario for r in sorted(rows, key=lambda r: r.episode_id or 0))
+        orders[key] = orders.get(key, 0) + 1
+    if orders:
+        best = max(orders.items(), key=lambda kv: (kv[1], len(kv[0])))[0]
+        return list(best) + [s for s in ranked if s not in best]
+    return ranked
+
+
 def _overview(table: ResultsTable) -> dict[str, Any]:
     complete = table.complete_sequences()
     sequences = {r.sequence for r in table}
@@ -103,6 +121,7 @@ def _overview(table: ResultsTable) -> dict[str, Any]:
     variants = sorted(table.unique("variant"))
     return {
         "variants": variants,
+        "scenarios": solve_order(table),
         "rows": len(table),
         "presets": list(table.unique("preset")),
         "models": sorted(table.unique("model"), key=model_rank),
@@ -207,4 +226,4 @@ def report_json(
     return analysis_json(analyse(table, metric=metric, resamples=resamples, seed=seed))
 
 
-__all__ = ["Analysis", "VariantResult", "analyse", "analysis_json", "per_variant", "report_json"]
+__all__ = ["Analysis", "VariantResult", "analyse", "analysis_json", "per_variant", "report_json", "solve_order"]

@@ -22,7 +22,7 @@ from llcps.analysis.stats import DEFAULT_RESAMPLES
 from llcps.analysis.survival import SurvivalComparison
 from llcps.analysis.versus_random import RandomComparison
 from llcps.errors import LlcpsError
-from llcps.experiments.design import SCENARIO_SEQUENCE
+from llcps.experiments.design import scenario_rank
 from llcps.report import artifacts, plots
 from llcps.report.html import render_html
 from llcps.report.markdown import render_markdown
@@ -153,7 +153,7 @@ def build_report(
                 plots=pngs,
                 films=film_paths,
                 provenance=environments,
-                unfilmed=[s for s in SCENARIO_SEQUENCE if s in table.unique("scenario") and s not in film_paths],
+                unfilmed=[s for s in sorted(table.unique("scenario"), key=scenario_rank) if s not in film_paths],
             ),
             encoding="utf-8",
         )

@@ -7,7 +7,6 @@ from typing import Mapping, Sequence
 
 from llcps.analysis.analyse import Analysis
 from llcps.analysis.versus_random import BASELINE_MODEL, best_versus_random
-from llcps.experiments.design import SCENARIO_SEQUENCE
 from llcps.report.tables import (
     figure2_lines,
     figure2_long_lines,
@@ -60,7 +59,7 @@ def render_markdown(
             "",
             "## Every cell, every scenario",
             "",
-            f"{SCENARIO_SEQUENCE[0]} is a control: both conditions start it from the pretraining set.",
+            f"{(analysis.overview.get('scenarios') or ['the first scenario'])[0]} is a control: both conditions start it from the pretraining set.",
             "",
             *figure2_long_lines(analysis.figure2),
             "",

@@ -27,7 +27,7 @@ from llcps.analysis.paper import FIGURE2_SCENARIOS, PAPER_FIGURE2
 from llcps.analysis.results import ResultsTable
 from llcps.analysis.stats import ALPHA
 from llcps.analysis.survival import SurvivalCurve
-from llcps.experiments.design import SCENARIO_SEQUENCE, cell_title, condition_rank
+from llcps.experiments.design import cell_title, condition_rank, scenario_rank
 from llcps.experiments.presets import measure_rank, model_rank
 from llcps.report.formatting import format_pct
 
@@ -37,7 +37,7 @@ STAR_NOTE = (
     "red: less exploration with updates, blue: more"
 )
 #: Colours of the two conditions, used by every plot.
-CONDITION_COLORS = {"update": "#1f77b4", "reset": "#ff7f0e"}
+CONDITION_COLORS = {"update": "#1f77b4", "reset": "#ff7f0e", "others": "#2ca02c"}
 #: Heatmap colours span update/reset ratios from 1/8 to 8 (log2 from -3 to 3).
 LOG2_RATIO_LIMIT = 3.0
 FORMATS: tuple[str, ...] = ("png", "svg")
@@ -110,7 +110,7 @@ def figure2_heatmap(rows: Iterable[Figure2Row], stem: str | Path, *, with_paper:
     """
     shown = [r for r in rows if r.in_figure2]
     pairs = sorted({(r.model, r.measure) for r in shown}, key=lambda k: (model_rank(k[0]), measure_rank(k[1])))
-    cols = sorted({(r.pretrain_size, r.scenario) for r in shown}, key=lambda k: (-k[0], SCENARIO_SEQUENCE.index(k[1])))
+    cols = sorted({(r.pretrain_size, r.scenario) for r in shown}, key=lambda k: (-k[0], scenario_rank(k[1])))
     if not pairs:
         pairs, cols = [("-", "-")], [(0, FIGURE2_SCENARIOS[0])]
     index = {(r.model, r.measure, r.pretrain_size, r.scenario): r for r in shown}
@@ -162,7 +162,7 @@ def exploration_distribution(
     (exploration trials only) a dashed line marks the cap an unsolved episode stops at.
     """
     cells = _cell_order((r.model, r.measure, r.pretrain_size) for r in table)
-    scenarios = [s for s in SCENARIO_SEQUENCE if any(r.scenario == s for r in table)] or list(SCENARIO_SEQUENCE[:1])
+    scenarios = sorted(table.unique("scenario"), key=scenario_rank) or ["-"]
     conditions = sorted({r.condition for r in table}, key=condition_rank) or ["update"]
     values: dict[tuple[str, str, int, str, str], list[float]] = {}
     for r in table:
@@ -236,7 +236,8 @@ def cumulative_plot(
     fig = Figure(figsize=(3.2 * len(sizes) + 0.8, height))
     axes = fig.subplots(len(pairs), len(sizes), sharex=True, sharey=True, squeeze=False)  # one scale: panels compare
     fig.subplots_adjust(hspace=0.45, wspace=0.25, top=1 - 0.45 / height, bottom=0.35 / height)
-    x = np.arange(len(SCENARIO_SEQUENCE))
+    order = sorted({p.scenario for p in points}, key=scenario_rank)
+    x = np.arange(len(order))
     lines: dict[tuple[str, str, int, str], dict[str, CumulativePoint]] = {}
     for p in points:
         lines.setdefault((p.model, p.measure, p.pretrain_size, p.condition), {})[p.scenario] = p
@@ -247,7 +248,7 @@ def cumulative_plot(
                 line = lines.get((model, measure, size, condition))
                 if not line:
                     continue
-                pts = [line.get(s) for s in SCENARIO_SEQUENCE]
+                pts = [line.get(s) for s in order]
                 mean = np.array([p.mean if p else math.nan for p in pts])
                 low = np.array([p.ci_low if p else math.nan for p in pts])
                 high = np.array([p.ci_high if p else math.nan for p in pts])
@@ -260,7 +261,7 @@ def cumulative_plot(
             if (i, j) == (0, 0) and ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=7, loc="upper left")
     for ax in axes[-1]:
-        ax.set_xticks(x, [s.replace("scenario", "S") for s in SCENARIO_SEQUENCE])
+        ax.set_xticks(x, [s.replace("scenario", "S") for s in order])
     for ax in axes[:, 0]:
         ax.set_ylabel(f"cumulative\n{metric.replace('_', ' ')}", fontsize=7)
     fig.suptitle(
@@ -313,6 +314,5 @@ def survival_plot(curves: Sequence[SurvivalCurve], stem: str | Path, *, scenario
 
 def survival_plots(curves: Sequence[SurvivalCurve], directory: str | Path) -> dict[str, tuple[Path, ...]]:
     """:func:`survival_plot` for every scenario of ``curves``, as ``survival_<scenario>`` in ``directory``."""
-    scenarios = [s for s in SCENARIO_SEQUENCE if any(c.scenario == s for c in curves)]
-    scenarios += sorted({c.scenario for c in curves} - set(scenarios))
+    scenarios = sorted({c.scenario for c in curves}, key=scenario_rank)
     return {s: survival_plot(curves, Path(directory) / f"survival_{s}", scenario=s) for s in scenarios}
