@@ -14,6 +14,13 @@ from dataclasses import asdict, dataclass
 from typing import Any, Mapping
 
 from llcps.analysis.cumulative import CumulativePoint, cumulative_exploration
+from llcps.analysis.generalization import (
+    HEADLINE_RATIO,
+    FamilyResult,
+    GeneralizationSummary,
+    family_results,
+    generalization_summary,
+)
 from llcps.analysis.figure2 import Figure2Row, Reduction, figure2_table, our_cells, reduction_summary
 from llcps.analysis.paper import PAPER_CAPTION_FRACTION_REDUCED, paper_cells
 from llcps.analysis.results import ResultsTable, group_rows
@@ -59,6 +66,11 @@ class Analysis:
     curves: tuple[SurvivalCurve, ...] = ()
     #: Per scene variant and scenario, each cell's result (only when the table spans variants).
     per_variant: tuple[VariantResult, ...] = ()
+    #: Leave one family out: each ordering against the random order per held-out family
+    #: (Holm across each ordering's families, apart from the correction above).
+    generalization: tuple[FamilyResult, ...] = ()
+    #: Per ordering over every family: geometric mean of the median ratios, families > 1.
+    generalization_overall: tuple[GeneralizationSummary, ...] = ()
 
     @property
     def comparisons(self) -> int:
@@ -149,6 +161,7 @@ def analyse(
         raise LlcpsError(f"{resamples} bootstrap resamples are too few for a 95% interval", hint="use 1000 or more")
     if len(table) == 0:
         raise LlcpsError("the results table is empty: nothing to report", hint="run `llcps experiment run` first")
+    families = family_results(table, metric=metric)
     rows, survival, random = adjust(
         [
             figure2_table(table, metric=metric, resamples=resamples, seed=seed),
@@ -169,6 +182,8 @@ def analyse(
         survival=survival,
         curves=survival_curves(table),
         per_variant=per_variant(table, metric),
+        generalization=families,
+        generalization_overall=generalization_summary(families),
     )
 
 
@@ -211,6 +226,12 @@ def analysis_json(analysis: Analysis) -> dict[str, Any]:
             "best_versus_random": [asdict(r) for r in best_versus_random(analysis.random)],
             "survival": [asdict(r) for r in analysis.survival],
             "kaplan_meier": [asdict(c) for c in analysis.curves],
+            "generalization": {
+                "headline_ratio": HEADLINE_RATIO,
+                "correction": "holm across the families of each ordering",
+                "families": [asdict(r) for r in analysis.generalization],
+                "overall": [asdict(r) for r in analysis.generalization_overall],
+            },
             "per_variant": [
                 {**asdict(v), "results": {k: None if r is None else {"value": r[0], "solved": r[1]} for k, r in v.results.items()}}
                 for v in analysis.per_variant

@@ -328,7 +328,9 @@ def show_results(analysis: dict[str, Any]) -> None:
     random order when they hold it (a reset-only preset such as vs_random has only that)."""
     if analysis.get("figure2"):
         show_figure2(analysis)
-    if analysis.get("random_comparison"):
+    if (analysis.get("generalization") or {}).get("families"):
+        show_generalization(analysis)
+    elif analysis.get("random_comparison"):
         show_random(analysis)
     if not analysis.get("figure2") and not analysis.get("random_comparison"):
         message("no update/reset pairs and no random-order results to compare: see the report's tables")
@@ -355,6 +357,51 @@ def show_random(analysis: dict[str, Any]) -> None:
                 _p(r["p_holm"]),
             )
             for r in rows
+        ],
+    )
+
+
+def _ratio(value: Any) -> str:
+    if value is None:
+        return "n/a"  # JSON null: infinite or undefined
+    return f"{value:.2f}"
+
+
+def show_generalization(analysis: dict[str, Any]) -> None:
+    """Leave one family out: per held-out family, each ordering against the random order, and overall."""
+    data = analysis["generalization"]
+    print_table(
+        "leave one family out: median exploration trials per held-out family, ordering vs random order "
+        "(ratio > 1: the ordering explored more)",
+        ("family", "ordering", "n", "median", "median random", "median of ratios", "ratio of medians", "Wilcoxon p", "Holm p", "unsolved", "log-rank p"),
+        [
+            (
+                r["family"],
+                f"{r['model']} / {r['measure']} / {r['condition']}" + (" (default)" if r["default"] else ""),
+                r["n"],
+                _num(r["median_model"]),
+                _num(r["median_random"]),
+                _ratio(r["median_ratio"]),
+                _ratio(r["ratio_of_medians"]),
+                _p(r["p_value"]),
+                _p(r["p_holm"]),
+                f"{r['unsolved_model']}/{r['unsolved_random']}",
+                "-" if r["logrank_p"] is None else _p(r["logrank_p"]),
+            )
+            for r in data["families"]
+        ],
+    )
+    print_table(
+        f"over every family (geometric mean of the {data['headline_ratio']})",
+        ("ordering", "families", "geometric mean ratio", "families with ratio > 1"),
+        [
+            (
+                f"{r['model']} / {r['measure']} / {r['condition']}" + (" (default)" if r["default"] else ""),
+                r["families"],
+                _ratio(r["geomean_ratio"]),
+                r["worse_than_random"],
+            )
+            for r in data["overall"]
         ],
     )
 

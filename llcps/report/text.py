@@ -154,6 +154,7 @@ def plot_caption(name: str, metric: str) -> str:
         "figure2": "Figure 2 as a heatmap, ours beside the paper's",
         "distribution": f"{metric} per cell and condition",
         "cumulative": "cumulative exploration over the scenario sequence",
+        "generalization": "per held-out family: trials of each ordering over the random order's (log axis)",
     }
     if name.startswith("survival_"):
         return f"Kaplan–Meier curves of trials to resolution, {name.removeprefix('survival_')}"
