@@ -205,3 +205,18 @@ def test_a_rerun_skips_every_stored_task(tiny: tuple[Store, Path, object]) -> No
     store = tiny[0]
     again = run_experiment_job(store=store, preset=TINY, variants=range(0, 2), workers=1, out_dir=tiny[1] / "again")
     assert again.summary.skipped == again.summary.tasks and again.summary.done == 0
+
+
+def test_with_others_solves_the_other_families_first_and_a_new_list_is_refused(tiny: tuple[Store, Path, object]) -> None:
+    store, out, _ = tiny
+    result = run_experiment_job(store=store, preset=TINY, variants=range(0, 1), with_others=True, workers=1, out_dir=out / "others")
+    assert result.summary.status == "ok"
+    branch = f"exp-generalization-{DEFAULT[0]}-{DEFAULT[1]}-p8-others-s0-scenario4"
+    assert [e.scenario for e in sorted(store.list_episodes(branch=branch), key=lambda e: e.id)] == ["scenario1", "scenario4"]
+    rows = [r for r in table_from_episodes(store.list_episodes()).table if r.condition == "others"]
+    assert sorted((r.scenario, r.model) for r in rows) == sorted((f, m) for f in ("scenario1", "scenario4") for m in (DEFAULT[0], "random"))
+    families = result.analysis["generalization"]["families"]  # type: ignore[index]
+    assert {(r["family"], r["condition"]) for r in families} >= {("scenario1", "others"), ("scenario4", "others")}
+    # The same branch names over another list would pass for its results: refused before anything runs.
+    with pytest.raises(LlcpsError, match="holds episodes of scenario4, scenario1, not of scenario1 as this run asks"):
+        run_experiment_job(store=store, preset=TINY, scenarios=["scenario1"], variants=range(0, 1), with_others=True, out_dir=out / "x")
