@@ -316,6 +316,8 @@ class Workbench:
         *,
         seeds: int | Iterable[int] | None = None,
         variants: range | None = None,
+        scenarios: Iterable[str] | None = None,
+        with_others: bool = False,
         workers: int = 1,
         out_dir: str | Path | None = None,
         html: bool = False,
@@ -324,11 +326,22 @@ class Workbench:
         """``llcps experiment run``: every missing sequence of a grid, then its report in ``out_dir``.
 
         ``variants`` (e.g. ``range(100, 110)``) takes the place of ``seeds``: seed N solves scene variant N.
+        ``scenarios`` (names, aliases or .toml paths) replaces the preset's list; ``with_others``
+        solves each held-out scenario after the others (``--with-others``).
         """
         from llcps.jobs.experiment import run_experiment_job  # the runner, scipy and matplotlib load here
 
         return run_experiment_job(
-            store=self.store, preset=preset, seeds=seeds, variants=variants, workers=workers, out_dir=out_dir, html=html, progress=progress
+            store=self.store,
+            preset=preset,
+            seeds=seeds,
+            variants=variants,
+            scenarios=scenarios,
+            with_others=with_others,
+            workers=workers,
+            out_dir=out_dir,
+            html=html,
+            progress=progress,
         ).summary
 
     def experiment_report(

@@ -112,9 +112,12 @@ SYMMETRIC_PREDICATES: frozenset[str] = frozenset({"touching"})
 #: Every fluent predicate perception reports (see :mod:`llcps.sim.perception`).
 PREDICATES: tuple[str, ...] = ("visible", "reachable", "touching", "on", "in", "holding", "near")
 
+#: Kinds of body perception types (:func:`llcps.sim.perception.scene_bodies`): the
+#: fixture the scene stands on, the ground beneath it, and any other static scenery.
+SUPPORT_KIND, GROUND_KIND, FIXTURE_KIND = "table", "floor", "fixture"
 #: What a body a fluent mentions is: an entity (object or container) or a fixture
-#: (the table, the floor, or another piece of static scenery such as a wall).
-BODY_KINDS: tuple[str, ...] = ("object", "container", "table", "floor", "fixture")
+#: (the support, the ground, or another piece of static scenery such as a wall).
+BODY_KINDS: tuple[str, ...] = ("object", "container", SUPPORT_KIND, GROUND_KIND, FIXTURE_KIND)
 
 #: How a trial's symbolic change came to be known (``unknown``: it could not be).
 CHANGE_SOURCES: tuple[str, ...] = ("recorded", "replayed", "unknown")

@@ -126,7 +126,7 @@ def test_renamed_spellings_are_rewritten_with_a_warning(capsys: pytest.CaptureFi
 
 def _small_results(path: Path) -> Path:
     """Two seeds of one cell, update and reset, written as a results CSV."""
-    from llcps.experiments.design import SCENARIO_SEQUENCE, Cell, Sequence
+    from llcps.experiments.design import PAPER_SCENARIOS, Cell, Sequence
     from llcps.analysis.results import ResultsTable
     from llcps.experiments.rows import ResultRow
 
@@ -134,7 +134,7 @@ def _small_results(path: Path) -> Path:
     for seed in (0, 1):
         for condition in ("update", "reset"):
             seq = Sequence("smoke", Cell("nb", "most-changes", 4, condition), seed)
-            for i, scenario in enumerate(SCENARIO_SEQUENCE):
+            for i, scenario in enumerate(PAPER_SCENARIOS):
                 trials = 3 + i + seed + (condition == "reset")
                 rows.append(
                     ResultRow("smoke", "nb", "most-changes", 4, condition, seed, scenario, trials < 5, trials,

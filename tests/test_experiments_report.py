@@ -11,7 +11,7 @@ import pytest
 
 from llcps.errors import LlcpsError
 from llcps.experiments import design, presets
-from llcps.experiments.design import SCENARIO_SEQUENCE, Cell, Sequence, parse_branch
+from llcps.experiments.design import PAPER_SCENARIOS, Cell, Sequence, parse_branch
 from llcps.experiments.presets import PRESETS, Preset
 from llcps.analysis.analyse import analyse, report_json
 from llcps.report.build import build_report
@@ -29,6 +29,7 @@ EXPECTED_SIZES = {
     "lifelong": (2, 20),
     "models": (5, 5),
     "random": (1, 20),
+    "generalization": (2, 10),
 }
 
 
@@ -55,7 +56,7 @@ def test_branch_names_are_valid_unique_and_parse_back(name: str) -> None:
     for seq in sequences:
         assert design.is_valid_branch_name(seq.branch_name) and "/" not in seq.branch_name
         assert parse_branch(seq.branch_name) == design.ParsedBranch(seq, None)
-        for scenario in SCENARIO_SEQUENCE:
+        for scenario in PAPER_SCENARIOS:
             branch = seq.episode_branch(scenario)
             assert design.is_valid_branch_name(branch)
             parsed = parse_branch(branch)
@@ -78,7 +79,7 @@ def test_pretraining_branch_is_shared_by_models_and_conditions() -> None:
 @pytest.mark.parametrize(
     "name",
     ["main", "exp-paper", "exp-paper-nb-most-changes-p200-maybe-s3", "exp-paper-nb-most-changes-p200-update-s03",
-     "exp-paper-nb-most-changes-p200-update-s3-scenario2", "exp-paper-nb-most-changes-p200-reset-s3-scenario9",
+     "exp-paper-nb-most-changes-p200-update-s3-scenario2", "exp-paper-nb-most-changes-p200-reset-s3-9lives",
      "exp-paper-pretrain-p200-s3", "exp-paper-nb--p200-update-s3"],
 )  # fmt: skip
 def test_other_branch_names_do_not_parse(name: str) -> None:
@@ -135,7 +136,7 @@ def synthetic_table(seeds: int = 4, rng_seed: int = 0) -> ResultsTable:
     rng = np.random.default_rng(rng_seed)
     rows = []
     for seq in TEST_PRESET.sequences(seeds):
-        for i, scenario in enumerate(SCENARIO_SEQUENCE):
+        for i, scenario in enumerate(PAPER_SCENARIOS):
             if i == 0:  # the control: identical under both conditions
                 trials = 10 + seq.seed
             else:
@@ -202,8 +203,8 @@ def _summary(seq: Sequence, scenario: str, trials: int, episode_id: int, **extra
 
 def test_table_from_episodes_parses_branches_and_keeps_the_latest() -> None:
     update, reset = PRESETS["smoke"].sequences(1)
-    episodes = [_summary(update, s, 10 + i, i + 1) for i, s in enumerate(SCENARIO_SEQUENCE)]
-    episodes += [_summary(reset, s, 20 + i, 10 + i) for i, s in enumerate(SCENARIO_SEQUENCE)]
+    episodes = [_summary(update, s, 10 + i, i + 1) for i, s in enumerate(PAPER_SCENARIOS)]
+    episodes += [_summary(reset, s, 20 + i, 10 + i) for i, s in enumerate(PAPER_SCENARIOS)]
     episodes += [
         _summary(reset, "scenario2", 99, 5),  # an older attempt at the same scenario
         _summary(update, "scenario3", 7, 50, status="running"),  # cut off mid-episode
@@ -233,7 +234,7 @@ def test_table_from_a_real_store(tmp_path) -> None:  # noqa: ANN001
         update, reset = PRESETS["smoke"].sequences(1)
         expected = {}
         for seq in (update, reset):
-            for i, scenario in enumerate(SCENARIO_SEQUENCE):
+            for i, scenario in enumerate(PAPER_SCENARIOS):
                 branch = seq.episode_branch(scenario)
                 if branch not in {b.name for b in store.list_branches()}:
                     store.create_branch(branch, from_branch="main", at="pretrain")
@@ -278,7 +279,7 @@ def test_build_report_writes_every_file(tmp_path) -> None:  # noqa: ANN001
     paths = build_report(table, tmp_path / "report", resamples=1000, seed=0)
     for path in paths.all():
         assert path.is_file() and path.stat().st_size > 0, path
-    scenarios = {f"survival_{s}" for s in SCENARIO_SEQUENCE}
+    scenarios = {f"survival_{s}" for s in PAPER_SCENARIOS}
     assert set(paths.plots) == {"figure2", "distribution", "cumulative", *scenarios}
     assert paths.survival_csv is not None and all(f"plots/{name}.png" in paths.report_md.read_text() for name in scenarios)
     assert {p.suffix for ps in paths.plots.values() for p in ps} == {".png", ".svg"}
@@ -360,7 +361,7 @@ def test_a_report_over_scene_variants_names_them_and_tabulates_each() -> None:
     assert data["overview"]["variants"] == [0, 1, 2]
     cells = {c.label for c in TEST_PRESET.cells()}
     assert "random order / p200 / reset" in cells  # the random order ignores the measure
-    assert len(data["per_variant"]) == 3 * len(SCENARIO_SEQUENCE)
+    assert len(data["per_variant"]) == 3 * len(PAPER_SCENARIOS)
     for v in data["per_variant"]:
         assert v["seed"] == v["variant"] and set(v["results"]) == cells
         row = table.filter(scenario=v["scenario"], seed=v["seed"], model="nb", condition="update").rows[0]
@@ -377,7 +378,7 @@ def synthetic_analysis():  # noqa: ANN201
 @pytest.mark.parametrize("holm_significant", [0, 1, 2])
 def test_the_summary_counts_cells_surviving_holm_with_a_verb_that_agrees(synthetic_analysis, holm_significant: int) -> None:  # noqa: ANN001
     analysis = synthetic_analysis
-    rows = [r for r in analysis.figure2 if r.scenario != SCENARIO_SEQUENCE[0]]
+    rows = [r for r in analysis.figure2 if r.scenario != PAPER_SCENARIOS[0]]
     assert len(rows) > holm_significant
     forced = {id(r) for r in rows[:holm_significant]}
     analysis = dataclasses.replace(

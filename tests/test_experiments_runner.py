@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 from llcps.cli.main import app
 from llcps.domain import ACTIONS
 from llcps.errors import LlcpsError, StoreError
-from llcps.experiments.design import SCENARIO_SEQUENCE, Cell, Sequence, pretrain_branch_name
+from llcps.experiments.design import PAPER_SCENARIOS, Cell, Sequence, pretrain_branch_name
 from llcps.experiments.presets import PRESETS
 from llcps.analysis.results import ResultsTable
 from llcps.experiments.rows import COLUMNS
@@ -193,7 +193,7 @@ def test_smoke_grid_runs_end_to_end_into_a_well_formed_table(reference: tuple[St
     assert summary.status == "ok" and summary.done == summary.tasks == SMOKE.default_seeds * (1 + len(SMOKE.cells()))
     table = results_table(store, "smoke")
     sequences = set(SMOKE.sequences())
-    assert len(table) == len(sequences) * len(SCENARIO_SEQUENCE)
+    assert len(table) == len(sequences) * len(PAPER_SCENARIOS)
     assert table.complete_sequences() == sequences and table.missing(SMOKE.sequences()) == ()
     assert ResultsTable.read_csv(table.write_csv(tmp_path / "t.csv")) == table
     for row in table:
@@ -206,7 +206,7 @@ def test_smoke_grid_runs_end_to_end_into_a_well_formed_table(reference: tuple[St
         assert all(t.snapshot_id is not None for t in pretraining)  # replayable
     for seq in SMOKE.sequences():
         fork = max(t.id for t in store.visible_trials(seq.pretrain_branch))
-        for scenario in SCENARIO_SEQUENCE:
+        for scenario in PAPER_SCENARIOS:
             info = store.resolve_branch(seq.episode_branch(scenario))
             assert info.parent == seq.pretrain_branch and info.fork_point == fork
             (episode,) = [e for e in store.list_episodes(branch=info.name) if e.scenario == scenario]
@@ -342,7 +342,7 @@ def test_kill_9_then_run_again_completes_without_duplicates(reference: tuple[Sto
         ours = store_signature(store)
         expected = {k: v for k, v in store_signature(ref_store).items() if k.endswith("-s0") or "-s0-" in k}
         assert ours == expected  # each branch once, with exactly the uninterrupted run's trials
-        assert len(store.list_episodes()) == 2 * len(SCENARIO_SEQUENCE)
+        assert len(store.list_episodes()) == 2 * len(PAPER_SCENARIOS)
 
 
 def test_rerun_skips_every_stored_task(reference: tuple[Store, Any]) -> None:
@@ -370,7 +370,7 @@ def test_report_rebuilds_from_a_directory_and_from_the_store(reference: tuple[St
     assert from_db.exit_code == 0, from_db.output
     data = json.loads(from_db.stdout)
     assert data["overview"]["rows"] == len(SMOKE.sequences()) * 3
-    assert {(r["scenario"], r["n_seeds"]) for r in data["figure2"]} == {(s, SMOKE.default_seeds) for s in SCENARIO_SEQUENCE}
+    assert {(r["scenario"], r["n_seeds"]) for r in data["figure2"]} == {(s, SMOKE.default_seeds) for s in PAPER_SCENARIOS}
     again = runner.invoke(app, ["experiment", "report", str(tmp_path / "a"), "--out", str(tmp_path / "b"), "--json"])
     assert again.exit_code == 0, again.output
     assert json.loads(again.stdout)["figure2"] == data["figure2"]
@@ -409,7 +409,7 @@ def test_report_takes_the_random_baseline_from_another_preset(reference: tuple[S
     data = json.loads(result.stdout)
     assert {r["model"] for r in data["random_comparison"]} == {"nb"}
     best = data["best_versus_random"]
-    assert sorted(r["scenario"] for r in best) == sorted(SCENARIO_SEQUENCE)
+    assert sorted(r["scenario"] for r in best) == sorted(PAPER_SCENARIOS)
     assert all(r["condition"] == "reset" and r["median_model"] < r["median_random"] for r in best)
     assert "The best model x measure per scenario" in (tmp_path / "c" / "report.md").read_text()
     missing = runner.invoke(app, ["experiment", "report", str(tmp_path / "a"), "--baseline-preset", "random"])
@@ -559,7 +559,7 @@ def test_variant_sequences_name_their_variant_and_parse_back() -> None:
     assert {(s.seed, s.variant) for s in sequences} == {(0, 0), (3, 3)}
     for seq in sequences:
         assert seq.branch_name.endswith("-s3-v3" if seq.seed == 3 else "-s0")
-        for scenario in SCENARIO_SEQUENCE:
+        for scenario in PAPER_SCENARIOS:
             assert parse_branch(seq.episode_branch(scenario)).sequence == seq
     # Variant 0 is the canonical scene: seed 0 of a variants run is seed 0 of a canonical run.
     assert SMOKE.sequences([0], variants=True) == SMOKE.sequences([0])
@@ -586,7 +586,7 @@ def test_a_variants_run_solves_each_seed_in_its_variant_and_reports_it(reference
     assert data["overview"]["variants"] == [1] and data["overview"]["rows"] == len(SMOKE.cells()) * 3
     with Store.open(str(db)) as store:
         for seq in SMOKE.sequences([1], variants=True):
-            for scenario in SCENARIO_SEQUENCE:
+            for scenario in PAPER_SCENARIOS:
                 (episode,) = [e for e in store.list_episodes(branch=seq.episode_branch(scenario)) if e.scenario == scenario]
                 assert episode.summary["variant"] == 1 and episode.seed == 1
         both = results_table(store, "smoke")
@@ -602,7 +602,7 @@ def test_a_variants_run_solves_each_seed_in_its_variant_and_reports_it(reference
     assert paired.exit_code == 0, paired.output
     report = json.loads(paired.stdout)
     assert report["overview"]["variants"] == [0, 1]
-    assert {(v["scenario"], v["variant"]) for v in report["per_variant"]} == {(s, v) for s in SCENARIO_SEQUENCE for v in (0, 1)}
+    assert {(v["scenario"], v["variant"]) for v in report["per_variant"]} == {(s, v) for s in PAPER_SCENARIOS for v in (0, 1)}
     text = (tmp_path / "p" / "report.md").read_text()
     assert "## Per scene variant" in text and "Scenes: variants 0-1" in text
     assert {r.variant for r in ResultsTable.read(tmp_path / "p" / "results.csv")} == {0, 1}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from llcps.analysis import cumulative, figure2, paper, stats, versus_random
-from llcps.experiments.design import SCENARIO_SEQUENCE, Sequence, Cell
+from llcps.experiments.design import PAPER_SCENARIOS, Sequence, Cell
 from llcps.analysis.results import ResultsTable
 from llcps.experiments.rows import ResultRow
 
@@ -214,7 +214,7 @@ def test_cumulative_exploration_sums_along_the_sequence() -> None:
     rows = [
         _row("nb", "most-changes", 4, "update", seed, scenario, trials)
         for seed, per_scenario in enumerate([(1, 2, 3), (3, 4, 5)])
-        for scenario, trials in zip(SCENARIO_SEQUENCE, per_scenario)
+        for scenario, trials in zip(PAPER_SCENARIOS, per_scenario)
     ]
     # An incomplete sequence must not count.
     rows.append(_row("nb", "most-changes", 4, "update", 7, "scenario1", 100))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from llcps.experiments.design import SCENARIO_SEQUENCE, Cell, Sequence
+from llcps.experiments.design import PAPER_SCENARIOS, Cell, Sequence
 from llcps.report.build import build_report
 from llcps.analysis.results import ResultsTable
 from llcps.experiments.rows import ResultRow
@@ -47,7 +47,7 @@ def paper_like_table(seeds: int = 3) -> ResultsTable:
             for condition in ("update", "reset"):
                 for seed in range(seeds):
                     seq = Sequence("paper", Cell(model, measure, 4, condition), seed)
-                    for i, scenario in enumerate(SCENARIO_SEQUENCE):
+                    for i, scenario in enumerate(PAPER_SCENARIOS):
                         trials = 12 + 3 * i + seed * (2 if condition == "update" else 3) + len(measure) % 5
                         rows.append(
                             ResultRow("paper", model, measure, 4, condition, seed, scenario, trials < 150, trials,

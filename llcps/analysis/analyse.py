@@ -14,14 +14,21 @@ from dataclasses import asdict, dataclass
 from typing import Any, Mapping
 
 from llcps.analysis.cumulative import CumulativePoint, cumulative_exploration
+from llcps.analysis.generalization import (
+    HEADLINE_RATIO,
+    FamilyResult,
+    GeneralizationSummary,
+    family_results,
+    generalization_summary,
+)
 from llcps.analysis.figure2 import Figure2Row, Reduction, figure2_table, our_cells, reduction_summary
 from llcps.analysis.paper import PAPER_CAPTION_FRACTION_REDUCED, paper_cells
-from llcps.analysis.results import ResultsTable
+from llcps.analysis.results import ResultsTable, group_rows
 from llcps.analysis.stats import ALPHA, DEFAULT_RESAMPLES, adjust
 from llcps.analysis.survival import SurvivalComparison, SurvivalCurve, survival_curves, survival_table
 from llcps.analysis.versus_random import RandomComparison, best_versus_random, random_comparison
 from llcps.errors import LlcpsError
-from llcps.experiments.design import SCENARIO_SEQUENCE, condition_rank
+from llcps.experiments.design import condition_rank, scenario_rank
 from llcps.experiments.presets import measure_rank, model_rank
 from llcps.experiments.rows import check_metric
 
@@ -59,6 +66,11 @@ class Analysis:
     curves: tuple[SurvivalCurve, ...] = ()
     #: Per scene variant and scenario, each cell's result (only when the table spans variants).
     per_variant: tuple[VariantResult, ...] = ()
+    #: Leave one family out: each ordering against the random order per held-out family
+    #: (Holm across each ordering's families, apart from the correction above).
+    generalization: tuple[FamilyResult, ...] = ()
+    #: Per ordering over every family: geometric mean of the median ratios, families > 1.
+    generalization_overall: tuple[GeneralizationSummary, ...] = ()
 
     @property
     def comparisons(self) -> int:
@@ -77,7 +89,7 @@ def per_variant(table: ResultsTable, metric: str) -> tuple[VariantResult, ...]:
     )
     by_key = {(r.scenario, r.variant, r.cell): r for r in table}
     out = []
-    for scenario in [s for s in SCENARIO_SEQUENCE if s in table.unique("scenario")]:
+    for scenario in sorted(table.unique("scenario"), key=scenario_rank):
         for variant in variants:
             rows = [by_key.get((scenario, variant, c)) for c in cells]
             seed = next((r.seed for r in rows if r is not None), None)
@@ -95,6 +107,24 @@ def per_variant(table: ResultsTable, metric: str) -> tuple[VariantResult, ...]:
 
 
 
+def solve_order(table: ResultsTable) -> list[str]:
+    """The table's scenarios in the order its sequences solved them.
+
+    Under ``update`` one branch holds a sequence's episodes in order (episode ids grow);
+    the order most sequences show wins. Without update rows (or episode ids), the
+    paper's scenarios first, then the rest by name.
+    """
+    ranked = sorted(table.unique("scenario"), key=scenario_rank)
+    orders: dict[tuple[str, ...], int] = {}
+    for rows in group_rows((r for r in table if r.condition == "update" and r.episode_id is not None), lambda r: r.sequence).values():
+        key = tuple(r.scenario for r in sorted(rows, key=lambda r: r.episode_id or 0))
+        orders[key] = orders.get(key, 0) + 1
+    if orders:
+        best = max(orders.items(), key=lambda kv: (kv[1], len(kv[0])))[0]
+        return list(best) + [s for s in ranked if s not in best]
+    return ranked
+
+
 def _overview(table: ResultsTable) -> dict[str, Any]:
     complete = table.complete_sequences()
     sequences = {r.sequence for r in table}
@@ -103,6 +133,7 @@ def _overview(table: ResultsTable) -> dict[str, Any]:
     variants = sorted(table.unique("variant"))
     return {
         "variants": variants,
+        "scenarios": solve_order(table),
         "rows": len(table),
         "presets": list(table.unique("preset")),
         "models": sorted(table.unique("model"), key=model_rank),
@@ -130,6 +161,7 @@ def analyse(
         raise LlcpsError(f"{resamples} bootstrap resamples are too few for a 95% interval", hint="use 1000 or more")
     if len(table) == 0:
         raise LlcpsError("the results table is empty: nothing to report", hint="run `llcps experiment run` first")
+    families = family_results(table, metric=metric)
     rows, survival, random = adjust(
         [
             figure2_table(table, metric=metric, resamples=resamples, seed=seed),
@@ -150,6 +182,8 @@ def analyse(
         survival=survival,
         curves=survival_curves(table),
         per_variant=per_variant(table, metric),
+        generalization=families,
+        generalization_overall=generalization_summary(families),
     )
 
 
@@ -192,6 +226,12 @@ def analysis_json(analysis: Analysis) -> dict[str, Any]:
             "best_versus_random": [asdict(r) for r in best_versus_random(analysis.random)],
             "survival": [asdict(r) for r in analysis.survival],
             "kaplan_meier": [asdict(c) for c in analysis.curves],
+            "generalization": {
+                "headline_ratio": HEADLINE_RATIO,
+                "correction": "holm across the families of each ordering",
+                "families": [asdict(r) for r in analysis.generalization],
+                "overall": [asdict(r) for r in analysis.generalization_overall],
+            },
             "per_variant": [
                 {**asdict(v), "results": {k: None if r is None else {"value": r[0], "solved": r[1]} for k, r in v.results.items()}}
                 for v in analysis.per_variant
@@ -207,4 +247,4 @@ def report_json(
     return analysis_json(analyse(table, metric=metric, resamples=resamples, seed=seed))
 
 
-__all__ = ["Analysis", "VariantResult", "analyse", "analysis_json", "per_variant", "report_json"]
+__all__ = ["Analysis", "VariantResult", "analyse", "analysis_json", "per_variant", "report_json", "solve_order"]

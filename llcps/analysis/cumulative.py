@@ -10,7 +10,7 @@ import numpy as np
 from llcps.analysis.figure2 import figure2_order
 from llcps.analysis.results import ResultsTable
 from llcps.analysis.stats import DEFAULT_RESAMPLES, bootstrap_mean_ci, cell_rng
-from llcps.experiments.design import SCENARIO_SEQUENCE, condition_rank
+from llcps.experiments.design import condition_rank, scenario_rank
 from llcps.experiments.rows import check_metric
 
 
@@ -43,19 +43,20 @@ def cumulative_exploration(
     check_metric(metric)
     complete = table.complete_sequences()
     per_cell: dict[tuple[str, str, int, str], dict[int, np.ndarray]] = {}
-    position = {s: i for i, s in enumerate(SCENARIO_SEQUENCE)}
+    order = sorted(table.unique("scenario"), key=scenario_rank)  # the paper's first, then by name
+    position = {s: i for i, s in enumerate(order)}
     for row in table:
         if row.sequence not in complete:
             continue
         key = (row.model, row.measure, row.pretrain_size, row.condition)
-        values = per_cell.setdefault(key, {}).setdefault(row.seed, np.zeros(len(SCENARIO_SEQUENCE)))
+        values = per_cell.setdefault(key, {}).setdefault(row.seed, np.zeros(len(order)))
         values[position[row.scenario]] = row.metric(metric)
     out: list[CumulativePoint] = []
     for key, seeds in sorted(
         per_cell.items(), key=lambda kv: (*figure2_order(*kv[0][:3], ""), condition_rank(kv[0][3]))
     ):
         matrix = np.cumsum(np.array([seeds[s] for s in sorted(seeds)]), axis=1)
-        for j, scenario in enumerate(SCENARIO_SEQUENCE):
+        for j, scenario in enumerate(order):
             column = matrix[:, j]
             low, high = bootstrap_mean_ci(
                 column, rng=cell_rng(seed, *key, scenario, metric, "cum"), resamples=resamples

@@ -19,7 +19,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, TypeVar
 import numpy as np
 
 from llcps.errors import LlcpsError
-from llcps.experiments.design import SCENARIO_SEQUENCE, Sequence, parse_branch
+from llcps.experiments.design import Sequence, parse_branch, scenario_rank
 from llcps.experiments.presets import PRESETS
 from llcps.experiments.rows import (
     COLUMNS,
@@ -88,14 +88,13 @@ class ResultsTable:
     """
 
     def __init__(self, rows: Iterable[ResultRow] = ()) -> None:
-        order = {s: i for i, s in enumerate(SCENARIO_SEQUENCE)}
         by_key: dict[tuple[Sequence, str], ResultRow] = {}
         for row in rows:
             if row.key in by_key:
                 raise LlcpsError(f"two results for {row.sequence.branch_name} {row.scenario}")
             by_key[row.key] = row
         self._rows: tuple[ResultRow, ...] = tuple(
-            sorted(by_key.values(), key=lambda r: (r.sequence, order.get(r.scenario, len(order)), r.scenario))
+            sorted(by_key.values(), key=lambda r: (r.sequence, scenario_rank(r.scenario)))
         )
 
     # -- collection protocol -------------------------------------------------
@@ -139,11 +138,17 @@ class ResultsTable:
 
     # -- completeness, for resumable runs ------------------------------------
     def complete_sequences(self) -> frozenset[Sequence]:
-        """Sequences with a row for every scenario of :data:`SCENARIO_SEQUENCE`."""
+        """Sequences with a row for every scenario their preset's rows hold.
+
+        The store does not record which scenarios a run asked for, so a preset's list
+        is every scenario any of its sequences solved in this table.
+        """
         seen: dict[Sequence, set[str]] = {}
+        per_preset: dict[str, set[str]] = {}
         for row in self._rows:
             seen.setdefault(row.sequence, set()).add(row.scenario)
-        return frozenset(s for s, done in seen.items() if done >= set(SCENARIO_SEQUENCE))
+            per_preset.setdefault(row.preset, set()).add(row.scenario)
+        return frozenset(s for s, done in seen.items() if done >= per_preset[s.preset])
 
     def missing(self, sequences: Iterable[Sequence]) -> tuple[Sequence, ...]:
         """The given sequences that are not complete yet, in the given order."""
@@ -256,8 +261,10 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
             skip("unfinished episode")
             continue
         seq, scenario = parsed.sequence, str(summary.get("scenario"))
-        if scenario not in SCENARIO_SEQUENCE or (parsed.scenario is not None and parsed.scenario != scenario):
-            skip("scenario does not match its branch")
+        if parsed.scenario is not None and parsed.scenario != scenario:
+            # Under ``others`` the held-out scenario's branch holds the other scenarios'
+            # episodes too: experience, not results.
+            skip("another scenario's episode before the held-out one" if seq.cell.condition == "others" else "scenario does not match its branch")
             continue
         if summary.get("model") != seq.cell.model or summary.get("measure") != seq.cell.measure:
             skip("model or measure does not match its branch")

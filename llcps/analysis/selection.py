@@ -12,19 +12,28 @@ from llcps.store import Store
 
 
 def results_table(
-    store: Store, preset: str, seeds: Iterable[int] | None = None, *, variants: bool = False
+    store: Store,
+    preset: str,
+    seeds: Iterable[int] | None = None,
+    *,
+    variants: bool = False,
+    scenarios: Iterable[str] | None = None,
 ) -> ResultsTable:
-    """The results of one preset (optionally some seeds) from the store's episodes.
+    """The results of one preset (optionally some seeds and scenarios) from the store's episodes.
 
     ``variants``: the sequences where seed N solved scene variant N; otherwise those on
     the canonical scenes (variant 0). Seed 0 of either is the same sequence.
     """
     wanted = None if seeds is None else set(seeds)
+    names = None if scenarios is None else set(scenarios)
     table = table_from_episodes(store.list_episodes()).table
     return ResultsTable(
         r
         for r in table
-        if r.preset == preset and (wanted is None or r.seed in wanted) and r.on_scenes(paired=variants)
+        if r.preset == preset
+        and (wanted is None or r.seed in wanted)
+        and (names is None or r.scenario in names)
+        and r.on_scenes(paired=variants)
     )
 
 

@@ -196,16 +196,29 @@ class SurvivalComparison:
     p_adjusted: float = math.nan
 
 
-def _logrank(u_t: np.ndarray, u_s: np.ndarray, r_t: np.ndarray, r_s: np.ndarray) -> tuple[float, str]:
-    if not (u_s.any() or r_s.any()):
-        return (math.nan, "no episode resolved under either condition")
-    if np.array_equal(u_t, r_t) and np.array_equal(u_s, r_s):
-        return (math.nan, "both conditions identical seed by seed")
+def logrank(a_t: np.ndarray, a_s: np.ndarray, b_t: np.ndarray, b_s: np.ndarray) -> tuple[float, str]:
+    """Two-sided log-rank p-value of two censored samples (times, resolved), with a reason when missing."""
+    a_s, b_s = np.asarray(a_s, dtype=bool), np.asarray(b_s, dtype=bool)
+    a_t, b_t = np.asarray(a_t, dtype=float), np.asarray(b_t, dtype=float)
+    if not (a_s.any() or b_s.any()):
+        return (math.nan, "no episode resolved in either sample")
+    if np.array_equal(a_t, b_t) and np.array_equal(a_s, b_s):
+        return (math.nan, "both samples identical")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        result = sps.logrank(_censored(u_t, u_s), _censored(r_t, r_s))
+        result = sps.logrank(_censored(a_t, a_s), _censored(b_t, b_s))
     p = float(result.pvalue)
     return (p, "") if math.isfinite(p) else (math.nan, "the log-rank statistic is undefined here")
+
+
+def _logrank(u_t: np.ndarray, u_s: np.ndarray, r_t: np.ndarray, r_s: np.ndarray) -> tuple[float, str]:
+    """:func:`logrank` of update against reset, its reasons in those terms."""
+    p, reason = logrank(u_t, u_s, r_t, r_s)
+    words = {
+        "no episode resolved in either sample": "no episode resolved under either condition",
+        "both samples identical": "both conditions identical seed by seed",
+    }
+    return p, words.get(reason, reason)
 
 
 def paired_rmst_ci(
@@ -291,6 +304,7 @@ __all__ = [
     "SurvivalCurve",
     "budget",
     "kaplan_meier",
+    "logrank",
     "paired_rmst_ci",
     "restricted_mean",
     "survival_curves",

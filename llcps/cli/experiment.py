@@ -66,6 +66,9 @@ _PRESET_HELP = "Grid to run: " + "; ".join(
         "llcps --db runs.db experiment run --preset paper --first-seed 20 --seeds 20   # another machine's share",
         "llcps --db runs.db experiment run --preset smoke --html --out-dir report/",
         "llcps --db runs.db experiment run --preset vs_random --variants 100:110   # seeds 100-109 on variants 100-109",
+        "llcps --db runs.db experiment run --preset generalization --variants 0:10   # leave one family out, every shipped scenario",
+        "llcps --db runs.db experiment run --preset generalization --scenarios scenario2,mine.toml --variants 0:5",
+        "llcps --db runs.db experiment run --preset lifelong --scenarios scenario1,scenario4",
     ),
 )
 def run_cli(
@@ -86,6 +89,24 @@ def run_cli(
         Optional[str],
         typer.Option("--variants", metavar="A:B", help=VARIANTS_HELP + " Takes the place of --seeds and --first-seed.", show_default=False),
     ] = None,
+    scenarios: Annotated[
+        Optional[str],
+        typer.Option(
+            "--scenarios",
+            metavar="A,B,...",
+            help="Scenarios each sequence solves, in order: names, aliases or .toml files (default: the preset's; "
+            "the paper's three for the paper's presets, every shipped scenario for generalization).",
+            show_default=False,
+        ),
+    ] = None,
+    with_others: Annotated[
+        bool,
+        typer.Option(
+            "--with-others",
+            help="Solve each scenario on its own branch after the other scenarios of the list (the preset's reset "
+            "becomes 'others'): the held-out family with experience of the rest.",
+        ),
+    ] = False,
     workers: Annotated[
         Optional[int],
         typer.Option("--workers", metavar="N", min=1, max=MAX_WORKERS, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
@@ -121,9 +142,13 @@ def run_cli(
 
     name = str(preset.value)  # type: ignore[attr-defined]
     scenes = None if variants is None else parse_range(variants)
+    chosen = None if scenarios is None else [s.strip() for s in scenarios.split(",") if s.strip()]
     target = check_output_dir(out_dir if out_dir is not None else default_out_dir(name), what="--out-dir")
-    # The seeds are checked before the store opens, so bad options create no store file.
-    run_seeds(get_preset(name), seeds=seeds, first_seed=first_seed, variants=scenes)
+    # The seeds and scenarios are checked before the store opens, so bad options create no store file.
+    grid = get_preset(name).with_scenarios(chosen)
+    if with_others:
+        grid.with_others()
+    run_seeds(grid, seeds=seeds, first_seed=first_seed, variants=scenes)
     try:
         with open_store(ctx, create=create) as store:
             with progress_display(f"experiment run {name}", "planning the tasks") as bar:
@@ -137,6 +162,8 @@ def run_cli(
                     seeds=seeds,
                     first_seed=first_seed,
                     variants=scenes,
+                    scenarios=chosen,
+                    with_others=with_others,
                     workers=workers if workers is not None else cpu_count(),
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
@@ -312,7 +339,9 @@ def show_results(analysis: dict[str, Any]) -> None:
     random order when they hold it (a reset-only preset such as vs_random has only that)."""
     if analysis.get("figure2"):
         show_figure2(analysis)
-    if analysis.get("random_comparison"):
+    if (analysis.get("generalization") or {}).get("families"):
+        show_generalization(analysis)
+    elif analysis.get("random_comparison"):
         show_random(analysis)
     if not analysis.get("figure2") and not analysis.get("random_comparison"):
         notice("no update/reset pairs and no random-order results to compare: see the report's tables")
@@ -339,6 +368,51 @@ def show_random(analysis: dict[str, Any]) -> None:
                 _p(r["p_holm"]),
             )
             for r in rows
+        ],
+    )
+
+
+def _ratio(value: Any) -> str:
+    if value is None:
+        return "n/a"  # JSON null: infinite or undefined
+    return f"{value:.2f}"
+
+
+def show_generalization(analysis: dict[str, Any]) -> None:
+    """Leave one family out: per held-out family, each ordering against the random order, and overall."""
+    data = analysis["generalization"]
+    print_table(
+        "leave one family out: median exploration trials per held-out family, ordering vs random order "
+        "(ratio > 1: the ordering explored more)",
+        ("family", "ordering", "n", "median", "median random", "median of ratios", "ratio of medians", "Wilcoxon p", "Holm p", "unsolved", "log-rank p"),
+        [
+            (
+                r["family"],
+                f"{r['model']} / {r['measure']} / {r['condition']}" + (" (default)" if r["default"] else ""),
+                r["n"],
+                _num(r["median_model"]),
+                _num(r["median_random"]),
+                _ratio(r["median_ratio"]),
+                _ratio(r["ratio_of_medians"]),
+                _p(r["p_value"]),
+                _p(r["p_holm"]),
+                f"{r['unsolved_model']}/{r['unsolved_random']}",
+                "-" if r["logrank_p"] is None else _p(r["logrank_p"]),
+            )
+            for r in data["families"]
+        ],
+    )
+    print_table(
+        f"over every family (geometric mean of the {data['headline_ratio']})",
+        ("ordering", "families", "geometric mean ratio", "families with ratio > 1"),
+        [
+            (
+                f"{r['model']} / {r['measure']} / {r['condition']}" + (" (default)" if r["default"] else ""),
+                r["families"],
+                _ratio(r["geomean_ratio"]),
+                r["worse_than_random"],
+            )
+            for r in data["overall"]
         ],
     )
 

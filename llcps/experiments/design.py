@@ -2,8 +2,11 @@
 
 The paper's evaluation (Figure 2) crosses world model x measure x pretraining size x
 condition, each *sequence* solving scenario1 -> scenario2 -> scenario3 in the novelty
-condition. ``update`` lets the world model keep every trial across the sequence;
-``reset`` sends the training data back to the pretraining set before each scenario.
+condition; a preset (or ``experiment run --scenarios``) may solve any list of scenarios
+instead. ``update`` lets the world model keep every trial across the sequence;
+``reset`` sends the training data back to the pretraining set before each scenario;
+``others`` solves each scenario on its own branch from the pretraining set after every
+*other* scenario of the list (leave-one-out with experience of the rest).
 
 Every sequence gets a deterministic branch name, so its trials stay inspectable and a
 re-run can tell which sequences are complete. The name encodes the whole cell, and
@@ -14,16 +17,23 @@ cells a run crosses is a preset's choice (:mod:`llcps.experiments.presets`).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from llcps.errors import LlcpsError, UnknownNameError
+from llcps.errors import LlcpsError
 from llcps.store.tables import MAX_BRANCH_NAME
 
-#: The order a sequence solves the scenarios in (the paper's order).
-SCENARIO_SEQUENCE: tuple[str, ...] = ("scenario1", "scenario2", "scenario3")
+#: The paper's scenarios in the order its sequences solve them: the default list of the
+#: paper's presets, and the order reports sort scenarios in (others come after, by name).
+PAPER_SCENARIOS: tuple[str, ...] = ("scenario1", "scenario2", "scenario3")
 #: ``update``: the world model keeps training across scenarios; ``reset``: the training
-#: data goes back to the pretraining set before each scenario (a branch from that point).
-EXPERIMENT_CONDITIONS: tuple[str, ...] = ("update", "reset")
+#: data goes back to the pretraining set before each scenario (a branch from that point);
+#: ``others``: like reset, but each scenario's branch first solves every other scenario
+#: of the list (in the list's order), so the held-out one sees the others' trials.
+EXPERIMENT_CONDITIONS: tuple[str, ...] = ("update", "reset", "others")
+#: The paper's two conditions (Figure 2): every grid's default.
+PAPER_CONDITIONS: tuple[str, ...] = ("update", "reset")
+#: The conditions that solve each scenario on its own branch (named after the scenario).
+OWN_BRANCH_CONDITIONS: tuple[str, ...] = ("reset", "others")
 
 #: Prefix of every experiment branch; nothing else in a store starts with it.
 BRANCH_PREFIX = "exp"
@@ -35,6 +45,20 @@ SEP = "-"
 _FIELD = re.compile(r"^[a-z0-9_]+$")
 _MEASURE = re.compile(r"^[a-z0-9_]+(-[a-z0-9_]+)*$")
 _BRANCH_CHARS = re.compile(r"^[A-Za-z0-9_.:-]+$")
+# A scenario's name is the last field of an episode branch: a PDDL-like name that cannot
+# be read as the variant field (``v3``).
+_SCENARIO = re.compile(r"^[a-z][a-z0-9_]*$")
+_VARIANT_FIELD = re.compile(r"^v\d+$")
+
+
+def check_scenario_name(name: str) -> str:
+    """``name`` if it can end an experiment branch, else an error saying why."""
+    if not _SCENARIO.match(name) or _VARIANT_FIELD.match(name):
+        raise LlcpsError(
+            f"scenario name {name!r} cannot name an experiment branch",
+            hint="use lower-case letters, digits and '_', starting with a letter (not v<digits>)",
+        )
+    return name
 
 
 @dataclass(frozen=True, order=True)
@@ -88,7 +112,12 @@ def cell_title(model: str, measure: str, pretrain_size: int) -> str:
 
 @dataclass(frozen=True, order=True)
 class Sequence:
-    """One run of :data:`SCENARIO_SEQUENCE` for one cell and one seed, on its own branch.
+    """One run of a list of scenarios for one cell and one seed, on its own branch.
+
+    ``scenarios`` (the paper's three unless a preset or ``--scenarios`` says otherwise)
+    is what the sequence solves, in order. It is not part of the sequence's identity:
+    the branch names do not encode it, and results read back from the store know each
+    episode's scenario from the episode itself.
 
     ``variant`` is the scene variant every scenario of the sequence is solved in (0: the
     canonical scenes). A run over scene variants pairs them with seeds: seed N solves
@@ -100,6 +129,7 @@ class Sequence:
     cell: Cell
     seed: int
     variant: int = 0
+    scenarios: tuple[str, ...] = field(default=PAPER_SCENARIOS, compare=False)
 
     def __post_init__(self) -> None:
         if not _FIELD.match(self.preset):
@@ -111,10 +141,13 @@ class Sequence:
             raise LlcpsError(f"seed must be a non-negative integer, not {self.seed!r}")
         if isinstance(self.variant, bool) or not isinstance(self.variant, int) or self.variant < 0:
             raise LlcpsError(f"variant must be a non-negative integer, not {self.variant!r}")
+        if not self.scenarios or len(set(self.scenarios)) != len(self.scenarios):
+            raise LlcpsError(f"a sequence needs distinct scenarios, not {self.scenarios!r}")
         # Fail at construction, not halfway through a run, if a name would be too long.
-        longest = self.episode_branch(SCENARIO_SEQUENCE[-1])
-        if len(longest) > MAX_BRANCH_NAME:
-            raise LlcpsError(f"branch name {longest!r} is longer than {MAX_BRANCH_NAME} characters")
+        for scenario in self.scenarios:
+            branch = self.episode_branch(scenario)
+            if len(branch) > MAX_BRANCH_NAME:
+                raise LlcpsError(f"branch name {branch!r} is longer than {MAX_BRANCH_NAME} characters")
 
     @property
     def branch_name(self) -> str:
@@ -134,10 +167,11 @@ class Sequence:
 
         Under ``update`` every scenario runs on the sequence branch, so each sees the
         trials of the ones before. Under ``reset`` each scenario gets its own branch
-        forked from the pretraining point, so it sees the pretraining set only.
+        forked from the pretraining point, so it sees the pretraining set only; under
+        ``others`` that branch also holds the episodes of the list's other scenarios,
+        solved on it first.
         """
-        if scenario not in SCENARIO_SEQUENCE:
-            raise UnknownNameError("scenario", scenario, SCENARIO_SEQUENCE)
+        check_scenario_name(scenario)
         if self.cell.condition == "update":
             return self.branch_name
         return f"{self.branch_name}{SEP}{scenario}"
@@ -159,7 +193,7 @@ def pretrain_branch_name(preset: str, pretrain_size: int, seed: int) -> str:
 
 @dataclass(frozen=True)
 class ParsedBranch:
-    """What an experiment branch name says: its sequence and, for ``reset``, its scenario."""
+    """What an experiment branch name says: its sequence and, for ``reset`` and ``others``, its scenario."""
 
     sequence: Sequence
     scenario: str | None
@@ -193,16 +227,16 @@ def parse_branch(name: str) -> ParsedBranch | None:
     condition = match["condition"]
     if condition not in EXPERIMENT_CONDITIONS:
         return None
-    if scenario is not None and (condition != "reset" or scenario not in SCENARIO_SEQUENCE):
+    if scenario is not None and condition not in OWN_BRANCH_CONDITIONS:
         return None
     try:
         cell = Cell(model, measure, int(match["pretrain"]), condition)
         sequence = Sequence(preset, cell, int(match["seed"]), int(match["variant"] or 0))
+        # Only names this module would write round-trip (no leading zeros, etc.).
+        expected = sequence.branch_name if scenario is None else sequence.episode_branch(scenario)
     except LlcpsError:
         return None
-    # Only names this module would write round-trip (no leading zeros, etc.).
     parsed = ParsedBranch(sequence, scenario)
-    expected = sequence.branch_name if scenario is None else sequence.episode_branch(scenario)
     return parsed if expected == name else None
 
 
@@ -217,8 +251,8 @@ def rank_by(order: tuple[str, ...], name: str) -> tuple[int, str]:
 
 
 def scenario_rank(scenario: str) -> tuple[int, str]:
-    """Sort key following :data:`SCENARIO_SEQUENCE`."""
-    return rank_by(SCENARIO_SEQUENCE, scenario)
+    """Sort key: the paper's scenarios in the paper's order, then any others by name."""
+    return rank_by(PAPER_SCENARIOS, scenario)
 
 
 def condition_rank(condition: str) -> tuple[int, str]:

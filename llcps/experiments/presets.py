@@ -13,13 +13,22 @@ paper's come from the world-model registry itself.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Iterable
 
 from llcps.cps.candidates import candidate_space_size
 from llcps.domain import MAX_SEED
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.experiments.design import EXPERIMENT_CONDITIONS, RANDOM_ORDER_MODEL, Cell, Sequence, rank_by
+from llcps.experiments.design import (
+    PAPER_CONDITIONS,
+    PAPER_SCENARIOS,
+    RANDOM_ORDER_MODEL,
+    Cell,
+    Sequence,
+    check_scenario_name,
+    rank_by,
+)
 from llcps.models.measures import MEASURES, PAPER_MEASURES
 from llcps.models.registry import PAPER_MODELS, WORLD_MODELS
 from llcps.registry import Registry
@@ -38,7 +47,7 @@ class Preset:
     models: tuple[str, ...]
     measures: tuple[str, ...]
     pretrain_sizes: tuple[int, ...]
-    conditions: tuple[str, ...] = EXPERIMENT_CONDITIONS
+    conditions: tuple[str, ...] = PAPER_CONDITIONS
     default_seeds: int = 20
     #: Most exploration trials per episode (an unsolved episode records this many);
     #: None: the whole candidate space (:func:`llcps.cps.candidates.candidate_space_size`).
@@ -48,6 +57,9 @@ class Preset:
     pretrain_pool: int = 200
     #: Exploration trials between refits of the world model within an episode.
     refit_every: int = 1
+    #: The scenarios each sequence solves, in order: names, aliases or paths of .toml
+    #: files; None: every shipped scenario (:data:`llcps.scenarios.SCENARIOS`).
+    scenarios: tuple[str, ...] | None = PAPER_SCENARIOS
 
     def __post_init__(self) -> None:
         if isinstance(self.refit_every, bool) or not isinstance(self.refit_every, int) or self.refit_every < 1:
@@ -77,6 +89,28 @@ class Preset:
             for condition in self.conditions
         )
 
+    def scenario_names(self) -> tuple[str, ...]:
+        """The names of the scenarios a sequence solves (files read for their names)."""
+        return tuple(name for name, _ in resolve_scenarios(self.scenarios))
+
+    def with_scenarios(self, scenarios: Iterable[str] | None) -> Preset:
+        """This preset solving ``scenarios`` (names, aliases or .toml paths) instead; None: unchanged."""
+        if scenarios is None:
+            return self
+        chosen = tuple(scenarios)
+        resolve_scenarios(chosen)  # check now: an unknown name fails before anything runs
+        return replace(self, scenarios=chosen)
+
+    def with_others(self) -> Preset:
+        """This preset with ``reset`` replaced by ``others``: each held-out scenario is solved
+        after the list's other scenarios on its branch (``experiment run --with-others``)."""
+        if "reset" not in self.conditions:
+            raise LlcpsError(
+                f"preset {self.name!r} has no reset condition for --with-others to replace",
+                hint="--with-others goes with a preset that solves each scenario from the pretraining set (e.g. generalization)",
+            )
+        return replace(self, conditions=tuple(dict.fromkeys("others" if c == "reset" else c for c in self.conditions)))
+
     def sequences(self, seeds: int | Iterable[int] | None = None, *, variants: bool = False) -> tuple[Sequence, ...]:
         """Every sequence of the grid; seeds grouped outermost so a partial run covers all cells.
 
@@ -86,9 +120,47 @@ class Preset:
                 one variant per seed); otherwise every seed uses the canonical scenes.
         """
         chosen = seed_list(self.default_seeds if seeds is None else seeds)
+        names = self.scenario_names()
         return tuple(
-            Sequence(self.name, cell, seed, seed if variants else 0) for seed in chosen for cell in self.cells()
+            Sequence(self.name, cell, seed, seed if variants else 0, names) for seed in chosen for cell in self.cells()
         )
+
+
+def resolve_scenarios(scenarios: Iterable[str] | None) -> tuple[tuple[str, str], ...]:
+    """``(name, source)`` of each scenario: its name, and what a worker passes to
+    :func:`llcps.scenarios.get_scenario` (the name, or a .toml file's absolute path).
+
+    None stands for every shipped scenario. Shipped names and aliases are read without
+    checking the files (cheap); a path is read and checked. An unknown name is an error
+    listing the known ones; a scenario named twice is an error.
+    """
+    from llcps.scenarios import get_scenario, is_path, shipped_names
+
+    shipped = shipped_names()
+    aliases = {alias: name for name, alias in shipped.items() if alias}
+    chosen = tuple(shipped) if scenarios is None else tuple(scenarios)
+    if not chosen:
+        raise LlcpsError("no scenarios to run", hint=f"name one or more of: {', '.join(shipped)}")
+    out: list[tuple[str, str]] = []
+    for item in chosen:
+        item = item.strip()
+        if item in shipped or item in aliases:
+            name = aliases.get(item, item)
+            out.append((name, name))
+        elif is_path(item):
+            scenario = get_scenario(item)
+            path = str(Path(item).resolve())
+            out.append((scenario.name, scenario.name if scenario.name in shipped else path))
+        else:
+            raise UnknownNameError(
+                "scenario", item, tuple(f"{n} ({a})" if a else n for n, a in shipped.items()) + ("or a path to a .toml file",)
+            )
+        check_scenario_name(out[-1][0])
+    names = [name for name, _ in out]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise LlcpsError(f"scenario {', '.join(twice)} is named twice", hint="name each scenario once")
+    return tuple(out)
 
 
 def seed_list(seeds: int | Iterable[int]) -> tuple[int, ...]:
@@ -181,6 +253,22 @@ PRESETS: Registry[Preset] = Registry(
             default_seeds=20,
             budget=150,
             pretrain_pool=4,
+        ),
+        # Leave one family out: every shipped scenario (a novelty family) solved on its own
+        # branch from 200 random pretraining interactions drawn from the sampler's catalog,
+        # never from a scenario's scene (condition reset; `--with-others` adds the other
+        # families' episodes first), by the default model and measure and by the random
+        # order, paired by scene variant. See docs/experiments.md.
+        "generalization": Preset(
+            "generalization",
+            (WORLD_MODELS.default, RANDOM_ORDER_MODEL),
+            (MEASURES.default,),
+            (200,),
+            conditions=("reset",),
+            default_seeds=10,
+            budget=WHOLE_SPACE,
+            pretrain_pool=200,
+            scenarios=None,
         ),
         # Small enough for the test suite: 8 random interactions per seed, 5 exploration trials per episode.
         "smoke": Preset("smoke", ("nb",), ("most-changes",), (4,), default_seeds=2, budget=5, pretrain_pool=8),

@@ -16,7 +16,7 @@ from typing import Any, Iterable
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.experiments.executors import ENGINES, EngineError, LocalEngine, RayEngine, make_engine
 from llcps.experiments.presets import Preset, get_preset, validate_preset
-from llcps.experiments.scheduler import ProgressCallback, RunSummary, check_partial, existing_branches, schedule
+from llcps.experiments.scheduler import ProgressCallback, RunSummary, check_partial, check_scenarios, existing_branches, schedule
 from llcps.experiments.tasks import PretrainTask, SequenceTask, Task, TaskOutput, plan_tasks, pretrain_subset, task_seed
 from llcps.experiments.worker import COMMAND, execute_task
 from llcps.store import MAIN_BRANCH, Store
@@ -41,6 +41,8 @@ def run_experiment(
     preset: Preset | str = "smoke",
     seeds: int | Iterable[int] | None = None,
     variants: bool = False,
+    scenarios: Iterable[str] | None = None,
+    with_others: bool = False,
     workers: int = 1,
     engine: str = "local",
     ray_address: str | None = None,
@@ -55,6 +57,10 @@ def run_experiment(
         seeds: a count (seeds ``0..n-1``), explicit seeds, or None for the preset's default.
         variants: seed N solves its scenarios in scene variant N (paired with the seeds,
             not crossed); otherwise every seed solves the canonical scenes (variant 0).
+        scenarios: the scenarios each sequence solves, in order (names, aliases or .toml
+            paths); None: the preset's own list (the paper's three for the paper's presets).
+        with_others: solve each scenario after the list's other scenarios on its branch
+            (the preset's ``reset`` becomes ``others``; see :meth:`Preset.with_others`).
         workers: processes (local) or concurrent Ray tasks.
         engine: one of :data:`ENGINES`.
         ray_address: a Ray cluster (None: start a local instance with ``workers`` CPUs).
@@ -69,6 +75,9 @@ def run_experiment(
         What ran; on Ctrl-C the tasks imported so far stay and ``status`` is ``interrupted``.
     """
     grid = get_preset(preset) if isinstance(preset, str) else preset
+    grid = grid.with_scenarios(scenarios)
+    if with_others:
+        grid = grid.with_others()
     validate_preset(grid)
     if engine not in ENGINES:
         raise UnknownNameError("engine", engine, ENGINES)
@@ -84,16 +93,19 @@ def run_experiment(
     )
     existing = existing_branches(store)
     check_partial(tasks, existing)
+    check_scenarios(store, tasks, existing)
     todo = [t for t in tasks if not all(b in existing for b in t.branches)]
     summary.skipped = len(tasks) - len(todo)
     started = time.perf_counter()
     summary.run_id = store.start_run(
-        command=f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else ""),
+        command=f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else "") + (" --with-others" if with_others else ""),
         seed=None,
         config={
             "preset": grid.name,
             "seeds": list(seed_list),
             "variants": variants,
+            "scenarios": [name for name in grid.scenario_names()],
+            "conditions": list(grid.conditions),
             "workers": workers,
             "engine": engine,
             "cache": cache,

@@ -100,6 +100,48 @@ def check_partial(tasks: Iterable[Task], existing: set[str]) -> None:
         )
 
 
+def expected_scenarios(task: SequenceTask) -> dict[str, list[str]]:
+    """Branch -> the scenarios its episodes solve, in order, when ``task`` runs."""
+    names = list(task.sequence.scenarios)
+    condition = task.sequence.cell.condition
+    if condition == "update":
+        return {task.sequence.branch_name: names}
+    if condition == "others":
+        return {task.sequence.episode_branch(s): [o for o in names if o != s] + [s] for s in names}
+    return {task.sequence.episode_branch(s): [s] for s in names}
+
+
+def check_scenarios(store: Store, tasks: Iterable[Task], existing: set[str]) -> None:
+    """Fail when a stored sequence solved another scenario list than this run would.
+
+    Branch names do not encode a sequence's scenarios, so an ``update`` or ``others``
+    branch run with one list would pass for a run with another. Reset branches hold one
+    scenario each and cannot disagree.
+    """
+    stored = [
+        t
+        for t in tasks
+        if isinstance(t, SequenceTask) and t.sequence.cell.condition != "reset" and all(b in existing for b in t.branches)
+    ]
+    if not stored:
+        return
+    held: dict[str, list[str]] = {}
+    for episode in sorted(store.list_episodes(), key=lambda e: e.id):
+        if episode.condition == "novelty" and episode.status != "running":
+            held.setdefault(episode.branch, []).append(episode.scenario)
+    for task in stored:
+        for branch, wanted in expected_scenarios(task).items():
+            have = held.get(branch, [])
+            if have and have != wanted:
+                raise LlcpsError(
+                    f"branch {branch} holds episodes of {', '.join(have)}, not of {', '.join(wanted)} as this run asks",
+                    hint=(
+                        "a preset's update and others sequences solve one scenario list per store: use another "
+                        "--db, or delete the branch with `llcps db delete NAME --yes`"
+                    ),
+                )
+
+
 def twin_key(task: Task) -> tuple[object, ...] | None:
     """What a sequence shares with its other-condition twin: both start scenario 1 alike."""
     if not isinstance(task, SequenceTask):
@@ -213,4 +255,13 @@ def _exists(store: Store, branches: Iterable[str]) -> bool:
     return True
 
 
-__all__ = ["POLL_SECONDS", "ProgressCallback", "RunSummary", "check_partial", "existing_branches", "schedule"]
+__all__ = [
+    "POLL_SECONDS",
+    "ProgressCallback",
+    "RunSummary",
+    "check_partial",
+    "check_scenarios",
+    "existing_branches",
+    "expected_scenarios",
+    "schedule",
+]

@@ -2,9 +2,13 @@
 
 A run is a list of *tasks*: per seed one pretraining task (the seed's pool of
 random interactions and every pretraining set drawn from it, each on its own
-branch) and one task per sequence of the grid (scenario1 -> scenario2 -> scenario3
-under ``update`` or ``reset``). Tasks are plain, picklable data, so the same task
-runs in a local pool process or as a Ray task.
+branch) and one task per sequence of the grid (the preset's scenarios, by default
+scenario1 -> scenario2 -> scenario3, under ``update``, ``reset`` or ``others``). Tasks
+are plain, picklable data, so the same task runs in a local pool process or as a Ray task.
+
+Pretraining never sees a scenario: the pool is random layouts from the sampler's
+catalog (:mod:`llcps.sim.sampler`), the same whichever scenarios the preset solves,
+so every scenario (novelty family) is held out of it.
 
 The paper's protocol, per (preset, pretraining size, seed): one pretraining branch
 shared by every model and measure of that seed. The seed's pool is
@@ -19,8 +23,8 @@ from dataclasses import dataclass
 from typing import Any, Iterable
 
 from llcps.domain import ACTIONS
-from llcps.experiments.design import SCENARIO_SEQUENCE, Sequence, pretrain_branch_name
-from llcps.experiments.presets import Preset, seed_list
+from llcps.experiments.design import Sequence, pretrain_branch_name
+from llcps.experiments.presets import Preset, resolve_scenarios, seed_list
 from llcps.experiments.transfer import Payload
 
 #: Stream tag of :func:`pretrain_subset` (kept apart from every other use of the seed).
@@ -57,10 +61,22 @@ class SequenceTask:
     #: The store whose physics cache answers trials simulated before (None: no cache).
     #: A URL with its credentials: the worker opens the store itself.
     cache_url: str | None = None
+    #: What the worker passes to ``get_scenario`` for each of the sequence's scenarios,
+    #: in order (a shipped name, or a .toml file's absolute path); empty: the names.
+    sources: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.sources and len(self.sources) != len(self.sequence.scenarios):
+            raise ValueError("a sequence task needs one source per scenario")
+
+    @property
+    def scenarios(self) -> tuple[tuple[str, str], ...]:
+        """``(name, source)`` of each scenario the sequence solves, in order."""
+        return tuple(zip(self.sequence.scenarios, self.sources or self.sequence.scenarios))
 
     @property
     def branches(self) -> tuple[str, ...]:
-        return tuple(dict.fromkeys(self.sequence.episode_branch(s) for s in SCENARIO_SEQUENCE))
+        return tuple(dict.fromkeys(self.sequence.episode_branch(s) for s in self.sequence.scenarios))
 
     @property
     def label(self) -> str:
@@ -103,12 +119,13 @@ def plan_tasks(
     """
     chosen = seed_list(preset.default_seeds if seeds is None else seeds)
     sequences = preset.sequences(chosen, variants=variants)
+    sources = tuple(source for _, source in resolve_scenarios(preset.scenarios))
     tasks: list[Task] = []
     budget = preset.exploration_budget()
     for seed in chosen:
         tasks.append(PretrainTask(preset.name, seed, preset.pretrain_pool, tuple(preset.pretrain_sizes)))
         tasks.extend(
-            SequenceTask(s, budget, refit_every=preset.refit_every, cache_url=cache_url)
+            SequenceTask(s, budget, refit_every=preset.refit_every, cache_url=cache_url, sources=sources)
             for s in sequences
             if s.seed == seed
         )

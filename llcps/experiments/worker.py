@@ -30,7 +30,6 @@ from typing import Any
 
 from llcps.errors import LlcpsError
 from llcps.cps.episode import SolveConfig
-from llcps.experiments.design import SCENARIO_SEQUENCE
 from llcps.experiments.tasks import PretrainTask, SequenceTask, Task, TaskOutput, pretrain_subset
 from llcps.experiments.transfer import Payload, export_branches, import_payload, inverse
 from llcps.store import MAIN_BRANCH, PRETRAIN, Store
@@ -177,40 +176,57 @@ def _run_pretrain(store: Store, task: PretrainTask) -> Payload:
     return export_branches(store, task.branches)
 
 
-def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str, ...], dict[str, Any] | None]:
+def _solve(store: Store, task: SequenceTask, branch: str, source: str) -> str:
+    """Solve one scenario of a sequence task on ``branch``; returns the episode's status."""
     from llcps.cps.episode import solve  # the simulator: not loaded where the CLI starts
 
+    seq = task.sequence
+    config = SolveConfig(
+        scenario=source,
+        condition="novelty",
+        model=seq.cell.model,
+        measure=seq.cell.measure,
+        seed=seq.seed,
+        variant=seq.variant,
+        budget=task.budget,
+        refit_every=task.refit_every,
+    )
+    result = solve(store, branch=branch, config=config, command=f"{COMMAND} --preset {seq.preset}", cache=_cache(task))
+    if result.status == "interrupted":
+        raise RuntimeError(f"{task.label}: {source} was interrupted")
+    return result.status
+
+
+def _cache(task: SequenceTask) -> Any:
+    return worker_cache(task.cache_url) if task.cache_url is not None else None
+
+
+def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str, ...], dict[str, Any] | None]:
     if task.base is None:
         raise LlcpsError(f"task {task.label} was sent without its pretraining trials")
     seeded = import_payload(store, task.base)
     seq = task.sequence
     cache = worker_cache(task.cache_url) if task.cache_url is not None else None
-    before = None if cache is None else dict(cache.counts.as_json())
+    counted = None if cache is None else dict(cache.counts.as_json())
     statuses: list[str] = []
-    for scenario in SCENARIO_SEQUENCE:
+    scenarios = task.scenarios
+    condition = seq.cell.condition
+    for index, (scenario, source) in enumerate(scenarios):
         branch = seq.episode_branch(scenario)
-        if scenario == SCENARIO_SEQUENCE[0] or seq.cell.condition == "reset":
+        if index == 0 or condition != "update":
             store.create_branch(branch, from_branch=seq.pretrain_branch, at=PRETRAIN)
-        config = SolveConfig(
-            scenario=scenario,
-            condition="novelty",
-            model=seq.cell.model,
-            measure=seq.cell.measure,
-            seed=seq.seed,
-            variant=seq.variant,
-            budget=task.budget,
-            refit_every=task.refit_every,
-        )
-        result = solve(store, branch=branch, config=config, command=f"{COMMAND} --preset {seq.preset}", cache=cache)
-        if result.status == "interrupted":
-            raise RuntimeError(f"{task.label}: {scenario} was interrupted")
-        statuses.append(result.status)
-        if scenario == SCENARIO_SEQUENCE[0]:
+        # Under ``others`` the held-out scenario's branch first solves every other one.
+        before = [item for item in scenarios if item[0] != scenario] if condition == "others" else []
+        for _, other in before:
+            _solve(store, task, branch, other)
+        status = _solve(store, task, branch, source)
+        statuses.append(status)
+        if index == 0:
             report(FIRST_SCENARIO, task.label)  # its twin's first scenario is in the physics cache now
     counts = None
-    if cache is not None and before is not None:
+    if cache is not None and counted is not None:
         after = cache.counts.as_json()
-        counts = {k: after[k] - before[k] for k in ("hits", "misses", "rejected", "stored")}
+        counts = {k: after[k] - counted[k] for k in ("hits", "misses", "rejected", "stored")}
     payload = export_branches(store, task.branches, external=inverse(seeded.trials))
     return payload, tuple(statuses), counts
 

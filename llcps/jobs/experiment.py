@@ -47,6 +47,8 @@ def run_experiment_job(
     seeds: int | Iterable[int] | None = None,
     first_seed: int = 0,
     variants: range | None = None,
+    scenarios: Iterable[str] | None = None,
+    with_others: bool = False,
     workers: int = 1,
     engine: str = "local",
     ray_address: str | None = None,
@@ -65,13 +67,20 @@ def run_experiment_job(
         first_seed: where a count of seeds starts (runners on several machines take disjoint seeds).
         variants: scene variants paired with the seeds (seed N solves variant N); takes
             the place of ``seeds`` and ``first_seed``.
+        scenarios: the scenarios each sequence solves (names, aliases or .toml paths);
+            None: the preset's own (the paper's three, or every shipped one for
+            ``generalization``). The report covers these scenarios only.
+        with_others: give each held-out scenario the other scenarios' episodes first
+            (the preset's ``reset`` becomes ``others``).
         workers, engine, ray_address, cache, progress: see
             :func:`~llcps.experiments.runner.run_experiment`.
         out_dir: the report's directory (default: ``results/<preset>``).
         html: also write report.html, with a film of a resolving trial per scenario.
         report_progress: called as ``(phase, done, total)`` while the report is built.
     """
-    grid = get_preset(preset) if isinstance(preset, str) else preset
+    grid = (get_preset(preset) if isinstance(preset, str) else preset).with_scenarios(scenarios)
+    if with_others:
+        grid = grid.with_others()
     chosen = run_seeds(grid, seeds=seeds, first_seed=first_seed, variants=variants)
     paired = variants is not None
     summary = run_experiment(
@@ -87,7 +96,7 @@ def run_experiment_job(
     )
     if summary.status == "interrupted":
         return ExperimentRun(summary)
-    table = results_table(store, summary.preset, summary.seeds, variants=paired)
+    table = results_table(store, summary.preset, summary.seeds, variants=paired, scenarios=grid.scenario_names())
     if len(table) == 0:
         return ExperimentRun(summary)
     target = out_dir if out_dir is not None else default_out_dir(summary.preset)

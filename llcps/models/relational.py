@@ -1,14 +1,15 @@
 """The goal-aware outcome as numbers: (candidate, atom) pairs in roles and relative geometry.
 
 Omega (Table 2) says what *kind* of fluent a trial changed; a failure asks for
-particular atoms, "(in cube bucket)". The goal-aware outcome is one binary question per
+particular ground atoms, "(in x c)". The goal-aware outcome is one binary question per
 (candidate c, ground atom m, sign): after c, has m become true (sign +) or stopped being
 true (sign -)? One model answers it for every predicate, entity and scene, because m is
 encoded without names:
 
 - by its predicate and sign, and the *role* each of its bodies plays for c: argument 1,
-  argument 2, another object, another container, the table, the floor, another fixture
-  (:data:`ROLES`);
+  argument 2, or else the kind the domain types the body as (:data:`~llcps.domain.BODY_KINDS`:
+  an object, a container, the support fixture the scene stands on, the ground, another
+  fixture), read from the stored bodies, never from a body's name (:data:`ROLES`);
 - by relational geometry in the robot frame: where m's bodies lie relative to c's first
   argument (offset, horizontal distance, height of their top over its bottom, size) and
   to its second; the direction c moves its first argument in (:func:`motion_direction`)
@@ -17,7 +18,7 @@ encoded without names:
 - by c's own action, orientation, rate and magnitude, and its arguments' shape, size and
   position.
 
-A *fixture* (table, floor, wall) is placed at its point nearest to argument 1, an entity
+A *fixture* (support, ground, wall) is placed at its point nearest to argument 1, an entity
 at its centre. Training examples come from stored trials with their
 :class:`~llcps.domain.TrialChange`: every ground atom over the trial's scene is one
 example, labelled by whether the trial changed it the way its truth before allowed
@@ -38,6 +39,7 @@ import numpy as np
 
 from llcps.domain import (
     ACTIONS,
+    BODY_KINDS,
     ORIENTATIONS,
     PREDICATES,
     PUSH_DIRECTION,
@@ -53,8 +55,8 @@ from llcps.domain import (
 )
 from llcps.errors import LlcpsError
 
-#: What a body of an atom is for a candidate.
-ROLES: tuple[str, ...] = ("arg1", "arg2", "object", "container", "table", "floor", "fixture")
+#: What a body of an atom is for a candidate: one of its arguments, or else its kind.
+ROLES: tuple[str, ...] = ("arg1", "arg2", *BODY_KINDS)
 #: The second slot of a one-place predicate.
 NO_ROLE = "none"
 SECOND_ROLES = ROLES + (NO_ROLE,)
@@ -62,7 +64,7 @@ _ARG2_SHAPES = SHAPES + (NO_ROLE,)
 
 #: Unchanged atoms that involve no argument kept per trial (the rest stand behind them by weight).
 OTHER_NEGATIVES = 8
-#: Sizes and offsets are clipped to this (m): a floor is not 6 m "bigger" than a table in any useful sense.
+#: Sizes and offsets are clipped to this (m): the ground is not 6 m "bigger" than the support in any useful sense.
 CLIP = 1.0
 
 
@@ -115,7 +117,6 @@ CONTINUOUS_MASK = np.array([False] * N_CATEGORICAL + [True] * len(CONTINUOUS_FEA
 FEATURE_INDEX = {name: i for i, name in enumerate(GOAL_FEATURES)}
 _ROLE_INDEX = {r: i for i, r in enumerate(SECOND_ROLES)}
 _FIRST_CONTINUOUS = N_CATEGORICAL
-_KIND_ROLE = {"object": "object", "container": "container", "table": "table", "floor": "floor", "fixture": "fixture"}
 
 
 @dataclass(frozen=True)
@@ -195,7 +196,7 @@ class Scene:
             return "arg1"
         if len(arguments) > 1 and name == arguments[1]:
             return "arg2"
-        return _KIND_ROLE[self.bodies[name].kind]
+        return self.bodies[name].kind  # a body's kind is its role (Body checks it is one of BODY_KINDS)
 
     def point(self, name: str, near: tuple[float, float, float]) -> tuple[float, float, float]:
         """Where a body is, seen from ``near``: an entity's centre, a fixture's nearest point."""

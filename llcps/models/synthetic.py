@@ -16,6 +16,8 @@ from llcps.domain import (
     ACTION_ARITY,
     ACTIONS,
     COLORS,
+    GROUND_KIND,
+    SUPPORT_KIND,
     ORIENTATIONS,
     OUTCOME_NAMES,
     SHAPES,
@@ -28,6 +30,7 @@ from llcps.domain import (
     TrialSpec,
     fluent,
 )
+from llcps.sim.specs import FLOOR, FLOOR_HALF_WIDTH, TABLE, TableSpec
 
 
 def _entity(rng: np.random.Generator) -> EntityFeatures:
@@ -120,7 +123,13 @@ def synthetic_trials(n: int, *, seed: int, start_id: int = 1, branch: str = "mai
 _TOY_KINDS = ("object", "object", "object", "object", "container", "container")
 
 
-def _toy_bodies(rng: np.random.Generator, kinds: dict[str, str]) -> tuple[Body, ...]:
+def _fixture(name: str, kind: str, lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Body:
+    return Body(name, kind, None, lo, hi, tuple((a + b) / 2.0 for a, b in zip(lo, hi)))  # type: ignore[arg-type]
+
+
+def _toy_bodies(rng: np.random.Generator, kinds: dict[str, str], table: TableSpec | None = None) -> tuple[Body, ...]:
+    """Random entities on the simulator's table (``table``: its geometry, default the simulator's default)."""
+    table = table if table is not None else TableSpec()
     bodies = []
     for name, kind in kinds.items():
         x, y = float(rng.uniform(0.3, 0.9)), float(rng.uniform(-0.4, 0.4))
@@ -129,8 +138,9 @@ def _toy_bodies(rng: np.random.Generator, kinds: dict[str, str]) -> tuple[Body, 
         shape = SHAPES[int(rng.integers(len(SHAPES)))] if kind == "object" else "box"
         lo, hi = (x - half, y - half, 0.0), (x + half, y + half, height)
         bodies.append(Body(name, kind, shape, lo, hi, (x, y, height / 2)))
-    bodies.append(Body("table", "table", None, (-0.3, -0.6, -0.45), (1.05, 0.6, 0.0), (0.375, 0.0, -0.225)))
-    bodies.append(Body("floor", "floor", None, (-3.0, -3.0, -0.45), (3.0, 3.0, -0.45), (0.0, 0.0, -0.45)))
+    w, floor_z = FLOOR_HALF_WIDTH, table.floor_z
+    bodies.append(_fixture(TABLE, SUPPORT_KIND, *table.box))
+    bodies.append(_fixture(FLOOR, GROUND_KIND, (-w, -w, floor_z), (w, w, floor_z)))
     return tuple(bodies)
 
 
@@ -153,7 +163,7 @@ def synthetic_changes(records: list[TrialRecord], *, seed: int) -> dict[int, Tri
         objects = [n for n, k in kinds.items() if k == "object"]
         containers = [n for n, k in kinds.items() if k == "container"]
         before = {fluent("visible", n) for n in kinds} | {fluent("reachable", n) for n in kinds}
-        before |= {fluent("on", n, "table") for n in objects} | {fluent("touching", n, "table") for n in kinds}
+        before |= {fluent("on", n, TABLE) for n in objects} | {fluent("touching", n, TABLE) for n in kinds}
         if spec.action == "remove_from_container" and rng.random() < 0.7:
             before.add(fluent("in", *spec.arguments))
         elif rng.random() < 0.3:
@@ -162,11 +172,11 @@ def synthetic_changes(records: list[TrialRecord], *, seed: int) -> dict[int, Tri
         first = spec.arguments[0]
         if spec.action == "place_in_container" and rng.random() < 0.9:
             after |= {fluent("in", *spec.arguments), fluent("touching", *spec.arguments)}
-            after -= {fluent("on", first, "table")}
+            after -= {fluent("on", first, TABLE)}
         elif spec.action == "remove_from_container":
             after -= {fluent("in", *spec.arguments)}  # a no-op when it was not in
         elif spec.action == "push" and spec.params.movement_magnitude > 0.2 and rng.random() < 0.7:
-            after -= {fluent("reachable", first), fluent("touching", first, "table")}
+            after -= {fluent("reachable", first), fluent("touching", first, TABLE)}
         elif spec.action == "push_together" and rng.random() < 0.8:
             after.add(fluent("touching", *spec.arguments))
         changes[record.id] = replace(  # type: ignore[index]

@@ -13,7 +13,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from llcps.analysis.results import ResultsTable
 from llcps.cps.film import episode_shots, reenact
-from llcps.experiments.design import SCENARIO_SEQUENCE
+from llcps.experiments.design import scenario_rank
 from llcps.experiments.rows import ResultRow
 from llcps.provenance import Provenance
 from llcps.store import Store
@@ -77,7 +77,7 @@ def film_resolutions(
     """
     films: dict[str, Path] = {}
     target = out_dir / FILMS_DIR
-    for scenario in [s for s in SCENARIO_SEQUENCE if any(r.scenario == s for r in table)]:
+    for scenario in sorted(table.unique("scenario"), key=scenario_rank):
         row = typical_resolution([r for r in table if r.scenario == scenario])
         if row is None or row.episode_id is None:
             continue
@@ -94,7 +94,7 @@ def film_resolutions(
 def existing_films(out_dir: Path) -> dict[str, Path]:
     """The films a report directory already holds, by scenario."""
     folder = out_dir / FILMS_DIR
-    return {s: folder / f"{s}.gif" for s in SCENARIO_SEQUENCE if (folder / f"{s}.gif").is_file()}
+    return {p.stem: p for p in sorted(folder.glob("*.gif"), key=lambda p: scenario_rank(p.stem))}
 
 
 __all__ = [

@@ -17,16 +17,17 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from llcps.analysis.analyse import analyse, analysis_json
 from llcps.analysis.figure2 import Figure2Row
+from llcps.analysis.generalization import FamilyResult
 from llcps.analysis.results import ResultsTable, table_budget
 from llcps.analysis.stats import DEFAULT_RESAMPLES
 from llcps.analysis.survival import SurvivalComparison
 from llcps.analysis.versus_random import RandomComparison
 from llcps.errors import LlcpsError
-from llcps.experiments.design import SCENARIO_SEQUENCE
+from llcps.experiments.design import scenario_rank
 from llcps.report import artifacts, plots
 from llcps.report.html import render_html
 from llcps.report.markdown import render_markdown
-from llcps.report.tables import figure2_blocks
+from llcps.report.tables import figure2_blocks, generalization_block, generalization_overall_block
 from llcps.report.text import method_text, overview_text, plot_caption, summary_lines
 from llcps.store import Store
 from llcps.tabular import csv_value
@@ -49,6 +50,9 @@ class ReportPaths:
     survival_csv: Path | None = None
     report_html: Path | None = None
     films: Mapping[str, Path] = field(default_factory=dict)
+    #: Leave one family out, per family and ordering (None: no random-order pairs).
+    generalization_csv: Path | None = None
+    generalization_json: Path | None = None
 
     def all(self) -> tuple[Path, ...]:
         """Every file written, for listing or checking."""
@@ -59,6 +63,7 @@ class ReportPaths:
             files.append(self.survival_csv)
         if self.report_html is not None:
             files.append(self.report_html)
+        files.extend(p for p in (self.generalization_csv, self.generalization_json) if p is not None)
         files.extend(self.films.values())
         for paths in self.plots.values():
             files.extend(paths)
@@ -87,8 +92,9 @@ def build_report(
     films: Mapping[str, Path] | None = None,
     html: bool = False,
 ) -> ReportPaths:
-    """Write results.csv, figure2.csv/json, random_comparison.csv, survival.csv, the plots and
-    report.md (and report.html).
+    """Write results.csv, figure2.csv/json, random_comparison.csv, survival.csv,
+    generalization.csv/json (leave one family out, when the random order ran beside
+    another ordering), the plots and report.md (and report.html).
 
     Args:
         table: the results to report on.
@@ -128,6 +134,16 @@ def build_report(
     if analysis.figure2:  # a preset of one condition has no Figure 2 to draw
         plot_paths = {"figure2": plots.figure2_heatmap(analysis.figure2, plot_dir / "figure2"), **plot_paths}
     plot_paths.update({f"survival_{s}": paths for s, paths in plots.survival_plots(analysis.curves, plot_dir).items()})
+    generalization_csv = generalization_json = None
+    if analysis.generalization:
+        plot_paths["generalization"] = plots.generalization_plot(analysis.generalization, plot_dir / "generalization")
+        generalization_csv = _write_rows_csv(
+            out / "generalization.csv", analysis.generalization, (f.name for f in fields(FamilyResult))
+        )
+        generalization_json = out / "generalization.json"
+        generalization_json.write_text(
+            json.dumps(analysis_json(analysis)["generalization"], indent=1, allow_nan=False) + "\n", encoding="utf-8"
+        )
     survival_csv = None
     if analysis.survival:
         survival_csv = _write_rows_csv(out / "survival.csv", analysis.survival, (f.name for f in fields(SurvivalComparison)))
@@ -153,12 +169,28 @@ def build_report(
                 plots=pngs,
                 films=film_paths,
                 provenance=environments,
-                unfilmed=[s for s in SCENARIO_SEQUENCE if s in table.unique("scenario") and s not in film_paths],
+                unfilmed=[s for s in sorted(table.unique("scenario"), key=scenario_rank) if s not in film_paths],
+                generalization=(
+                    [generalization_overall_block(analysis.generalization_overall), generalization_block(analysis.generalization)]
+                    if analysis.generalization
+                    else []
+                ),
             ),
             encoding="utf-8",
         )
     return ReportPaths(
-        out, results_csv, figure2_csv, figure2_json, random_csv, report_md, plot_paths, survival_csv, report_html, film_paths
+        out,
+        results_csv,
+        figure2_csv,
+        figure2_json,
+        random_csv,
+        report_md,
+        plot_paths,
+        survival_csv,
+        report_html,
+        film_paths,
+        generalization_csv,
+        generalization_json,
     )
 
 

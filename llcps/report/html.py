@@ -72,6 +72,7 @@ def render_html(
     films: Mapping[str, Path],
     provenance: Sequence[str],
     unfilmed: Sequence[str] = (),
+    generalization: Sequence[TableBlock] = (),
 ) -> str:
     """The page. ``plots`` maps a plot name to (caption, PNG path); ``films`` a scenario to its
     GIF; ``unfilmed`` names the scenarios without a film (no solved episode to show)."""
@@ -102,6 +103,10 @@ def render_html(
         '<p class="note">* p &lt; 0.05 (paired Wilcoxon over seeds, uncorrected); ** also after Holm\'s correction. '
         "Shaded columns are the paper's numbers (4 runs per cell, no intervals).</p></section>"
     )
+    if generalization:
+        parts.append('<section id="generalization"><h2>Leave one family out</h2>')
+        parts += [_table(block, table_id=f"generalization-{i}") for i, block in enumerate(generalization)]
+        parts.append("</section>")
     parts.append('<section id="films"><h2>A resolving trial per scenario</h2>')
     if films:
         parts.append('<div class="films">')

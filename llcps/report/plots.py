@@ -26,8 +26,9 @@ from llcps.analysis.figure2 import Figure2Row
 from llcps.analysis.paper import FIGURE2_SCENARIOS, PAPER_FIGURE2
 from llcps.analysis.results import ResultsTable
 from llcps.analysis.stats import ALPHA
+from llcps.analysis.generalization import FamilyResult
 from llcps.analysis.survival import SurvivalCurve
-from llcps.experiments.design import SCENARIO_SEQUENCE, cell_title, condition_rank
+from llcps.experiments.design import cell_title, condition_rank, scenario_rank
 from llcps.experiments.presets import measure_rank, model_rank
 from llcps.report.formatting import format_pct
 
@@ -37,7 +38,7 @@ STAR_NOTE = (
     "red: less exploration with updates, blue: more"
 )
 #: Colours of the two conditions, used by every plot.
-CONDITION_COLORS = {"update": "#1f77b4", "reset": "#ff7f0e"}
+CONDITION_COLORS = {"update": "#1f77b4", "reset": "#ff7f0e", "others": "#2ca02c"}
 #: Heatmap colours span update/reset ratios from 1/8 to 8 (log2 from -3 to 3).
 LOG2_RATIO_LIMIT = 3.0
 FORMATS: tuple[str, ...] = ("png", "svg")
@@ -110,7 +111,7 @@ def figure2_heatmap(rows: Iterable[Figure2Row], stem: str | Path, *, with_paper:
     """
     shown = [r for r in rows if r.in_figure2]
     pairs = sorted({(r.model, r.measure) for r in shown}, key=lambda k: (model_rank(k[0]), measure_rank(k[1])))
-    cols = sorted({(r.pretrain_size, r.scenario) for r in shown}, key=lambda k: (-k[0], SCENARIO_SEQUENCE.index(k[1])))
+    cols = sorted({(r.pretrain_size, r.scenario) for r in shown}, key=lambda k: (-k[0], scenario_rank(k[1])))
     if not pairs:
         pairs, cols = [("-", "-")], [(0, FIGURE2_SCENARIOS[0])]
     index = {(r.model, r.measure, r.pretrain_size, r.scenario): r for r in shown}
@@ -162,7 +163,7 @@ def exploration_distribution(
     (exploration trials only) a dashed line marks the cap an unsolved episode stops at.
     """
     cells = _cell_order((r.model, r.measure, r.pretrain_size) for r in table)
-    scenarios = [s for s in SCENARIO_SEQUENCE if any(r.scenario == s for r in table)] or list(SCENARIO_SEQUENCE[:1])
+    scenarios = sorted(table.unique("scenario"), key=scenario_rank) or ["-"]
     conditions = sorted({r.condition for r in table}, key=condition_rank) or ["update"]
     values: dict[tuple[str, str, int, str, str], list[float]] = {}
     for r in table:
@@ -236,7 +237,8 @@ def cumulative_plot(
     fig = Figure(figsize=(3.2 * len(sizes) + 0.8, height))
     axes = fig.subplots(len(pairs), len(sizes), sharex=True, sharey=True, squeeze=False)  # one scale: panels compare
     fig.subplots_adjust(hspace=0.45, wspace=0.25, top=1 - 0.45 / height, bottom=0.35 / height)
-    x = np.arange(len(SCENARIO_SEQUENCE))
+    order = sorted({p.scenario for p in points}, key=scenario_rank)
+    x = np.arange(len(order))
     lines: dict[tuple[str, str, int, str], dict[str, CumulativePoint]] = {}
     for p in points:
         lines.setdefault((p.model, p.measure, p.pretrain_size, p.condition), {})[p.scenario] = p
@@ -247,7 +249,7 @@ def cumulative_plot(
                 line = lines.get((model, measure, size, condition))
                 if not line:
                     continue
-                pts = [line.get(s) for s in SCENARIO_SEQUENCE]
+                pts = [line.get(s) for s in order]
                 mean = np.array([p.mean if p else math.nan for p in pts])
                 low = np.array([p.ci_low if p else math.nan for p in pts])
                 high = np.array([p.ci_high if p else math.nan for p in pts])
@@ -260,7 +262,7 @@ def cumulative_plot(
             if (i, j) == (0, 0) and ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=7, loc="upper left")
     for ax in axes[-1]:
-        ax.set_xticks(x, [s.replace("scenario", "S") for s in SCENARIO_SEQUENCE])
+        ax.set_xticks(x, [s.replace("scenario", "S") for s in order])
     for ax in axes[:, 0]:
         ax.set_ylabel(f"cumulative\n{metric.replace('_', ' ')}", fontsize=7)
     fig.suptitle(
@@ -313,6 +315,46 @@ def survival_plot(curves: Sequence[SurvivalCurve], stem: str | Path, *, scenario
 
 def survival_plots(curves: Sequence[SurvivalCurve], directory: str | Path) -> dict[str, tuple[Path, ...]]:
     """:func:`survival_plot` for every scenario of ``curves``, as ``survival_<scenario>`` in ``directory``."""
-    scenarios = [s for s in SCENARIO_SEQUENCE if any(c.scenario == s for c in curves)]
-    scenarios += sorted({c.scenario for c in curves} - set(scenarios))
+    scenarios = sorted({c.scenario for c in curves}, key=scenario_rank)
     return {s: survival_plot(curves, Path(directory) / f"survival_{s}", scenario=s) for s in scenarios}
+
+
+def generalization_plot(rows: Sequence[FamilyResult], stem: str | Path) -> tuple[Path, ...]:
+    """Per held-out family, each ordering's ratio to the random order on a log axis.
+
+    A filled marker is the median of the per-variant ratios, a hollow one the ratio of
+    the medians; left of the line at 1 the ordering explored less than random. Infinite
+    or zero ratios are drawn at the axis' edge.
+    """
+    families = sorted({r.family for r in rows}, key=scenario_rank)
+    orderings = list(dict.fromkeys((r.model, r.measure, r.pretrain_size, r.condition) for r in rows))
+    height = 1.2 + 0.45 * max(len(families), 1) * max(len(orderings), 1) ** 0.5
+    fig = Figure(figsize=(6.4, height))
+    ax = fig.subplots()
+    finite = [v for r in rows for v in (r.median_ratio, r.ratio_of_medians) if math.isfinite(v) and v > 0]
+    low, high = (min(finite + [0.5]) / 1.5, max(finite + [2.0]) * 1.5)
+    step = 0.8 / max(len(orderings), 1)
+    colors = matplotlib.colormaps["tab10"]
+    for k, key in enumerate(orderings):
+        mine = {r.family: r for r in rows if (r.model, r.measure, r.pretrain_size, r.condition) == key}
+        ys = [i - 0.4 + step * (k + 0.5) for i, f in enumerate(families) if f in mine]
+        shown = [mine[f] for f in families if f in mine]
+
+        def clip(v: float) -> float:
+            return high if v == math.inf or math.isnan(v) else (low if v <= 0 else min(max(v, low), high))
+
+        label = cell_title(key[0], key[1], key[2]) + f" / {key[3]}"
+        ax.scatter([clip(r.median_ratio) for r in shown], ys, color=colors(k % 10), label=f"{label}: median of ratios", zorder=3)
+        ax.scatter(
+            [clip(r.ratio_of_medians) for r in shown], ys, facecolors="none", edgecolors=colors(k % 10), label=f"{label}: ratio of medians", zorder=3
+        )
+    ax.axvline(1.0, color="black", linewidth=0.8)
+    ax.set_xscale("log")
+    ax.set_xlim(low, high)
+    ax.set_yticks(range(len(families)), families, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlabel("exploration trials / random order's (log scale; < 1: fewer than random)", fontsize=8)
+    ax.grid(alpha=0.3, axis="x")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title("leave one family out: each held-out family against the random order", fontsize=10)
+    return save(fig, stem)

@@ -10,6 +10,7 @@ from typing import Iterable
 
 from llcps.analysis.analyse import Analysis, VariantResult
 from llcps.analysis.figure2 import Figure2Row
+from llcps.analysis.generalization import HEADLINE_RATIO, FamilyResult, GeneralizationSummary
 from llcps.analysis.paper import FIGURE2_SCENARIOS, PAPER_CAPTION_FRACTION_REDUCED, PAPER_FIGURE2, PRETRAIN_NAMES
 from llcps.analysis.survival import SurvivalComparison
 from llcps.analysis.versus_random import BASELINE_MODEL, RandomComparison
@@ -173,6 +174,68 @@ def survival_lines(rows: tuple[SurvivalComparison, ...]) -> list[str]:
     return markdown_table(header, body)
 
 
+def _ratio(value: float) -> str:
+    return "n/a" if math.isnan(value) else ("inf" if math.isinf(value) else f"{value:.2f}")
+
+
+def _km(value: float | None, unsolved: int) -> str:
+    return "-" if unsolved == 0 and value is None else ("not reached" if value is None else format_num(value))
+
+
+def _ordering_name(model: str, measure: str, size: int, condition: str, default: bool) -> str:
+    return f"{model} / {measure} / p{size} / {condition}" + (" (default)" if default else "")
+
+
+def generalization_block(rows: tuple[FamilyResult, ...]) -> TableBlock:
+    """Per held-out family and ordering: medians, both ratios, Wilcoxon and log-rank."""
+    header = (
+        "family", "ordering", "n", "median trials", f"median {BASELINE_MODEL}", "median of ratios", "ratio of medians",
+        "Wilcoxon p", "Holm p", "unsolved", f"unsolved {BASELINE_MODEL}", "KM median", f"KM median {BASELINE_MODEL}", "log-rank p",
+    )  # fmt: skip
+    body = tuple(
+        (
+            r.family,
+            _ordering_name(r.model, r.measure, r.pretrain_size, r.condition, r.default),
+            str(r.n),
+            format_num(r.median_model),
+            format_num(r.median_random),
+            _ratio(r.median_ratio),
+            _ratio(r.ratio_of_medians),
+            format_p(r.p_value, r.p_reason),
+            format_p(r.p_holm),
+            str(r.unsolved_model),
+            str(r.unsolved_random),
+            _km(r.km_median_model, r.unsolved_model + r.unsolved_random),
+            _km(r.km_median_random, r.unsolved_model + r.unsolved_random),
+            "-" if r.logrank_p is None and r.unsolved_model + r.unsolved_random == 0 else format_p(
+                math.nan if r.logrank_p is None else r.logrank_p, r.logrank_reason
+            ),
+        )
+        for r in rows
+    )
+    return TableBlock(f"Leave one family out: each ordering against the {BASELINE_MODEL} order", header, body)
+
+
+def generalization_overall_block(rows: tuple[GeneralizationSummary, ...]) -> TableBlock:
+    """Per ordering: the geometric mean of the per-family median ratios and the families above 1."""
+    header = ("ordering", "families", f"geometric mean of the {HEADLINE_RATIO}", f"families worse than {BASELINE_MODEL} (ratio > 1)")
+    body = tuple(
+        (
+            _ordering_name(r.model, r.measure, r.pretrain_size, r.condition, r.default),
+            str(r.families),
+            _ratio(r.geomean_ratio),
+            f"{r.worse_than_random} of {r.families}",
+        )
+        for r in rows
+    )
+    return TableBlock("Over every family", header, body)
+
+
+def block_lines(block: TableBlock) -> list[str]:
+    """A :class:`TableBlock` as markdown lines (without its title)."""
+    return markdown_table(list(block.header), block.body)
+
+
 def variant_lines(rows: tuple[VariantResult, ...], metric: str) -> list[str]:
     labels = list(rows[0].results) if rows else []
     body = [
@@ -192,6 +255,9 @@ def variant_lines(rows: tuple[VariantResult, ...], metric: str) -> list[str]:
 
 __all__ = [
     "TableBlock",
+    "block_lines",
+    "generalization_block",
+    "generalization_overall_block",
     "figure2_blocks",
     "figure2_lines",
     "figure2_long_lines",

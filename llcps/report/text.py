@@ -11,7 +11,6 @@ from llcps.analysis.analyse import Analysis
 from llcps.analysis.paper import PAPER_CAPTION_FRACTION_REDUCED, PAPER_RUNS_PER_CELL
 from llcps.analysis.stats import ALPHA
 from llcps.analysis.versus_random import BASELINE_MODEL
-from llcps.experiments.design import SCENARIO_SEQUENCE
 from llcps.report.formatting import format_pct
 
 #: The summary names at most this many cells in one sentence; the tables have them all.
@@ -70,13 +69,14 @@ def summary_lines(analysis: Analysis) -> list[str]:
             f"cells; the paper's value lies outside our 95% interval in {len(outside)} of {len(compared)} cells "
             f"(the paper averaged {PAPER_RUNS_PER_CELL} runs per cell, without intervals)."
         )
-    control = [r for r in rows if r.scenario == SCENARIO_SEQUENCE[0]]
+    first = (analysis.overview.get("scenarios") or [""])[0]  # solved first: update and reset start it alike
+    control = [r for r in rows if r.scenario == first]
     if control:
         identical = [r for r in control if r.identical]
         sig = [r for r in control if r.significant]
         worst = max(control, key=lambda r: abs(r.pct_change) if not math.isnan(r.pct_change) else -1.0)
         lines.append(
-            f"Control: in {SCENARIO_SEQUENCE[0]} both conditions start from the pretraining set, so they should agree. "
+            f"Control: in {first} both conditions start from the pretraining set, so they should agree. "
             f"{len(identical)} of {len(control)} cells are identical seed by seed, {len(sig)} {'shows' if len(sig) == 1 else 'show'} a difference at p < {ALPHA}, "
             f"the largest change is {format_pct(worst.pct_change)} ({worst.model}/{worst.measure}/p{worst.pretrain_size})."
         )
@@ -154,6 +154,7 @@ def plot_caption(name: str, metric: str) -> str:
         "figure2": "Figure 2 as a heatmap, ours beside the paper's",
         "distribution": f"{metric} per cell and condition",
         "cumulative": "cumulative exploration over the scenario sequence",
+        "generalization": "per held-out family: trials of each ordering over the random order's (log axis)",
     }
     if name.startswith("survival_"):
         return f"Kaplan–Meier curves of trials to resolution, {name.removeprefix('survival_')}"

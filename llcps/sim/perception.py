@@ -30,7 +30,7 @@ from llcps.domain import Body, EntityFeatures, State, fluent
 from llcps.sim import geometry as g
 from llcps.sim.contact import TOUCH_DISTANCE
 from llcps.sim.robot import RAY_MASK
-from llcps.sim.specs import FLOOR, TABLE
+from llcps.sim.specs import FLOOR, FLOOR_HALF_WIDTH, TABLE
 
 if TYPE_CHECKING:
     from llcps.sim.world import World
@@ -46,9 +46,6 @@ REACH_ABOVE = 0.02
 APPROACH_HEIGHT = 0.5
 #: Fraction of an entity's extent by which visibility sample points spread from its centre.
 SAMPLE_SPREAD = 0.35
-#: Half width of the floor a body description gives (m): the floor plane is unbounded,
-#: its visible slab is this wide.
-FLOOR_HALF_WIDTH = 3.0
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,9 @@ from llcps.errors import LlcpsError, UnknownNameError
 #: Names reserved for the built-in fixtures.
 TABLE = "table"
 FLOOR = "floor"
+#: Half width of the floor a body description gives (m): the floor plane is unbounded,
+#: its visible slab is this wide.
+FLOOR_HALF_WIDTH = 3.0
 
 #: Entity kinds.
 KINDS: tuple[str, ...] = ("object", "container")
@@ -220,6 +223,11 @@ class TableSpec(_Record):
     @property
     def floor_z(self) -> float:
         return -self.height
+
+    @property
+    def box(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """The table's world-frame bounding box (lower and upper corner, m)."""
+        return (self.x_min, -self.y_half, self.floor_z), (self.x_max, self.y_half, 0.0)
 
 
 

@@ -1,0 +1,222 @@
+"""Experiments over any scenarios, and the leave-one-family-out preset: its statistics on
+hand-worked numbers, its options, and a tiny grid end to end."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+from scipy import stats as sps
+from typer.testing import CliRunner
+
+from llcps.analysis.generalization import family_results, generalization_summary, geometric_mean, ratio
+from llcps.analysis.results import ResultsTable, table_from_episodes
+from llcps.analysis.stats import holm
+from llcps.cli.main import app
+from llcps.errors import LlcpsError, UnknownNameError
+from llcps.experiments.design import PAPER_SCENARIOS, Cell, Sequence, parse_branch, scenario_rank
+from llcps.experiments.holdout import pretraining_leaks
+from llcps.experiments.presets import PRESETS, resolve_scenarios
+from llcps.experiments.rows import ResultRow
+from llcps.experiments.scheduler import expected_scenarios
+from llcps.experiments.tasks import plan_tasks
+from llcps.jobs.experiment import run_experiment_job
+from llcps.models.measures import MEASURES
+from llcps.models.registry import WORLD_MODELS
+from llcps.scenarios import SCENARIOS
+from llcps.store import Store
+
+DEFAULT = (WORLD_MODELS.default, MEASURES.default)
+
+
+# -- scenario lists --------------------------------------------------------------------------
+def test_paper_presets_keep_the_papers_scenarios_and_generalization_takes_every_shipped_one() -> None:
+    for name in ("paper", "full", "smoke", "vs_random", "lifelong"):
+        assert PRESETS[name].scenario_names() == PAPER_SCENARIOS
+    assert PRESETS["generalization"].scenario_names() == tuple(SCENARIOS)
+    assert len(SCENARIOS) >= 4
+
+
+def test_scenarios_resolve_aliases_and_files_and_refuse_unknown_names(tmp_path: Path) -> None:
+    assert resolve_scenarios(["container", "scenario4"]) == (("scenario2", "scenario2"), ("scenario4", "scenario4"))
+    mine = tmp_path / "mine.toml"
+    text = SCENARIOS["scenario4"].source.path.read_text(encoding="utf-8")  # type: ignore[union-attr]
+    mine.write_text(text.replace('name = "scenario4"', 'name = "mine"').replace('alias = "wall"', ""), encoding="utf-8")
+    assert resolve_scenarios([str(mine)]) == (("mine", str(mine.resolve())),)
+    with pytest.raises(UnknownNameError) as info:
+        resolve_scenarios(["scenario1", "nope"])
+    assert "scenario4 (wall)" in (info.value.hint or "")
+    with pytest.raises(LlcpsError, match="named twice"):
+        resolve_scenarios(["scenario2", "container"])
+
+
+def test_sequences_over_any_scenarios_name_parseable_branches() -> None:
+    preset = PRESETS["generalization"].with_scenarios(["scenario4", "scenario1"])
+    tasks = [t for t in plan_tasks(preset, [3], variants=True)]
+    branches = [b for t in tasks[1:] for b in t.branches]  # type: ignore[union-attr]
+    assert len(branches) == len(set(branches)) == 2 * 2
+    for name in branches:
+        parsed = parse_branch(name)
+        assert parsed is not None and parsed.scenario in ("scenario4", "scenario1") and parsed.sequence.variant == 3
+    others = preset.with_others()
+    assert others.conditions == ("others",)
+    task = plan_tasks(others, [3], variants=True)[1]
+    assert expected_scenarios(task) == {  # type: ignore[arg-type]
+        task.sequence.episode_branch("scenario4"): ["scenario1", "scenario4"],  # type: ignore[union-attr]
+        task.sequence.episode_branch("scenario1"): ["scenario4", "scenario1"],  # type: ignore[union-attr]
+    }
+    with pytest.raises(LlcpsError, match="no reset condition"):
+        replace(PRESETS["lifelong"], conditions=("update",)).with_others()
+
+
+def test_scenario_order_puts_the_papers_first_then_the_rest_by_name() -> None:
+    assert sorted(["zeta", "scenario4", "scenario2", "scenario1"], key=scenario_rank) == ["scenario1", "scenario2", "scenario4", "zeta"]
+
+
+@pytest.mark.parametrize(
+    "argv, error",
+    [
+        (["--scenarios", "scenario1,nope"], "unknown scenario 'nope'"),
+        (["--scenarios", ","], "no scenarios to run"),
+        (["--scenarios", "scenario1,bucket"], "named twice"),
+    ],
+)
+def test_bad_scenarios_are_one_error_line_and_create_no_store(tmp_path: Path, argv: list[str], error: str) -> None:
+    db = tmp_path / "g.db"
+    result = CliRunner().invoke(app, ["--db", str(db), "experiment", "run", "--preset", "generalization", *argv, "--create"])
+    assert result.exit_code == 2, result.output
+    assert error in result.stderr and "hint:" in result.stderr and "Traceback" not in result.output
+    assert not db.exists()
+    if "nope" in error:
+        assert "scenario4 (wall)" in result.stderr
+
+
+# -- the statistics on hand-worked numbers ---------------------------------------------------
+def _row(model: str, family: str, variant: int, trials: int, solved: bool = True, condition: str = "reset") -> ResultRow:
+    measure = DEFAULT[1]
+    seq = Sequence("generalization", Cell(model, measure, 200, condition), variant, variant, (family,))
+    return ResultRow(
+        preset="generalization", model=model, measure=measure, pretrain_size=200, condition=condition, seed=variant,
+        scenario=family, solved=solved, exploration_trials=trials, sim_seconds=1.0, wall_seconds=1.0, episode_id=None,
+        branch=seq.episode_branch(family), variant=variant,
+    )  # fmt: skip
+
+
+@pytest.fixture
+def table() -> ResultsTable:
+    model, rnd = DEFAULT[0], "random"
+    # family a: the model takes 2, 4, 6, 8, 10 trials, random 4, 4, 3, 16, 5 -> ratios .5, 1, 2, .5, 2
+    # family b: the model 9 (unsolved at the budget 9) in variant 0, random resolves everything.
+    a_model, a_random = [2, 4, 6, 8, 10], [4, 4, 3, 16, 5]
+    b_model, b_random = [9, 3, 3, 3, 3], [1, 1, 6, 1, 1]
+    rows = [_row(model, "scenario1", v, t) for v, t in enumerate(a_model)]
+    rows += [_row(rnd, "scenario1", v, t) for v, t in enumerate(a_random)]
+    rows += [_row(model, "scenario2", v, t, solved=v != 0) for v, t in enumerate(b_model)]
+    rows += [_row(rnd, "scenario2", v, t) for v, t in enumerate(b_random)]
+    return ResultsTable(rows)
+
+
+def test_family_ratios_tests_and_overall_on_hand_worked_numbers(table: ResultsTable) -> None:
+    results = family_results(table)
+    a, b = results
+    assert (a.family, b.family) == ("scenario1", "scenario2") and a.default
+    assert (a.median_model, a.median_random) == (6.0, 4.0)
+    assert a.median_ratio == 1.0  # median of .5, 1, 2, .5, 2
+    assert a.ratio_of_medians == 1.5
+    assert b.median_ratio == 3.0 and b.ratio_of_medians == 3.0  # ratios 9, 3, .5, 3, 3
+    p_a = sps.wilcoxon([2, 4, 6, 8, 10], [4, 4, 3, 16, 5]).pvalue
+    p_b = sps.wilcoxon([9, 3, 3, 3, 3], [1, 1, 6, 1, 1]).pvalue
+    assert a.p_value == pytest.approx(p_a) and b.p_value == pytest.approx(p_b)
+    assert [a.p_holm, b.p_holm] == pytest.approx(holm([p_a, p_b]))
+    # Censoring only in family b: Kaplan-Meier and log-rank there, not in a.
+    assert a.logrank_p is None and a.km_median_model is None and a.unsolved_model == 0
+    assert b.unsolved_model == 1 and b.logrank_p is not None and b.km_median_model == 3.0 and b.km_median_random == 1.0
+    (overall,) = generalization_summary(results)
+    assert overall.families == 2 and overall.worse_than_random == 1
+    assert overall.geomean_ratio == pytest.approx(math.sqrt(1.0 * 3.0))
+
+
+def test_ratio_and_geometric_mean_edge_cases() -> None:
+    assert ratio(0, 0) == 1.0 and ratio(3, 0) == math.inf and ratio(3, 6) == 0.5
+    assert geometric_mean([0.5, 2.0]) == pytest.approx(1.0)
+    assert math.isnan(geometric_mean([]))
+    assert geometric_mean([math.inf, 2.0]) == math.inf
+
+
+def test_others_rows_pair_with_random_under_others_only(table: ResultsTable) -> None:
+    others = ResultsTable(replace(r, condition="others", branch=r.branch.replace("-reset-", "-others-")) for r in table)
+    both = family_results(ResultsTable([*table, *others]))
+    assert sorted({r.condition for r in both}) == ["others", "reset"] and len(both) == 4
+
+
+def test_the_report_writes_the_family_table_json_and_plot(table: ResultsTable, tmp_path: Path) -> None:
+    from llcps.report.build import build_report
+
+    paths = build_report(table, tmp_path / "r", resamples=200, html=True)
+    data = json.loads(paths.generalization_json.read_text())  # type: ignore[union-attr]
+    assert [r["family"] for r in data["families"]] == ["scenario1", "scenario2"]
+    assert data["headline_ratio"] == "median of per-variant ratios"
+    assert data["overall"][0]["worse_than_random"] == 1
+    text = paths.report_md.read_text()
+    assert "## Leave one family out" in text and "| scenario2 |" in text
+    assert {p.suffix for p in paths.plots["generalization"]} == {".png", ".svg"}
+    assert 'id="generalization-1"' in paths.report_html.read_text()  # type: ignore[union-attr]
+
+
+# -- a tiny grid end to end ------------------------------------------------------------------
+TINY = replace(PRESETS["generalization"], budget=5, pretrain_pool=8, pretrain_sizes=(8,), scenarios=("scenario1", "scenario4"))
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Store, Path, object]]:
+    out = tmp_path_factory.mktemp("gen")
+    with Store.open(str(out / "g.db"), create=True) as store:
+        result = run_experiment_job(store=store, preset=TINY, variants=range(0, 2), workers=1, out_dir=out / "report")
+        yield store, out, result
+
+
+def test_a_tiny_generalization_grid_reports_every_family(tiny: tuple[Store, Path, object]) -> None:
+    store, out, result = tiny
+    assert result.summary.status == "ok"  # type: ignore[attr-defined]
+    table = table_from_episodes(store.list_episodes()).table
+    assert {(r.scenario, r.model, r.variant) for r in table} == {
+        (f, m, v) for f in ("scenario1", "scenario4") for m in (DEFAULT[0], "random") for v in (0, 1)
+    }
+    assert all(r.condition == "reset" for r in table)
+    families = result.analysis["generalization"]["families"]  # type: ignore[attr-defined]
+    assert [r["family"] for r in families] == ["scenario1", "scenario4"] and all(r["n"] == 2 for r in families)
+    assert "## Leave one family out" in (out / "report" / "report.md").read_text()
+    assert (out / "report" / "generalization.csv").is_file()
+    # The pretraining of each seed holds every family out: no trial of it starts from their scenes.
+    for seed in (0, 1):
+        branch = f"exp-generalization-pretrain-p8-s{seed}"
+        assert len(store.visible_trials(branch)) == 8
+        assert pretraining_leaks(store, branch, ["scenario1", "scenario4"], variants=(0, 1)) == ()
+    # ... and the check would see a leak: an episode's branch holds the scenario's own trials.
+    episode_branch = next(r.branch for r in table if r.model == DEFAULT[0])
+    assert pretraining_leaks(store, episode_branch, ["scenario1"], variants=(0, 1))
+
+
+def test_a_rerun_skips_every_stored_task(tiny: tuple[Store, Path, object]) -> None:
+    store = tiny[0]
+    again = run_experiment_job(store=store, preset=TINY, variants=range(0, 2), workers=1, out_dir=tiny[1] / "again")
+    assert again.summary.skipped == again.summary.tasks and again.summary.done == 0
+
+
+def test_with_others_solves_the_other_families_first_and_a_new_list_is_refused(tiny: tuple[Store, Path, object]) -> None:
+    store, out, _ = tiny
+    result = run_experiment_job(store=store, preset=TINY, variants=range(0, 1), with_others=True, workers=1, out_dir=out / "others")
+    assert result.summary.status == "ok"
+    branch = f"exp-generalization-{DEFAULT[0]}-{DEFAULT[1]}-p8-others-s0-scenario4"
+    assert [e.scenario for e in sorted(store.list_episodes(branch=branch), key=lambda e: e.id)] == ["scenario1", "scenario4"]
+    rows = [r for r in table_from_episodes(store.list_episodes()).table if r.condition == "others"]
+    assert sorted((r.scenario, r.model) for r in rows) == sorted((f, m) for f in ("scenario1", "scenario4") for m in (DEFAULT[0], "random"))
+    families = result.analysis["generalization"]["families"]  # type: ignore[index]
+    assert {(r["family"], r["condition"]) for r in families} >= {("scenario1", "others"), ("scenario4", "others")}
+    # The same branch names over another list would pass for its results: refused before anything runs.
+    with pytest.raises(LlcpsError, match="holds episodes of scenario4, scenario1, not of scenario1 as this run asks"):
+        run_experiment_job(store=store, preset=TINY, scenarios=["scenario1"], variants=range(0, 1), with_others=True, out_dir=out / "x")
