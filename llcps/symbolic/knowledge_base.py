@@ -284,7 +284,7 @@ class KnowledgeBase:
         """Every operator the planner may use, at its cost by experience: the domain's
         actions, then the learned ones."""
         ops = [replace(op, cost=self.cost(op.name)) for op in self.actions]
-        return ops + [op.as_operator(self.cost(op.name)) for op in self.learned]
+        return ops + [op.as_operator(self.cost(op.name), self.is_subtype) for op in self.learned]
 
     def operator(self, name: str) -> Operator:
         """The operator called ``name``.
@@ -321,7 +321,7 @@ class KnowledgeBase:
         """
         types = {**self.constants, **objects}
         readings = [atom, (atom[0], *reversed(atom[1:]))] if atom[0] in SYMMETRIC_PREDICATES else [atom]
-        for op in (*self.actions, *(learned.as_operator(0.0) for learned in self.learned)):
+        for op in (*self.actions, *(learned.as_operator(0.0, self.is_subtype) for learned in self.learned)):
             controller = op.controller
             if controller.action != call.action or controller.params not in (None, call.params):
                 continue
