@@ -209,7 +209,7 @@ def knowledge_cli(
         print_json(result.as_json())
     elif result.path is not None:
         what = f"{result.scenario}'s {result.condition} task" if result.part == "problem" else f"the knowledge base of {result.branch}"
-        message(f"wrote {what} as a PDDL {result.part} ({result.costs} costs) to {result.path}")
+        message(f"wrote {what} as a PDDL {result.part} (costs: {result.costs}) to {result.path}")
     else:
         typer.echo(result.text, nl=False)
 
