@@ -238,6 +238,25 @@ class Workbench:
         ]
         return _frame(rows, ((n, k, ()) for n, (k, _) in OPERATOR_COLUMNS.items()))
 
+    def pddl(
+        self,
+        part: str,
+        *,
+        scenario: str | None = None,
+        condition: str = "novelty",
+        variant: int = 0,
+        costs: str = "integer",
+        branch: str | None = None,
+        out: str | Path | None = None,
+    ) -> str:
+        """Plain PDDL of the branch's K' (``part="domain"``) or of ``scenario``'s task for it
+        (``part="problem"``), as ``llcps inspect knowledge --pddl`` writes it (docs/knowledge.md)."""
+        from llcps.jobs.inspect import export_pddl
+
+        return export_pddl(
+            store=self.store, part=part, branch=branch, scenario=scenario, condition=condition, variant=variant, costs=costs, out=out
+        ).text
+
     def compare_runs(self, a: int, b: int) -> pd.DataFrame:
         """Runs ``a`` and ``b`` side by side: one row per field, with whether they agree."""
         from llcps.jobs.inspect import compare_runs

@@ -7,12 +7,12 @@ import itertools
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from llcps.domain import ControllerParams, TrialSpec, fluent
+from llcps.domain import ACTION_ARITY, ControllerParams, TrialSpec, fluent
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
 from llcps.symbolic.experience import Experience
 from llcps.symbolic.operators import learn_operator
-from llcps.symbolic.planner import plan, plan_cost
+from llcps.symbolic.planner import ground, plan, plan_cost
 from llcps.symbolic.validate import validate
 
 OBJECTS = {"cube": "item", "ball": "item", "tray": "container", "bin": "container"}
@@ -82,3 +82,44 @@ def test_every_plan_passes_the_validator(task: Task, which: int) -> None:
     assert verdict.ok, verdict.reason
     assert verdict.cost == plan_cost(steps)
     assert plan(kb, task) == steps  # deterministic
+
+
+# --------------------------------------------------------------------------- binding
+
+#: Entities a learned operator may be lifted from; two items, two containers and a surface,
+#: so that parameters of one type (or of an ancestor and a descendant) are common.
+LEARNING_OBJECTS = {"block": "item", "can": "item", "bin": "container", "tray": "container", "shelf": "surface"}
+LEARNING_ATOMS = sorted(
+    {fluent(p, e) for p in ("visible", "reachable") for e in LEARNING_OBJECTS}
+    | {fluent(p, a, b) for p in ("touching", "near", "in", "on") for a, b in itertools.permutations(LEARNING_OBJECTS, 2)}
+)
+
+
+@st.composite
+def learned_operators(draw: st.DrawFn) -> tuple[KnowledgeBase, str]:
+    """K' with one operator learned from a random trial; and that operator's name."""
+    action = draw(st.sampled_from(sorted(ACTION_ARITY)))
+    arguments = draw(st.permutations(sorted(LEARNING_OBJECTS)))[: ACTION_ARITY[action]]
+    before = frozenset(draw(st.sets(st.sampled_from(LEARNING_ATOMS), max_size=8)))
+    changed = frozenset(draw(st.sets(st.sampled_from(LEARNING_ATOMS), min_size=1, max_size=4)))
+    after = before ^ changed
+    spec = TrialSpec(action, tuple(arguments), ControllerParams(0.2, 0.3, "left"))
+    op = learn_operator(spec=spec, before=before, after=after, objects=LEARNING_OBJECTS)
+    return KnowledgeBase.default().with_operator(op), op.name
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(learned=learned_operators())
+def test_no_ground_learned_operator_binds_one_entity_to_two_distinct_parameters(learned: tuple[KnowledgeBase, str]) -> None:
+    kb, name = learned
+    (op,) = kb.learned
+    assert op.source_arguments is not None and len(set(op.source_arguments)) == len(op.source_arguments)
+    task = Task(dict(LEARNING_OBJECTS), frozenset())
+    steps = [a for a in ground(kb, task) if a.name == name]
+    assert steps, "the operator grounds at least where it was learned"
+    assert tuple(op.source_arguments) in {a.args for a in steps}
+    for step in steps:
+        assert len(set(step.args)) == len(step.args), f"{step.label} binds one entity twice"
+    # K' read back from its PDDL (which forgets source_arguments) binds the same way.
+    again = KnowledgeBase.from_pddl(kb.to_pddl())
+    assert {a.args for a in ground(again, task) if a.name == name} == {a.args for a in steps}

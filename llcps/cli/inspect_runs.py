@@ -1,18 +1,21 @@
 """``llcps inspect runs``, ``inspect episodes`` and ``inspect knowledge``: what was run,
-where, what it did, and what was learned."""
+where, what it did, and what was learned (also as plain PDDL for other planners)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
 
-from llcps.cli._common import JsonFlag, db_location, print_json, print_table, selected_branch
+from llcps.cli._common import JsonFlag, choice_enum, db_location, message, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
 from llcps.cli.inspect import app
-from llcps.domain import MAX_ID
+from llcps.domain import CONDITIONS, MAX_ID
+from llcps.errors import LlcpsError
 from llcps.jobs import inspect as jobs
-from llcps.jobs.inspect import RunRow
+from llcps.jobs.inspect import PDDL_COSTS, PDDL_PARTS, RunRow
+from llcps.scenarios.variants import MAX_VARIANT
 
 LimitOption = Annotated[int, typer.Option("--limit", min=0, max=MAX_ID, metavar="N", help="Show the newest N; 0 shows all.")]
 AllBranches = Annotated[bool, typer.Option("--all", help="Every branch, not just --branch.")]
@@ -133,20 +136,85 @@ def episodes_cli(
     )
 
 
+PddlPart = choice_enum("PddlPart", PDDL_PARTS)
+PddlCosts = choice_enum("PddlCosts", PDDL_COSTS)
+Condition = choice_enum("KnowledgeCondition", CONDITIONS)
+
+
 @app.command(
     "knowledge",
     epilog=examples(
         "llcps inspect knowledge                 # K' in PDDL",
         "llcps --branch exp inspect knowledge --json",
+        "llcps inspect knowledge --pddl domain --out domain.pddl                        # for other planners",
+        "llcps inspect knowledge --pddl problem --scenario scenario2 --out problem.pddl",
+        "llcps inspect knowledge --pddl problem --scenario scenario2 --condition original --costs none",
     ),
 )
-def knowledge_cli(ctx: typer.Context, as_json: JsonFlag = False) -> None:
+def knowledge_cli(
+    ctx: typer.Context,
+    pddl: Annotated[
+        Optional[PddlPart],  # type: ignore[valid-type]
+        typer.Option(
+            "--pddl",
+            help="Write plain PDDL for other planners instead: K' as a domain, or --scenario's task as a problem for it.",
+            show_default=False,
+        ),
+    ] = None,
+    scenario: Annotated[
+        Optional[str],
+        typer.Option("--scenario", metavar="NAME", help="The scenario whose task --pddl problem writes (a name, alias or file).", show_default=False),
+    ] = None,
+    condition: Annotated[Condition, typer.Option("--condition", help="The condition of --scenario's task.")] = "novelty",  # type: ignore[valid-type, assignment]
+    variant: Annotated[
+        int, typer.Option("--variant", metavar="N", min=0, max=MAX_VARIANT, help="Scene variant of --scenario (0: the canonical scene).")
+    ] = 0,
+    costs: Annotated[
+        PddlCosts,  # type: ignore[valid-type]
+        typer.Option("--costs", help="integer: experience costs x 1000, rounded; none: a cost-free compilation for planners without action costs."),
+    ] = "integer",  # type: ignore[assignment]
+    out: Annotated[
+        Optional[Path],
+        typer.Option("--out", metavar="FILE", help="Write the --pddl file here instead of to stdout.", show_default=False, dir_okay=False),
+    ] = None,
+    as_json: JsonFlag = False,
+) -> None:
     """The branch's knowledge base K' in PDDL, and what experience says of each operator.
 
     Each operator's plan cost is its nominal cost divided by the Laplace-smoothed rate at
     which its executions as plan steps on the branch achieved their effects, relative to
     the rate 1/2 of an operator never executed (docs/knowledge.md). The PDDL shows these costs.
+
+    With --pddl, plain PDDL that other planners (Fast Downward, through unified-planning)
+    accept: integer costs, the learned operators' inequalities, and the contexts where an
+    operator only failed as preconditions; what PDDL cannot say is a comment in the file.
     """
+    if pddl is None:
+        given = [name for name, value in (("--scenario", scenario), ("--out", out)) if value is not None]
+        if given:
+            raise LlcpsError(f"{given[0]} is an option of --pddl", hint="add --pddl domain or --pddl problem")
+        _print_knowledge(ctx, as_json)
+        return
+    result = jobs.export_pddl(
+        store=db_location(ctx),
+        branch=selected_branch(ctx),
+        part=str(pddl.value),
+        scenario=scenario,
+        condition=str(condition.value),  # type: ignore[attr-defined]
+        variant=variant,
+        costs=str(costs.value),  # type: ignore[attr-defined]
+        out=out,
+    )
+    if as_json:
+        print_json(result.as_json())
+    elif result.path is not None:
+        what = f"{result.scenario}'s {result.condition} task" if result.part == "problem" else f"the knowledge base of {result.branch}"
+        message(f"wrote {what} as a PDDL {result.part} (costs: {result.costs}) to {result.path}")
+    else:
+        typer.echo(result.text, nl=False)
+
+
+def _print_knowledge(ctx: typer.Context, as_json: bool) -> None:
     result = jobs.knowledge(store=db_location(ctx), branch=selected_branch(ctx))
     if as_json:
         print_json(result.as_json())

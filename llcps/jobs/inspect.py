@@ -4,6 +4,7 @@ how well the world models predict."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 from llcps.errors import LlcpsError
@@ -188,6 +189,103 @@ def knowledge(*, store: StoreRef, branch: str | None = None) -> KnowledgeResult:
         for op in kb.operators()
     )
     return KnowledgeResult(branch=name, domain=kb.to_pddl(), operators=operators, learned_operators=tuple(learned_operators))
+
+
+#: What ``llcps inspect knowledge --pddl`` writes: K's domain, or a scenario's task for it.
+PDDL_PARTS: tuple[str, ...] = ("domain", "problem")
+
+#: How the PDDL export writes costs (:data:`llcps.symbolic.export.COSTS`, kept here so the
+#: CLI does not load the PDDL library to list them).
+PDDL_COSTS: tuple[str, ...] = ("integer", "none")
+
+
+@dataclass(frozen=True)
+class PddlExport:
+    """A plain PDDL file of a branch's K' (``part`` domain) or of a scenario's task for it
+    (``part`` problem), and where it was written (None: nowhere)."""
+
+    branch: str
+    part: str
+    scenario: str | None
+    condition: str | None
+    variant: int
+    costs: str
+    text: str
+    path: Path | None
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "branch": self.branch,
+            "part": self.part,
+            "scenario": self.scenario,
+            "condition": self.condition,
+            "variant": self.variant,
+            "costs": self.costs,
+            "path": None if self.path is None else str(self.path),
+            "pddl": self.text,
+        }
+
+
+def export_pddl(
+    *,
+    store: StoreRef,
+    part: str,
+    branch: str | None = None,
+    scenario: str | None = None,
+    condition: str = "novelty",
+    variant: int = 0,
+    costs: str = "integer",
+    out: str | Path | None = None,
+) -> PddlExport:
+    """Write the knowledge base K' ``branch`` (None: the current branch) plans with as a plain
+    PDDL domain (``part="domain"``), or ``scenario``'s task in ``condition`` as a problem for
+    it (``part="problem"``), for other planners: integer costs (experience costs x 1000) or
+    none, learned operators' inequalities and context bans as preconditions, and what PDDL
+    cannot say in a comment (docs/knowledge.md). Writes ``out`` when given.
+
+    Raises:
+        LlcpsError: an unknown part, cost compilation, scenario or condition; a problem
+            without a scenario; an unwritable ``out``. Checked before the store opens.
+    """
+    from llcps.cps.branch_knowledge import load_knowledge
+    from llcps.outputs import check_output_file
+    from llcps.scenarios import CONDITIONS, get_scenario
+    from llcps.scenarios.variants import check_variant
+    from llcps.symbolic.export import export_domain, export_problem
+
+    if part not in PDDL_PARTS:
+        raise LlcpsError(f"unknown PDDL part {part!r}", hint=f"choose one of: {', '.join(PDDL_PARTS)}")
+    if costs not in PDDL_COSTS:
+        raise LlcpsError(f"unknown cost compilation {costs!r}", hint=f"choose one of: {', '.join(PDDL_COSTS)}")
+    if condition not in CONDITIONS:
+        raise LlcpsError(f"unknown condition {condition!r}", hint=f"choose one of: {', '.join(CONDITIONS)}")
+    check_variant(variant)
+    if part == "problem" and scenario is None:
+        raise LlcpsError("a PDDL problem needs a scenario", hint="e.g. `llcps inspect knowledge --pddl problem --scenario scenario2`")
+    spec = get_scenario(scenario) if scenario is not None else None
+    path = check_output_file(out, what="--out") if out is not None else None
+    with opened(store) as s:
+        name = s.resolve_branch(branch).name
+        kb = load_knowledge(s, name)
+    if part == "domain":
+        text = export_domain(kb, costs=costs)
+    else:
+        from llcps.cps.scene_task import perceived_task  # the simulator loads only for a problem
+
+        assert spec is not None
+        text = export_problem(kb, perceived_task(spec, condition=condition, variant=variant), costs=costs)
+    if path is not None:
+        path.write_text(text, encoding="utf-8")
+    return PddlExport(
+        branch=name,
+        part=part,
+        scenario=None if spec is None else spec.name,
+        condition=condition if part == "problem" else None,
+        variant=variant,
+        costs=costs,
+        text=text,
+        path=path,
+    )
 
 
 def inspect_model(

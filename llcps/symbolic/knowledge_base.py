@@ -20,8 +20,9 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field, replace
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Iterable, Mapping, Sequence
 
+from pddl.action import Action
 from pddl.core import Domain
 from pddl.exceptions import PDDLValidationError
 from pddl.logic.functions import NumericFunction
@@ -284,7 +285,7 @@ class KnowledgeBase:
         """Every operator the planner may use, at its cost by experience: the domain's
         actions, then the learned ones."""
         ops = [replace(op, cost=self.cost(op.name)) for op in self.actions]
-        return ops + [op.as_operator(self.cost(op.name)) for op in self.learned]
+        return ops + [op.as_operator(self.cost(op.name), self.is_subtype) for op in self.learned]
 
     def operator(self, name: str) -> Operator:
         """The operator called ``name``.
@@ -321,7 +322,7 @@ class KnowledgeBase:
         """
         types = {**self.constants, **objects}
         readings = [atom, (atom[0], *reversed(atom[1:]))] if atom[0] in SYMMETRIC_PREDICATES else [atom]
-        for op in (*self.actions, *(learned.as_operator(0.0) for learned in self.learned)):
+        for op in (*self.actions, *(learned.as_operator(0.0, self.is_subtype) for learned in self.learned)):
             controller = op.controller
             if controller.action != call.action or controller.params not in (None, call.params):
                 continue
@@ -351,8 +352,16 @@ class KnowledgeBase:
 
     # ------------------------------------------------------------------ PDDL
 
-    def to_domain(self) -> Domain:
-        """K as a `pddl` library domain (type-checked by the library)."""
+    def to_domain(self, *, actions: Sequence[Action] | None = None, requirements: Iterable[str] = REQUIREMENTS) -> Domain:
+        """K as a `pddl` library domain (type-checked by the library).
+
+        Args:
+            actions: the actions as written (default: every operator at its cost by
+                experience in every context); the PDDL export writes its own.
+            requirements: the requirements to declare; without ``action-costs`` the
+                domain declares no ``total-cost`` function.
+        """
+        requirements = tuple(requirements)
         constants = self.constants
         predicates = [
             Predicate(name, *(Variable(v[1:], [t]) for v, t in params)) for name, params in self.predicate_signatures
@@ -360,12 +369,12 @@ class KnowledgeBase:
         try:
             return Domain(
                 self.name,
-                requirements={Requirements(r) for r in REQUIREMENTS},
+                requirements={Requirements(r) for r in requirements},
                 types=dict(self.type_parents),
                 constants=[Constant(c, t) for c, t in self.constant_types],
                 predicates=predicates,
-                functions={NumericFunction(TOTAL_COST): "number"},
-                actions=[operator_to_pddl(op, constants) for op in self.operators()],
+                functions={NumericFunction(TOTAL_COST): "number"} if "action-costs" in requirements else None,
+                actions=[operator_to_pddl(op, constants) for op in self.operators()] if actions is None else list(actions),
             )
         except (PDDLValidationError, ValueError, AssertionError) as exc:
             raise LlcpsError(f"the knowledge base is not a valid PDDL domain: {exc}") from exc

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Iterable, Mapping, Sequence
+from typing import Callable, Iterable, Mapping, Sequence
 
 from pddl.action import Action
 from pddl.logic.base import And, Formula, Not
@@ -243,12 +243,21 @@ def _number(value: float) -> int | float:
     return int(value) if float(value).is_integer() else float(value)
 
 
-def operator_to_pddl(op: Operator, constant_types: Mapping[str, str] | None = None) -> Action:
+def operator_to_pddl(
+    op: Operator,
+    constant_types: Mapping[str, str] | None = None,
+    *,
+    costs: bool = True,
+    extra_precondition: Callable[[Callable[[Fluent], Formula]], Sequence[Formula]] | None = None,
+) -> Action:
     """Render an operator as a `pddl` library action.
 
     Args:
         op: the operator.
         constant_types: types of the domain constants the operator mentions (for type tags).
+        costs: whether the effect increases ``total-cost`` (False: a cost-free action).
+        extra_precondition: more conjuncts for the precondition, built from the operator's
+            lifted fluents with the function it is given (used by the PDDL export).
     """
     constant_types = constant_types or {}
     variables = {v: Variable(v[1:], [t]) for v, t in op.parameters}
@@ -273,9 +282,12 @@ def operator_to_pddl(op: Operator, constant_types: Mapping[str, str] | None = No
 
     precondition = [atom(a) for a in sort_fluents(op.preconditions)]
     precondition += [Not(atom(a)) for a in sort_fluents(op.negative_preconditions)]
+    if extra_precondition is not None:
+        precondition += extra_precondition(atom)
     effect: list[Formula] = [atom(a) for a in both_orderings(op.add)]
     effect += [Not(atom(a)) for a in both_orderings(op.delete)]
-    effect.append(Increase(NumericFunction(TOTAL_COST), NumericValue(_number(op.cost))))
+    if costs:
+        effect.append(Increase(NumericFunction(TOTAL_COST), NumericValue(_number(op.cost))))
     return Action(
         op.name,
         parameters=[variables[v] for v, _ in op.parameters],

@@ -18,11 +18,11 @@ from __future__ import annotations
 import itertools
 import re
 from dataclasses import fields, dataclass, replace
-from typing import Collection, Mapping, Sequence
+from typing import Callable, Collection, Mapping, Sequence
 
 from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, TrialSpec, fluent
 from llcps.errors import LlcpsError
-from llcps.symbolic.pddl_domain import default_constants, default_predicates
+from llcps.symbolic.pddl_domain import default_constants, default_is_subtype, default_predicates
 from llcps.symbolic.lifted import (
     EQUALITY,
     Controller,
@@ -120,6 +120,8 @@ class LearnedOperator:
     source_arguments: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
+        if any(a[0] == EQUALITY for a in self.preconditions | self.negative_preconditions):
+            raise ValueError(f"{self.name}: equality tests are derived from the parameters, not stored")
         self.as_operator(1.0)  # validates names, variables and the controller binding
         if self.source_arguments is not None and len(self.source_arguments) != len(self.parameters):
             raise ValueError(f"{self.name}: source_arguments {self.source_arguments} do not match parameters {self.parameters}")
@@ -128,13 +130,36 @@ class LearnedOperator:
     def variables(self) -> tuple[str, ...]:
         return tuple(v for v, _ in self.parameters)
 
-    def as_operator(self, cost: float) -> Operator:
-        """The operator the planner searches with, at ``cost`` (set by the knowledge base)."""
+    def distinct(self, is_subtype: Callable[[str, str], bool] | None = None) -> frozenset[Fluent]:
+        """``(= ?a ?b)`` tests the operator must fail: one per pair of parameters that one
+        object could fill (their types are compatible) but that were distinct entities
+        where the operator was learned.
+
+        A trial on (block bin can) says nothing of (can bin can): without these tests the
+        planner could bind one entity to two parameters. Pairs bound to one entity when
+        the operator was learned (``source_arguments``) are left free.
+
+        Args:
+            is_subtype: the knowledge base's type order (default: the naive domain's).
+        """
+        is_subtype = is_subtype or default_is_subtype
+        sources = self.source_arguments
+        tests = set()
+        for (i, (a, ta)), (j, (b, tb)) in itertools.combinations(enumerate(self.parameters), 2):
+            if sources is not None and sources[i] == sources[j]:
+                continue
+            if is_subtype(ta, tb) or is_subtype(tb, ta):
+                tests.add((EQUALITY, a, b))
+        return frozenset(tests)
+
+    def as_operator(self, cost: float, is_subtype: Callable[[str, str], bool] | None = None) -> Operator:
+        """The operator the planner searches with, at ``cost`` (set by the knowledge base),
+        with the inequalities of :meth:`distinct` among its negative preconditions."""
         return Operator(
             name=self.name,
             parameters=self.parameters,
             preconditions=self.preconditions,
-            negative_preconditions=self.negative_preconditions,
+            negative_preconditions=self.negative_preconditions | self.distinct(is_subtype),
             add=self.add,
             delete=self.delete,
             cost=cost,
@@ -169,11 +194,12 @@ class LearnedOperator:
 
         The controller's physical arguments are the first parameters, as many as the
         controller takes. ``cost`` is accepted for PDDL round trips and ignored: a learned
-        operator's cost comes from the knowledge base's experience.
+        operator's cost comes from the knowledge base's experience. Inequalities between
+        parameters (``(not (= ?a ?b))``) are dropped: :meth:`distinct` derives them again.
 
         Raises:
             LlcpsError: the name does not encode controller settings, there are too few
-                parameters, or a precondition is an equality test.
+                parameters, or a precondition is another equality test.
         """
         parsed = parse_operator_name(name)
         if parsed is None:
@@ -181,8 +207,13 @@ class LearnedOperator:
                 f"action {name} is neither one of {ACTIONS} nor a learned operator",
                 hint="learned operators are named like push_front_r0p2_m0p3",
             )
+        variables = {v for v, _ in parameters}
+        inequalities = {a for a in negative_preconditions if a[0] == EQUALITY and set(a[1:]) <= variables}
+        negative_preconditions = frozenset(negative_preconditions - inequalities)
         if any(a[0] == EQUALITY for a in preconditions | negative_preconditions):
-            raise LlcpsError(f"learned operator {name} has an equality test", hint="learned operators test fluents only")
+            raise LlcpsError(
+                f"learned operator {name} has an equality test", hint="learned operators test fluents and parameter inequalities only"
+            )
         action, params, _ = parsed
         arity = ACTION_ARITY[action]
         if len(parameters) < arity:
@@ -232,9 +263,11 @@ class LearnedOperator:
             negative_preconditions=self.negative_preconditions & other.negative_preconditions,
         )
 
-    def to_pddl(self, constant_types: Mapping[str, str] | None = None, *, cost: float = 1.0) -> str:
+    def to_pddl(
+        self, constant_types: Mapping[str, str] | None = None, *, cost: float = 1.0, is_subtype: Callable[[str, str], bool] | None = None
+    ) -> str:
         """The operator as a PDDL ``:action`` (rendered by the `pddl` library)."""
-        return str(operator_to_pddl(self.as_operator(cost), constant_types))
+        return str(operator_to_pddl(self.as_operator(cost, is_subtype), constant_types))
 
     def controller_spec(self, binding: Mapping[str, str] | Sequence[str]) -> TrialSpec:
         """The trial that executes this operator on concrete objects.

@@ -73,8 +73,28 @@ def default_constants() -> dict[str, str]:
     return dict(constant_types(_default_domain()))
 
 
+@functools.cache
+def _default_parents() -> dict[str, str | None]:
+    return dict(type_parents(_default_domain()))
+
+
+def default_is_subtype(kind: str, ancestor: str) -> bool:
+    """Whether an object of type ``kind`` may fill a parameter of type ``ancestor`` in the
+    naive domain (what ``KnowledgeBase.default().is_subtype`` says)."""
+    parents = _default_parents()
+    seen: set[str] = set()
+    current: str | None = kind
+    while current is not None and current not in seen:
+        if current == ancestor:
+            return True
+        seen.add(current)
+        current = parents.get(current)
+    return ancestor == "object"
+
+
 def clear_caches() -> None:
     _default_domain.cache_clear()
+    _default_parents.cache_clear()
 
 
 def default_predicates() -> dict[str, int]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterable, Mapping
 
-from pddl.core import Problem
+from pddl.core import Domain, Problem
 from pddl.logic.base import And, Formula, Not
 from pddl.logic.functions import EqualTo as NumericEqualTo
 from pddl.logic.functions import Metric, NumericFunction, NumericValue
@@ -116,8 +116,14 @@ class Task:
                 if unknown:
                     raise LlcpsError(f"{what}: ({' '.join(atom)}) mentions unknown object(s) {', '.join(unknown)}", hint="list every entity in Task.objects")
 
-    def to_problem(self, kb: KnowledgeBase) -> Problem:
-        """T as a `pddl` library problem against K's domain (type-checked by the library)."""
+    def to_problem(self, kb: KnowledgeBase, *, domain: Domain | None = None, costs: bool = True) -> Problem:
+        """T as a `pddl` library problem against K's domain (type-checked by the library).
+
+        Args:
+            kb: the knowledge base K.
+            domain: K's domain as written (default: :meth:`KnowledgeBase.to_domain`).
+            costs: whether the problem sets and minimizes ``total-cost``.
+        """
         self.check(kb)
         everything = self.all_objects(kb)
         constants = kb.constants
@@ -128,14 +134,15 @@ class Task:
         goal: list[Formula] = [atom(a) for a in sort_fluents(self.goal_pos)]
         goal += [Not(atom(a)) for a in sort_fluents(self.goal_neg)]
         init: list[Formula] = [atom(a) for a in _symmetric_closure(self.init)]
-        init.append(NumericEqualTo(NumericFunction(TOTAL_COST), NumericValue(0)))
+        if costs:
+            init.append(NumericEqualTo(NumericFunction(TOTAL_COST), NumericValue(0)))
         return Problem(
             self.name,
-            domain=kb.to_domain(),
+            domain=kb.to_domain() if domain is None else domain,
             objects=[Constant(o, t) for o, t in sorted(self.objects.items()) if o not in constants],
             init=init,
             goal=And(*goal),
-            metric=Metric(NumericFunction(TOTAL_COST), Metric.MINIMIZE),
+            metric=Metric(NumericFunction(TOTAL_COST), Metric.MINIMIZE) if costs else None,
         )
 
     def problem_pddl(self, kb: KnowledgeBase) -> str:
