@@ -11,7 +11,9 @@
 
 Everything runs in throwaway in-memory stores: nothing reaches the experience store.
 A *quick* check stops each sweep at the first resolving candidate: it decides every
-property, but counts resolving candidates only as "at least one".
+property, but counts resolving candidates only as "at least one". A check of some
+positions of the default order (``positions``, 0 among them) decides every property too:
+where the first resolving candidate is known, the first candidate and that one suffice.
 """
 
 from __future__ import annotations
@@ -115,7 +117,15 @@ class CheckReport:
         }
 
 
-def check_variant(scenario: Scenario, ref: str, variant: int, *, quick: bool, progress: ProgressCallback | None = None) -> VariantCheck:
+def check_variant(
+    scenario: Scenario,
+    ref: str,
+    variant: int,
+    *,
+    quick: bool,
+    positions: Sequence[int] | None = None,
+    progress: ProgressCallback | None = None,
+) -> VariantCheck:
     """Check the four properties of one variant (see the module docstring).
 
     Args:
@@ -123,8 +133,12 @@ def check_variant(scenario: Scenario, ref: str, variant: int, *, quick: bool, pr
         ref: what :func:`llcps.scenarios.get_scenario` finds it by (its name, or its file).
         variant: the scene variant.
         quick: stop the sweep at the first resolving candidate.
+        positions: sweep only these 0-based positions of the default order (None: all).
+            Position 0 must be among them: ``ranking_matters`` asks whether it resolves.
         progress: see :data:`ProgressCallback`.
     """
+    if positions is not None and 0 not in positions:
+        raise ValueError("positions must include 0, the first candidate of the default order")
     if progress is not None:
         progress(f"variant {variant}: original condition", 0, 0)
     with Store.open("sqlite://", create=True) as store:
@@ -135,7 +149,7 @@ def check_variant(scenario: Scenario, ref: str, variant: int, *, quick: bool, pr
             progress(f"variant {variant}: novelty sweep", done, total)
 
     swept(0, 0)
-    found = sweep(scenario, variant=variant, stop_at_first=quick, progress=swept)
+    found = sweep(scenario, variant=variant, stop_at_first=quick, positions=positions, progress=swept)
     report = VariantCheck(variant, original.status, original.exploration_trials, found, quick)
     judge(report)
     return report
