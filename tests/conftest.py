@@ -196,7 +196,7 @@ def _budget_summary(terminalreporter: Any, wall: float) -> None:
     over = [nodeid for nodeid in ranked if share(nodeid) > TEST_BUDGET_SHARE]
     for nodeid in over:
         write(
-            f"warning: {nodeid} took {seconds[nodeid]:.0f} s, over a third of its {timeouts[nodeid]:.0f} s timeout: "
+            f"warning: {nodeid} took {seconds[nodeid]:.1f} s, over a third of its {timeouts[nodeid]:.0f} s timeout: "
             "a loaded machine can push it past; split it (see tests/test_scenarios.py)",
             yellow=True,
         )
