@@ -4,6 +4,10 @@ Store tests run on SQLite and on PostgreSQL: ``store_url`` (and ``store``, ``db_
 are parametrized over both backends. The PostgreSQL cases need a server named by
 ``LLCPS_TEST_POSTGRES_URL``; ``make test`` starts a throwaway one (tests/services.sh).
 Without it they are skipped with that reason, and the summary line counts them.
+
+The run ends with its budget (``pytest_terminal_summary``): the wall time against the
+25 minutes ``make test`` may take, and the slowest tests as a share of their timeout,
+with a warning for any test over a third of it (split it: see tests/test_scenarios.py).
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+import time
 import uuid
 from collections import Counter
 from pathlib import Path
@@ -122,12 +127,93 @@ def new_trial():  # noqa: ANN201 - returns the sample_trial factory
     return sample_trial
 
 
+#: The wall time ``make test`` may take on an idle machine, in minutes.
+SUITE_BUDGET_MINUTES = 25
+#: The share of its timeout no test should need: what a loaded machine multiplies stays under it.
+TEST_BUDGET_SHARE = 1 / 3
+#: Tests listed in the budget, slowest first.
+BUDGET_LISTED = 5
+_STARTED = pytest.StashKey[float]()
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    session.config.stash[_STARTED] = time.perf_counter()
+
+
+def _timeout(item: pytest.Item) -> float | None:
+    """The item's timeout under pytest-timeout: its ``timeout`` mark, else --timeout, else the ini's."""
+    marker = item.get_closest_marker("timeout")
+    if marker is not None:
+        value = marker.args[0] if marker.args else marker.kwargs.get("timeout")
+    else:
+        value = item.config.getoption("timeout", None) or item.config.getini("timeout")
+    try:
+        seconds = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
+    return seconds if seconds > 0 else None
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Each test carries its timeout to its reports (from an xdist worker too), for the budget."""
+    for item in items:
+        item.user_properties.append(("timeout", _timeout(item)))
+
+
 def pytest_report_header(config: pytest.Config) -> str:
     return f"postgresql: {'tests run at ' + POSTGRES_URL if POSTGRES_SKIP is None else 'tests skipped: ' + POSTGRES_SKIP}"
 
 
-def pytest_terminal_summary(terminalreporter: Any) -> None:
-    """Say how many PostgreSQL cases ran, so a log shows they were not skipped."""
+def pytest_terminal_summary(terminalreporter: Any, config: pytest.Config) -> None:
+    """Say how many PostgreSQL cases ran, so a log shows they were not skipped; then the budget."""
+    _postgres_summary(terminalreporter)
+    if not hasattr(config, "workerinput") and _STARTED in config.stash:
+        _budget_summary(terminalreporter, time.perf_counter() - config.stash[_STARTED])
+
+
+def _budget_summary(terminalreporter: Any, wall: float) -> None:
+    """The run's wall time against :data:`SUITE_BUDGET_MINUTES`, and the tests that took the
+    largest share of their timeout (setup, call and teardown together, as pytest-timeout
+    counts them); a warning, never a failure, for each over :data:`TEST_BUDGET_SHARE`."""
+    seconds: dict[str, float] = {}
+    timeouts: dict[str, float | None] = {}
+    for reports in terminalreporter.stats.values():
+        for report in reports:
+            if isinstance(report, pytest.TestReport):
+                seconds[report.nodeid] = seconds.get(report.nodeid, 0.0) + report.duration
+                timeouts[report.nodeid] = dict(report.user_properties).get("timeout")
+    if not seconds:
+        return
+    budget = SUITE_BUDGET_MINUTES * 60
+    write = terminalreporter.write_line
+    terminalreporter.write_sep("-", "test budget")
+    write(
+        f"wall time {wall / 60:.1f} min of the {SUITE_BUDGET_MINUTES} min `make test` may take on an idle machine "
+        f"({wall / budget:.0%}); {len(seconds)} tests",
+        yellow=wall > budget,
+    )
+
+    def share(nodeid: str) -> float:
+        limit = timeouts[nodeid]
+        return seconds[nodeid] / limit if limit else 0.0
+
+    ranked = sorted(seconds, key=lambda nodeid: (share(nodeid), seconds[nodeid]), reverse=True)
+    for nodeid in ranked[:BUDGET_LISTED]:
+        limit = timeouts[nodeid]
+        of = f"{share(nodeid):4.0%} of its {limit:.0f} s timeout" if limit else "no timeout"
+        write(f"{seconds[nodeid]:7.1f} s  {of}  {nodeid}")
+    over = [nodeid for nodeid in ranked if share(nodeid) > TEST_BUDGET_SHARE]
+    for nodeid in over:
+        write(
+            f"warning: {nodeid} took {seconds[nodeid]:.1f} s, over a third of its {timeouts[nodeid]:.0f} s timeout: "
+            "a loaded machine can push it past; split it (see tests/test_scenarios.py)",
+            yellow=True,
+        )
+    if wall > budget:
+        write(f"warning: the run took {wall / 60:.1f} min, over the {SUITE_BUDGET_MINUTES} min budget", yellow=True)
+
+
+def _postgres_summary(terminalreporter: Any) -> None:
     counts: Counter[str] = Counter()
     for outcome in ("passed", "failed", "error", "skipped"):
         for report in terminalreporter.stats.get(outcome, []):

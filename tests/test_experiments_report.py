@@ -318,6 +318,7 @@ def test_build_report_writes_every_file(tmp_path) -> None:  # noqa: ANN001
     assert "are identical seed by seed" in md
 
 
+@pytest.mark.slow
 def test_report_is_reproducible(tmp_path) -> None:  # noqa: ANN001
     table = synthetic_table(seeds=3)
     first = build_report(table, tmp_path / "a", resamples=500, seed=4)

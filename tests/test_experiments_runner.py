@@ -216,6 +216,7 @@ def test_smoke_grid_runs_end_to_end_into_a_well_formed_table(reference: tuple[St
     assert len(store.list_episodes(branch=update.branch_name)) == 3
 
 
+@pytest.mark.slow
 def test_results_are_identical_with_two_workers(reference: tuple[Store, Any], tmp_path: Path) -> None:
     ref_store, _ = reference
     with Store.open(str(tmp_path / "two.db"), create=True) as store:
@@ -238,6 +239,7 @@ def test_a_grid_run_into_postgresql_stores_what_sqlite_does(reference: tuple[Sto
         assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke", [0]))
 
 
+@pytest.mark.slow
 def test_results_are_identical_without_the_cache_and_from_a_warm_one(reference: tuple[Store, Any], tmp_path: Path) -> None:
     """The reference ran with a cold cache; --no-cache and a later run on a warm cache give the same store."""
     ref_store, ref_summary = reference
@@ -267,6 +269,7 @@ def test_results_are_identical_without_the_cache_and_from_a_warm_one(reference: 
         assert summary.cache["hits"] == len(episode_trials)
 
 
+@pytest.mark.slow
 def test_ray_engine_gives_the_local_engine_results(reference: tuple[Store, Any], tmp_path: Path) -> None:
     pytest.importorskip("ray", reason="Ray is not installed (pip install 'llcps[ray]')")
     ref_store, _ = reference
@@ -309,6 +312,7 @@ def _llcps(*args: str) -> list[str]:
     return [sys.executable, "-m", "llcps.cli.main", *args]
 
 
+@pytest.mark.slow
 def test_kill_9_then_run_again_completes_without_duplicates(reference: tuple[Store, Any], tmp_path: Path) -> None:
     ref_store, _ = reference
     db, out = tmp_path / "killed.db", tmp_path / "report"
@@ -491,6 +495,7 @@ def test_a_twin_past_its_first_scenario_no_longer_holds_back_the_other(store: St
     assert engine.submitted[:2] == [tasks[0].label, tasks[1].label]
 
 
+@pytest.mark.slow
 def test_a_local_worker_reports_the_end_of_a_sequences_first_scenario(reference: tuple[Store, Any]) -> None:
     """What the scheduler reads to let a twin start: reported by a real pool worker."""
     from dataclasses import replace
@@ -569,6 +574,7 @@ def test_variant_sequences_name_their_variant_and_parse_back() -> None:
     assert [t.seed for t in tasks if isinstance(t, PretrainTask)] == [5]
 
 
+@pytest.mark.slow
 def test_a_variants_run_solves_each_seed_in_its_variant_and_reports_it(reference: tuple[Store, Any], tmp_path: Path) -> None:
     """`--variants 1:2` next to the canonical seeds 0-1: seed 1 solves variant 1; reports keep the scenes apart."""
     db = tmp_path / "v.db"

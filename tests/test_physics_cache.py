@@ -209,6 +209,7 @@ def _row(t):
     return (t.source, t.spec, t.features, t.outcome, t.solved, t.sim_steps, t.seed)
 
 
+@pytest.mark.slow
 def test_episodes_record_the_same_trials_without_the_cache_from_a_cold_one_and_from_a_warm_one(tmp_path: Path) -> None:
     with Store.open(str(tmp_path / "cache.db"), create=True) as store:
         cache = pc.StorePhysicsCache(store.engine)

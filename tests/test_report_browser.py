@@ -109,6 +109,7 @@ def open_in_chromium(page: Path, profile: Path, screenshot: Path | None = None) 
         driver.quit()
 
 
+@pytest.mark.slow
 @needs_chromium
 def test_html_report_renders_in_headless_chromium(tmp_path: Path) -> None:
     pytest.importorskip("selenium", reason="selenium is a dev dependency: pip install -e '.[dev]'")

@@ -11,6 +11,7 @@ from typing import Any, Callable
 
 import pytest
 import tomli_w
+from scenario_sweeps import FIRST_RESOLVING
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
@@ -313,9 +314,33 @@ def test_check_judges_each_property_with_a_reason(case: dict[str, Any], failed: 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_check_passes_on_every_shipped_scenario_at_variant_zero(name: str) -> None:
+    """The four properties, with the sweep at the first candidate of the default order and at
+    the recorded first resolving one (tests/test_scenarios.py sweeps every position between)."""
+    from llcps.cps.check import PROPERTIES, check_variant
+
+    first = FIRST_RESOLVING.get(name)
+    assert first is not None, f"record the first resolving position of {name} in tests/fixtures/scenario_sweeps.py"
+    report = check_variant(SCENARIOS[name], name, 0, quick=False, positions=(0, first - 1))
+    assert report.properties == {p: True for p in PROPERTIES}, report.reasons
+    assert report.sweep.tried == 2 and report.sweep.first_position == first
+
+
+@pytest.mark.slow
+def test_check_command_passes_on_a_shipped_scenario() -> None:
+    """`scenario check --quick` end to end, on the scenario whose first resolving candidate comes soonest."""
+    name = min((n for n in NAMES if n in FIRST_RESOLVING), key=FIRST_RESOLVING.__getitem__)
     result = runner.invoke(app, ["scenario", "check", name, "--quick", "--json"])
     assert result.exit_code == 0, result.stdout + result.stderr
     report = json.loads(result.stdout)
     assert report["passed"] and report["shares"] == {p: 1.0 for p in report["properties"]}
-    candidates = report["variants"][0]["candidates"]
+    (variant,) = report["variants"]
+    candidates = variant["candidates"]
     assert f"variant 0: {candidates} candidates x ~" in result.stderr and "the sweep may take" in result.stderr  # said up front
+    assert variant["first_position"] == variant["tried"] == FIRST_RESOLVING[name]
+
+
+def test_a_check_of_some_positions_must_include_the_first() -> None:
+    from llcps.cps.check import check_variant
+
+    with pytest.raises(ValueError, match="include 0"):
+        check_variant(SCENARIOS[NAMES[0]], NAMES[0], 0, quick=False, positions=(5, 9))

@@ -1,7 +1,12 @@
 """Every scenario tells its story in real physics: K's nominal plan works in the original
 condition; in the novelty it fails and so does every plan repair, so that only creative
 problem solving can reach the goal; and some candidate of the exploration space resolves
-the novelty, though not the first one of the default order (so ranking matters)."""
+the novelty, though not the first one of the default order (so ranking matters).
+
+The sweep up to the first resolving candidate is split into slices of the default order
+(tests/fixtures/scenario_sweeps.py), a test each, so that no test comes near its timeout:
+together the slices find that no candidate before the recorded position resolves and the
+one at it does."""
 
 from __future__ import annotations
 
@@ -9,12 +14,20 @@ from pathlib import Path
 
 import pytest
 
+from scenario_sweeps import FIRST_RESOLVING, slices
+
+from llcps.cps.candidates import candidate_space_size
 from llcps.cps.episode import SolveConfig, solve
 from llcps.cps.sweep import sweep
 from llcps.scenarios import SCENARIOS, get_scenario
 from llcps.store import Store
 
 SCENARIO_NAMES = tuple(SCENARIOS)
+SLICES = [
+    pytest.param(name, part, id=f"{name}-{part.start}:{part.stop}")
+    for name in SCENARIO_NAMES
+    for part in slices(FIRST_RESOLVING.get(name, 1))
+]
 
 
 def test_aliases_resolve_to_the_same_scenario() -> None:
@@ -48,12 +61,28 @@ def test_novelty_defeats_the_plan_and_every_plan_repair(tmp_path: Path, name: st
     assert result.plan_trials == sum(len(repair["plan"]) for repair in result.plan_repairs) + len(result.plan)
 
 
+def test_every_scenario_records_where_its_first_resolving_candidate_sits() -> None:
+    missing = set(SCENARIO_NAMES) - set(FIRST_RESOLVING)
+    assert not missing, f"record the first resolving position of {sorted(missing)} in tests/fixtures/scenario_sweeps.py"
+    assert all(1 < first <= candidate_space_size(name) for name, first in FIRST_RESOLVING.items() if name in SCENARIOS)
+
+
+def test_slices_cover_every_position_before_the_first_resolving_one_once() -> None:
+    for first in (1, 59, 60, 61, 432):
+        parts = slices(first)
+        assert [i for part in parts for i in part] == list(range(first))
+        assert max(len(part) for part in parts) <= 60
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", SCENARIO_NAMES)
-def test_sweep_finds_a_resolving_candidate_after_the_first(name: str) -> None:
-    """Candidates from the state a_f was executed in, in the default order, until one resolves."""
-    found = sweep(get_scenario(name), stop_at_first=True)
+@pytest.mark.parametrize(("name", "part"), SLICES)
+def test_sweep_finds_a_resolving_candidate_after_the_first(name: str, part: range) -> None:
+    """Candidates from the state a_f was executed in, one slice of the default order: none
+    resolves before the recorded first resolving position, and the one at it does."""
+    first = FIRST_RESOLVING.get(name)
+    assert first is not None, f"record the first resolving position of {name} in tests/fixtures/scenario_sweeps.py"
+    found = sweep(get_scenario(name), positions=part)
     assert found.failed_action is not None
-    assert found.resolving, "no candidate resolves the novelty"
-    assert found.first_position > 1, "the first candidate of the default order resolves the novelty: ranking would not matter"
-    assert found.tried == found.first_position < found.candidates
+    assert found.candidates == candidate_space_size(name) and found.tried == len(part)
+    expected = [first - 1] if first - 1 in part else []
+    assert found.resolving == expected, f"resolving positions (1-based) {[i + 1 for i in found.resolving]}, recorded first {first}"

@@ -15,7 +15,9 @@ property, but counts resolving candidates only as "at least one".
 
 A full sweep runs every candidate in physics (minutes per variant), so a check can say
 how long each sweep may take once its first :data:`TIMED_TRIALS` candidates are timed
-(:class:`SweepEstimate`).
+(:class:`SweepEstimate`). A check of some positions of the default order
+(``positions``, 0 among them) decides every property too: where the first resolving
+candidate is known, the first candidate and that one suffice.
 """
 
 from __future__ import annotations
@@ -170,6 +172,7 @@ def check_variant(
     variant: int,
     *,
     quick: bool,
+    positions: Sequence[int] | None = None,
     progress: ProgressCallback | None = None,
     estimate: EstimateCallback | None = None,
 ) -> VariantCheck:
@@ -180,9 +183,13 @@ def check_variant(
         ref: what :func:`llcps.scenarios.get_scenario` finds it by (its name, or its file).
         variant: the scene variant.
         quick: stop the sweep at the first resolving candidate.
+        positions: sweep only these 0-based positions of the default order (None: all).
+            Position 0 must be among them: ``ranking_matters`` asks whether it resolves.
         progress: see :data:`ProgressCallback`.
         estimate: see :data:`EstimateCallback`.
     """
+    if positions is not None and 0 not in positions:
+        raise ValueError("positions must include 0, the first candidate of the default order")
     if progress is not None:
         progress(f"variant {variant}: original condition", 0, 0)
     with Store.open("sqlite://", create=True) as store:
@@ -201,7 +208,7 @@ def check_variant(
             estimate(SweepEstimate(variant, total, done, (time.perf_counter() - first_trial[0]) / done, quick))
 
     swept(0, 0)
-    found = sweep(scenario, variant=variant, stop_at_first=quick, progress=swept)
+    found = sweep(scenario, variant=variant, stop_at_first=quick, positions=positions, progress=swept)
     report = VariantCheck(variant, original.status, original.exploration_trials, found, quick)
     judge(report)
     return report

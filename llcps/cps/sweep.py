@@ -6,12 +6,17 @@ as an episode would, then every candidate of the exploration space is tried, in 
 default order, from the state the failed step a_f was executed in, and judged by the
 agent's own definition of a resolution. Everything runs in real physics and is recorded
 in a throwaway in-memory store, so nothing reaches the experience store.
+
+Every candidate starts from the same stored snapshot and a re-plan counts no operator
+execution, so what a candidate gives does not depend on which candidates were tried
+before it: a sweep of some positions of the default order (``positions``) finds for them
+what the whole sweep finds. The test suite splits the sweeps into slices that way.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Sequence
 
 from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
 from llcps.cps.candidates import enumerate_candidates
@@ -33,8 +38,9 @@ class Sweep:
         plan: K's first plan; ``plan_repairs`` the repairs tried, as in ``solve --json``.
         failed_action: the step a_f whose alternatives were swept (None: the plan worked).
         candidates: the size of the candidate space.
-        tried: candidates executed (all of them unless the sweep stopped at the first).
-        resolving: 0-based positions, in the default order, of the candidates that resolve.
+        tried: candidates executed (all of them unless the sweep stopped at the first, or
+            swept only some positions).
+        resolving: 0-based positions, in the default order, of the tried candidates that resolve.
         labels: the resolving candidates, as text.
     """
 
@@ -49,7 +55,7 @@ class Sweep:
 
     @property
     def first_position(self) -> int | None:
-        """1-based position of the first resolving candidate in the default order."""
+        """1-based position in the default order of the first resolving candidate tried."""
         return self.resolving[0] + 1 if self.resolving else None
 
     def as_json(self) -> dict[str, object]:
@@ -71,6 +77,7 @@ def sweep(
     *,
     variant: int = 0,
     stop_at_first: bool = False,
+    positions: Sequence[int] | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> Sweep:
     """Sweep ``scenario``'s novelty (see the module docstring).
@@ -79,8 +86,10 @@ def sweep(
         scenario: the scenario (its novelty condition is swept).
         variant: the scene variant (0: the canonical scene).
         stop_at_first: stop at the first resolving candidate.
+        positions: try only the candidates at these 0-based positions of the default order,
+            in increasing order (None: every candidate).
         progress: called as ``progress(done, total)`` once the candidates are known (done 0)
-            and after every candidate.
+            and after every candidate (total: the candidates to try).
     """
     config = SolveConfig(scenario=scenario.name, variant=variant)
     found = Sweep(scenario=scenario.name)
@@ -101,16 +110,20 @@ def sweep(
                 failed=executor.controller_call(failure.step), entities=executor.kinds, grid=config.candidate_grid(scenario)
             )
             found.candidates = len(candidates)
+            chosen = range(len(candidates)) if positions is None else sorted(set(positions))
+            if chosen and not 0 <= chosen[0] <= chosen[-1] < len(candidates):
+                raise ValueError(f"positions must lie in 0..{len(candidates) - 1}, the {len(candidates)} candidates")
             if progress is not None:
-                progress(0, len(candidates))
-            for index, spec in enumerate(candidates):
+                progress(0, len(chosen))
+            for done, index in enumerate(chosen, start=1):
+                spec = candidates[index]
                 trial, _ = executor.execute(spec, source="exploration", snapshot_id=failure.snapshot, start=failure.snapshot)
                 found.tried += 1
                 if resolves(executor, experience, kb, trial, failure):
                     found.resolving.append(index)
                     found.labels.append(spec.label)
                 if progress is not None:
-                    progress(index + 1, len(candidates))
+                    progress(done, len(chosen))
                 if stop_at_first and found.resolving:
                     break
         finally:
