@@ -33,7 +33,7 @@ from llcps.analysis.results import ResultsTable, group_rows
 from llcps.analysis.stats import holm, paired_wilcoxon
 from llcps.analysis.survival import budget, kaplan_meier, logrank
 from llcps.experiments.design import OWN_BRANCH_CONDITIONS, RANDOM_ORDER_MODEL, condition_rank, scenario_rank
-from llcps.experiments.presets import measure_rank, model_rank
+from llcps.experiments.presets import PRESETS, measure_rank, model_rank
 from llcps.models.measures import MEASURES
 from llcps.models.registry import WORLD_MODELS
 
@@ -122,9 +122,10 @@ def family_results(table: ResultsTable, *, metric: str = "exploration_trials") -
 
     Only conditions that solve each family on its own branch count (``reset``,
     ``others``); the random order's rows are matched on family, condition and
-    pretraining size (the random order ignores its measure). Empty without random rows.
+    pretraining size (the random order ignores its measure). Empty without random rows,
+    and for rows of presets that do not hold their scenarios out as families.
     """
-    rows = [r for r in table if r.condition in OWN_BRANCH_CONDITIONS]
+    rows = [r for r in table if r.condition in OWN_BRANCH_CONDITIONS and r.preset in PRESETS and PRESETS[r.preset].per_family]
     random = group_rows((r for r in rows if r.model == RANDOM_ORDER_MODEL), lambda r: (r.scenario, r.condition, r.pretrain_size))
     groups = group_rows(
         (r for r in rows if r.model != RANDOM_ORDER_MODEL), lambda r: (r.model, r.measure, r.pretrain_size, r.condition, r.scenario)

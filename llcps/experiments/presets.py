@@ -60,6 +60,9 @@ class Preset:
     #: The scenarios each sequence solves, in order: names, aliases or paths of .toml
     #: files; None: every shipped scenario (:data:`llcps.scenarios.SCENARIOS`).
     scenarios: tuple[str, ...] | None = PAPER_SCENARIOS
+    #: Whether each scenario is a held-out novelty family, reported against the random
+    #: order family by family (leave one family out).
+    per_family: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.refit_every, bool) or not isinstance(self.refit_every, int) or self.refit_every < 1:
@@ -269,6 +272,7 @@ PRESETS: Registry[Preset] = Registry(
             budget=WHOLE_SPACE,
             pretrain_pool=200,
             scenarios=None,
+            per_family=True,
         ),
         # Small enough for the test suite: 8 random interactions per seed, 5 exploration trials per episode.
         "smoke": Preset("smoke", ("nb",), ("most-changes",), (4,), default_seeds=2, budget=5, pretrain_pool=8),
