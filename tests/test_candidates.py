@@ -3,7 +3,8 @@ from __future__ import annotations
 import pytest
 
 from llcps.cps.candidates import Grid, argument_tuples, enumerate_candidates, focused_count
-from llcps.domain import ACTION_ARITY, ACTIONS, ControllerParams, TrialSpec
+from llcps.domain import ACTION_ARITY, ACTIONS, ControllerParams
+from llcps.trial_records import TrialSpec
 
 ENTITIES = {"cube": "object", "ball": "object", "bucket": "container"}
 

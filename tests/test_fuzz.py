@@ -25,7 +25,8 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
-from llcps.domain import ControllerParams, TrialSpec, fluent
+from llcps.domain import ControllerParams, fluent
+from llcps.trial_records import TrialSpec
 from llcps.models.persistence import fit_or_load
 from llcps.cps.pretraining import pretrain
 from llcps.store import Store

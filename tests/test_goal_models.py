@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from llcps.cps.candidates import enumerate_candidates
-from llcps.domain import ACTIONS, Body, ControllerParams, EntityFeatures, Outcome, TrialChange, TrialRecord, TrialSpec, fluent
+from llcps.domain import ACTIONS, ControllerParams, EntityFeatures, fluent
+from llcps.trial_records import Body, Outcome, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
 from llcps.models import WORLD_MODELS, load_world_model, make_world_model
 from llcps.models.goal import family_scale, joint_probability

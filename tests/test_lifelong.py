@@ -11,7 +11,8 @@ import pytest
 
 from llcps.cps.candidates import candidate_space_size
 from llcps.cps.episode import SolveConfig, solve
-from llcps.domain import TrialSpec, ControllerParams, fluent
+from llcps.domain import ControllerParams, fluent
+from llcps.trial_records import TrialSpec
 from llcps.cps.pretraining import pretrain
 from llcps.scenarios import SCENARIOS
 from llcps.store import Store

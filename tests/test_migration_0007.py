@@ -11,7 +11,8 @@ from pathlib import Path
 
 from make_store_fixtures import make as make_store
 
-from llcps.domain import ControllerParams, EntityFeatures, Outcome, TrialSpec
+from llcps.domain import ControllerParams, EntityFeatures
+from llcps.trial_records import Outcome, TrialSpec
 from llcps.sim.cache import encode_result
 from llcps.sim.trial import TrialResult
 from llcps.store import Store, migrations

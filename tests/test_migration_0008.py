@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from make_store_fixtures import make as make_store
 
-from llcps.domain import Body
+from llcps.trial_records import Body
 from llcps.errors import LlcpsError
 from llcps.store import Store, migrations
 from llcps.store import backends

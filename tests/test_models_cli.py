@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
-from llcps.domain import TrialRecord
+from llcps.trial_records import TrialRecord
 from llcps.models import MEASURES, PAPER_MODELS
 from llcps.models.synthetic import synthetic_trials
 from llcps.scenarios import SCENARIOS

@@ -8,7 +8,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, SHAPES, ControllerParams, TrialSpec, WorldModelInput
+from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, SHAPES, ControllerParams
+from llcps.trial_records import TrialSpec, WorldModelInput
 from llcps.errors import LlcpsError
 from llcps.models.features import (
     CONTINUOUS_COLUMNS,

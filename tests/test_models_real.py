@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from llcps.domain import ACTIONS, TrialRecord
+from llcps.domain import ACTIONS
+from llcps.trial_records import TrialRecord
 from llcps.models import PAPER_MODELS, WORLD_MODELS, load_world_model, make_world_model
 from llcps.models.evaluation import evaluate
 

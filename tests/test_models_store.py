@@ -8,7 +8,7 @@ import logging
 import numpy as np
 import pytest
 
-from llcps.domain import TrialRecord
+from llcps.trial_records import TrialRecord
 from llcps.errors import LlcpsError
 from llcps.models import fit_or_load
 from llcps.models.synthetic import synthetic_trials

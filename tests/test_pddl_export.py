@@ -14,7 +14,8 @@ from unified_planning.plans import ActionInstance, SequentialPlan
 import llcps
 from llcps.cli.main import app
 from llcps.cps.scene_task import perceived_task
-from llcps.domain import CONDITIONS, ControllerParams, TrialSpec, fluent
+from llcps.domain import CONDITIONS, ControllerParams, fluent
+from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError
 from llcps.scenarios import SCENARIOS
 from llcps.symbolic.experience import Experience

@@ -13,7 +13,8 @@ import pytest
 from sqlalchemy import update
 
 from llcps.cps.episode import SolveConfig, solve
-from llcps.domain import Body, ControllerParams, EntityFeatures, Outcome, TrialSpec
+from llcps.domain import ControllerParams, EntityFeatures
+from llcps.trial_records import Body, Outcome, TrialSpec
 from llcps.cps.pretraining import pretrain
 from llcps.sim.cache import decode_result, encode_result, trial_key
 from llcps.sim.trial import TrialResult

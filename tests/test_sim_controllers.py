@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, TrialSpec, fluent
+from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, fluent
+from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.sim.controllers import CONTROLLERS, PUSH_DIRECTION, SIDE, execute
 from llcps.sim.builders import inside, open_box, solid

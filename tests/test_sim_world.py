@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from llcps.domain import ControllerParams, TrialSpec
+from llcps.domain import ControllerParams
+from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.sim.builders import bucket, edge_lip, inside, open_box, shelf, solid, stacked
 from llcps.sim.specs import EntitySpec

@@ -12,7 +12,8 @@ from conftest import BACKENDS, new_store_url
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from llcps.domain import TRIAL_SOURCES, Body, TrialChange, TrialRecord, fluent
+from llcps.domain import TRIAL_SOURCES, fluent
+from llcps.trial_records import Body, TrialChange, TrialRecord
 from llcps.errors import LlcpsError, StoreError, UnknownNameError
 from llcps.store import MAIN_BRANCH, Store, validate_branch_name
 

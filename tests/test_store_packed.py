@@ -12,7 +12,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from llcps.domain import BODY_KINDS, SHAPES, Body, EntityFeatures
+from llcps.domain import BODY_KINDS, SHAPES, EntityFeatures
+from llcps.trial_records import Body
 from llcps.errors import LlcpsError
 from llcps.store.trial_changes import pack_atoms, pack_bodies, unpack_atoms, unpack_bodies
 from llcps.store.trials import pack_features, unpack_features

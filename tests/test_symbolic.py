@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 from pddl.parser.domain import DomainParser
 
-from llcps.domain import ACTIONS, ControllerParams, TrialSpec, fluent
+from llcps.domain import ACTIONS, ControllerParams, fluent
+from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.pddl_domain import default_domain_pddl
@@ -385,7 +386,8 @@ def test_a_tipping_trial_replaces_the_removal_where_the_removal_failed():
 def test_same_knowledge_compares_operators_with_different_parameters_without_error() -> None:
     """Two operators learned with the same settings but over different entities are different
     knowledge (regression: comparing them used to build an invalid operator and crash)."""
-    from llcps.domain import ControllerParams, TrialSpec, fluent
+    from llcps.domain import ControllerParams, fluent
+    from llcps.trial_records import TrialSpec
     from llcps.symbolic.operators import learn_operator
 
     spec = TrialSpec("place_in_container", ("cube", "bucket"), ControllerParams(1.0, 0.15, "right"))

@@ -8,7 +8,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from llcps.domain import ACTION_ARITY, ControllerParams, TrialSpec, fluent
+from llcps.domain import ACTION_ARITY, ControllerParams, fluent
+from llcps.trial_records import TrialSpec
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
 from llcps.symbolic.experience import Experience

@@ -15,7 +15,8 @@ from typer.testing import CliRunner
 
 from llcps.cli.main import app
 from llcps.cps.backfill import backfill_changes
-from llcps.domain import Body, TrialChange, fluent
+from llcps.domain import fluent
+from llcps.trial_records import Body, TrialChange
 from llcps.errors import LlcpsError, StoreError
 from llcps.experiments.transfer import export_branches, import_payload
 from llcps.cps.pretraining import random_trial

@@ -11,7 +11,8 @@ from functools import cached_property, partial
 from pathlib import Path
 
 from llcps.bench.core import Clock, Figure, Progress, figure, say
-from llcps.domain import Body, EntityFeatures, TrialChange, TrialRecord
+from llcps.domain import EntityFeatures
+from llcps.trial_records import Body, TrialChange, TrialRecord
 from llcps.models.synthetic import synthetic_changes, synthetic_trials
 from llcps.store import Store
 

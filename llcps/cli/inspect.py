@@ -8,7 +8,8 @@ import typer
 
 from llcps.cli._common import JsonFlag, choice_enum, db_location, new_app, print_json, print_table, selected_branch
 from llcps.cli._conventions import examples
-from llcps.domain import MAX_ID, OUTCOME_NAMES, TRIAL_SOURCES, TrialRecord
+from llcps.domain import MAX_ID, OUTCOME_NAMES, TRIAL_SOURCES
+from llcps.trial_records import TrialRecord
 from llcps.jobs.inspect import list_trials
 
 app = new_app(

@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
-from llcps.domain import TrialChange
+from llcps.trial_records import TrialChange
 from llcps.errors import LlcpsError
 from llcps.store import Store
 

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 from typing import Iterator, Mapping, Sequence
 
 from llcps.cps.discretization import EXPLORATION_ORIENTATIONS, MOVEMENT_MAGNITUDES, RATES
-from llcps.domain import ACTIONS, ControllerParams, TrialSpec
+from llcps.domain import ACTIONS, ControllerParams
+from llcps.trial_records import TrialSpec
 
 #: Entity kinds an argument slot accepts, per action.
 ARGUMENT_KINDS: Mapping[str, tuple[frozenset[str], ...]] = {

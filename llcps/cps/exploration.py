@@ -32,7 +32,8 @@ import numpy as np
 
 from llcps.cps.candidates import Grid, enumerate_candidates
 from llcps.cps.outcomes import desired_outcome
-from llcps.domain import Body, Fluent, State, TrialSpec, WorldModelInput, format_fluent
+from llcps.domain import Fluent, State, format_fluent
+from llcps.trial_records import Body, TrialSpec, WorldModelInput
 from llcps.models.base import WorldModel
 from llcps.models.goal import joint_probability
 from llcps.models.measures import get_measure, rank

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
-from llcps.domain import TrialRecord
+from llcps.trial_records import TrialRecord
 from llcps.errors import LlcpsError
 from llcps.store import Store
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from llcps.cps.branch_knowledge import BranchExperience
 from llcps.cps.executor import TrialExecutor
 from llcps.cps.plan_execution import Failure
-from llcps.domain import TrialRecord, TrialSpec
+from llcps.trial_records import TrialRecord, TrialSpec
 from llcps.sim.trial import TrialResult
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.operators import learn_operator

@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 import numpy as np
 
-from llcps.domain import ACTIONS, MAX_PRETRAIN_TRIALS, OUTCOME_NAMES, TrialRecord, check_seed
+from llcps.domain import ACTIONS, MAX_PRETRAIN_TRIALS, OUTCOME_NAMES, check_seed
+from llcps.trial_records import TrialRecord
 from llcps.errors import LlcpsError
 from llcps.sim.motion import control_loop_rate
 from llcps.sim.sampler import sample_interaction

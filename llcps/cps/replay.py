@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from llcps.cps.film import PHASES, ProgressCallback, Shot, reenact
-from llcps.domain import Fluent, Outcome, TrialRecord
+from llcps.domain import Fluent
+from llcps.trial_records import Outcome, TrialRecord
 from llcps.errors import LlcpsError
 from llcps.outputs import GIF_SUFFIXES, check_output_file
 from llcps.scenarios import get_scenario, is_path

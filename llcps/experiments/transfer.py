@@ -28,7 +28,7 @@ from typing import Any, Mapping, Sequence
 
 from sqlalchemy import insert, select, update
 
-from llcps.domain import TrialChange, TrialRecord
+from llcps.trial_records import TrialChange, TrialRecord
 from llcps.errors import StoreError
 from llcps.store import EpisodeRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
 from llcps.store.trial_changes import change_row

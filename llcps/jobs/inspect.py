@@ -12,7 +12,7 @@ from llcps.jobs._common import Progress, StoreRef, opened
 
 if TYPE_CHECKING:
     from llcps.cps.inspection import ModelInspection
-    from llcps.domain import TrialRecord
+    from llcps.trial_records import TrialRecord
     from llcps.store import EpisodeRecord, OperatorRecord, RunRecord
     from llcps.store.runs import RunComparison
 

@@ -13,7 +13,8 @@ from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from llcps.domain import OUTCOME_NAMES, TrialChange, TrialRecord, WorldModelInput
+from llcps.domain import OUTCOME_NAMES
+from llcps.trial_records import TrialChange, TrialRecord, WorldModelInput
 from llcps.errors import LlcpsError
 
 from llcps.models.artifact import pack_arrays, unpack_arrays

@@ -14,7 +14,7 @@ from sklearn.ensemble import RandomForestClassifier
 from scipy.special import expit
 from sklearn.linear_model import LogisticRegression
 
-from llcps.domain import TrialRecord, WorldModelInput
+from llcps.trial_records import TrialRecord, WorldModelInput
 from llcps.models.artifact import array
 from llcps.models.base import WorldModel
 from llcps.models.features import encode_inputs

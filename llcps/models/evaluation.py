@@ -18,7 +18,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from sklearn.metrics import accuracy_score, f1_score, roc_auc_score
 
-from llcps.domain import OUTCOME_NAMES, TrialChange, TrialRecord
+from llcps.domain import OUTCOME_NAMES
+from llcps.trial_records import TrialChange, TrialRecord
 from llcps.errors import LlcpsError
 from llcps.models.features import outcome_matrix
 from llcps.models.goal import examples_of

@@ -25,7 +25,8 @@ import numpy as np
 from sklearn import config_context
 from sklearn.preprocessing import StandardScaler
 
-from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, EntityFeatures, StoredFeatures, TrialRecord, TrialSpec
+from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, EntityFeatures
+from llcps.trial_records import StoredFeatures, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
 
 #: The category a missing argument slot takes (second slot of a one-argument action).
@@ -88,8 +89,8 @@ _SKLEARN_CONFIG = {"assume_finite": True, "skip_parameter_validation": True}
 
 class ModelInput(Protocol):
     """Anything with a trial spec and its arguments' features: a candidate
-    (:class:`~llcps.domain.WorldModelInput`) or a stored trial
-    (:class:`~llcps.domain.TrialRecord`)."""
+    (:class:`~llcps.trial_records.WorldModelInput`) or a stored trial
+    (:class:`~llcps.trial_records.TrialRecord`)."""
 
     @property
     def spec(self) -> TrialSpec: ...

@@ -70,7 +70,7 @@ from typing import Any, Callable, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from llcps.domain import TrialChange, TrialRecord
+from llcps.trial_records import TrialChange, TrialRecord
 from llcps.models.artifact import array
 from llcps.models.measures import GOAL_FLOOR
 from llcps.models.families import (

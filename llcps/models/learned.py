@@ -14,7 +14,8 @@ from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from llcps.domain import OUTCOME_NAMES, TrialRecord, WorldModelInput
+from llcps.domain import OUTCOME_NAMES
+from llcps.trial_records import TrialRecord, WorldModelInput
 from llcps.models.artifact import array
 from llcps.models.base import WorldModel, label_prior, learnable_labels
 from llcps.models.features import (

@@ -31,7 +31,8 @@ from dataclasses import asdict, dataclass
 from importlib import resources
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
-from llcps.domain import StoredFeatures, TrialChange, TrialRecord, check_seed
+from llcps.domain import check_seed
+from llcps.trial_records import StoredFeatures, TrialChange, TrialRecord
 from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import WorldModelEntry, world_model_entry

@@ -20,7 +20,7 @@ encoded without names:
 
 A *fixture* (support, ground, wall) is placed at its point nearest to argument 1, an entity
 at its centre. Training examples come from stored trials with their
-:class:`~llcps.domain.TrialChange`: every ground atom over the trial's scene is one
+:class:`~llcps.trial_records.TrialChange`: every ground atom over the trial's scene is one
 example, labelled by whether the trial changed it the way its truth before allowed
 (:func:`trial_examples`). All changed atoms and all atoms touching an argument are kept;
 of the rest (bodies the trial did not act on, nearly always unchanged) a bounded,
@@ -37,22 +37,8 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from llcps.domain import (
-    ACTIONS,
-    BODY_KINDS,
-    ORIENTATIONS,
-    PREDICATES,
-    PUSH_DIRECTION,
-    SHAPES,
-    SIDE,
-    SYMMETRIC_PREDICATES,
-    Body,
-    Fluent,
-    TrialChange,
-    TrialRecord,
-    TrialSpec,
-    format_fluent,
-)
+from llcps.domain import ACTIONS, BODY_KINDS, ORIENTATIONS, PREDICATES, PUSH_DIRECTION, SHAPES, SIDE, SYMMETRIC_PREDICATES, Fluent, format_fluent
+from llcps.trial_records import Body, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
 
 #: What a body of an atom is for a candidate: one of its arguments, or else its kind.

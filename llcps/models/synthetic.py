@@ -12,24 +12,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from llcps.domain import (
-    ACTION_ARITY,
-    ACTIONS,
-    COLORS,
-    GROUND_KIND,
-    SUPPORT_KIND,
-    ORIENTATIONS,
-    OUTCOME_NAMES,
-    SHAPES,
-    Body,
-    ControllerParams,
-    EntityFeatures,
-    Outcome,
-    TrialChange,
-    TrialRecord,
-    TrialSpec,
-    fluent,
-)
+from llcps.domain import ACTION_ARITY, ACTIONS, COLORS, GROUND_KIND, SUPPORT_KIND, ORIENTATIONS, OUTCOME_NAMES, SHAPES, ControllerParams, EntityFeatures, fluent
+from llcps.trial_records import Body, Outcome, TrialChange, TrialRecord, TrialSpec
 from llcps.sim.specs import FLOOR, FLOOR_HALF_WIDTH, TABLE, TableSpec
 
 

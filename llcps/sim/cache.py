@@ -24,7 +24,8 @@ import math
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
 
-from llcps.domain import ACTIONS, ORIENTATIONS, Body, ControllerParams, EntityFeatures, Outcome, TrialSpec
+from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, EntityFeatures
+from llcps.trial_records import Body, Outcome, TrialSpec
 from llcps.sim.result import TrialResult
 
 if TYPE_CHECKING:

@@ -19,7 +19,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Callable, Mapping
 
-from llcps.domain import ACTIONS, PUSH_DIRECTION, SIDE, TrialSpec
+from llcps.domain import ACTIONS, PUSH_DIRECTION, SIDE
+from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError
 from llcps.sim import geometry as g
 from llcps.sim.contact import TOUCH_DISTANCE, in_contact

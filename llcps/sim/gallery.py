@@ -12,7 +12,8 @@ import sys
 from pathlib import Path
 from typing import Mapping
 
-from llcps.domain import ACTIONS, ControllerParams, TrialSpec
+from llcps.domain import ACTIONS, ControllerParams
+from llcps.trial_records import TrialSpec
 from llcps.sim.builders import bucket, inside, open_box, solid
 from llcps.sim.render import CLOSE, GifRecorder, render_png
 from llcps.sim.trial import TrialResult, run_trial

@@ -26,7 +26,8 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from llcps.domain import Body, EntityFeatures, State, fluent
+from llcps.domain import EntityFeatures, State, fluent
+from llcps.trial_records import Body
 from llcps.sim import geometry as g
 from llcps.sim.contact import TOUCH_DISTANCE
 from llcps.sim.robot import RAY_MASK

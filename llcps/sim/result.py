@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from llcps.domain import Body, EntityFeatures, Outcome, State, TrialChange, TrialSpec, WorldModelInput
+from llcps.domain import EntityFeatures, State
+from llcps.trial_records import Body, Outcome, TrialChange, TrialSpec, WorldModelInput
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, ControllerParams, TrialSpec
+from llcps.domain import ACTIONS, COLORS, ORIENTATIONS, ControllerParams
+from llcps.trial_records import TrialSpec
 from llcps.sim.builders import bucket, inside, open_box, shelf, solid, stacked
 from llcps.sim.specs import EntitySpec, FixtureSpec, TableSpec
 from llcps.sim.geometry import in_interior

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 
-from llcps.domain import Outcome, TrialSpec
+from llcps.trial_records import Outcome, TrialSpec
 from llcps.sim.controllers import DEFAULT_MAX_STEPS, execute
 from llcps.sim.perception import entity_features, perceive, scene_bodies
 from llcps.sim.result import TrialResult

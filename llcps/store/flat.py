@@ -16,7 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
-from llcps.domain import ACTION_ARITY, ACTIONS, COLORS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, TRIAL_SOURCES, EntityFeatures, StoredFeatures, TrialRecord
+from llcps.domain import ACTION_ARITY, ACTIONS, COLORS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, TRIAL_SOURCES, EntityFeatures
+from llcps.trial_records import StoredFeatures, TrialRecord
 
 if TYPE_CHECKING:
     from llcps.store.store import Store

@@ -1,6 +1,6 @@
 """Frozen dataclasses the store hands out and takes in.
 
-Trials come back as :class:`llcps.domain.TrialRecord`; everything else the store
+Trials come back as :class:`llcps.trial_records.TrialRecord`; everything else the store
 knows (branches, runs, episodes, snapshots, operators, world models) has its own
 small record here. None of them holds a database session.
 """

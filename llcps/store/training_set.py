@@ -14,7 +14,8 @@ from typing import Any, Callable, Sequence
 from sqlalchemy import ColumnElement, Connection, func, insert, select
 from sqlalchemy.exc import IntegrityError
 
-from llcps.domain import TrialChange, TrialRecord, check_id
+from llcps.domain import check_id
+from llcps.trial_records import TrialChange, TrialRecord
 from llcps.errors import LlcpsError, StoreError
 from llcps.store import backends, visibility
 from llcps.store.branches import BranchQueries

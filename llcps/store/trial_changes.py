@@ -1,4 +1,4 @@
-"""Trial changes between :class:`~llcps.domain.TrialChange` and ``trial_changes`` rows.
+"""Trial changes between :class:`~llcps.trial_records.TrialChange` and ``trial_changes`` rows.
 
 A change is kept in its own table keyed by trial id (the trials table and its hot
 decoder stay as they are), its states and its scene each packed into one binary
@@ -17,7 +17,8 @@ from dataclasses import fields
 from functools import lru_cache
 from typing import Any, Iterable, Sequence
 
-from llcps.domain import BODY_KINDS, CHANGE_SOURCES, SHAPES, Body, Fluent, TrialChange, fluent
+from llcps.domain import BODY_KINDS, CHANGE_SOURCES, SHAPES, Fluent, fluent
+from llcps.trial_records import Body, TrialChange
 from llcps.errors import LlcpsError
 from llcps.store.tables import TrialChangeRow
 

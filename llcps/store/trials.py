@@ -1,11 +1,11 @@
-"""Trials between :class:`~llcps.domain.TrialRecord` and table rows.
+"""Trials between :class:`~llcps.trial_records.TrialRecord` and table rows.
 
 Reading the lifelong training set is the hot path (every model refit loads it),
 so rows are read with Core selects that skip SQLAlchemy's JSON and datetime
 processing, and the immutable parts of a record that repeat across trials
 (controller settings, entity features, outcomes) are built once per load. A record's
 entity features are held as checked names and numbers
-(:class:`~llcps.domain.StoredFeatures`), which is what the models read; its
+(:class:`~llcps.trial_records.StoredFeatures`), which is what the models read; its
 :class:`~llcps.domain.EntityFeatures` are built when ``features`` is first used.
 
 Rows are untrusted input. Each distinct spec, feature set and outcome is checked
@@ -30,20 +30,8 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 from sqlalchemy import Integer, String, Text, and_, case, cast, type_coerce
 
-from llcps.domain import (
-    ACTIONS,
-    COLORS,
-    ENTITY_NUMBERS,
-    OUTCOME_NAMES,
-    SHAPES,
-    TRIAL_SOURCES,
-    ControllerParams,
-    EntityFeatures,
-    Outcome,
-    StoredFeatures,
-    TrialRecord,
-    TrialSpec,
-)
+from llcps.domain import ACTIONS, COLORS, ENTITY_NUMBERS, OUTCOME_NAMES, SHAPES, TRIAL_SOURCES, ControllerParams, EntityFeatures
+from llcps.trial_records import Outcome, StoredFeatures, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError, StoreError
 from llcps.store.tables import Trial
 

@@ -30,7 +30,8 @@ from pddl.logic.predicates import Predicate
 from pddl.logic.terms import Constant, Variable
 from pddl.requirements import Requirements
 
-from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, State, TrialSpec, fluent
+from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, Fluent, State, fluent
+from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.symbolic.experience import Context, Experience, step_context
 from llcps.symbolic.operators import LearnedOperator, parse_operator_name

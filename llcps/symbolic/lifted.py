@@ -26,7 +26,8 @@ from pddl.logic.functions import Increase, NumericFunction, NumericValue
 from pddl.logic.predicates import EqualTo, Predicate
 from pddl.logic.terms import Constant, Term, Variable
 
-from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, ControllerParams, Fluent, State, TrialSpec, fluent
+from llcps.domain import ACTION_ARITY, ACTIONS, SYMMETRIC_PREDICATES, ControllerParams, Fluent, State, fluent
+from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError
 
 #: The predicate name under which (in)equality tests sit in precondition sets.

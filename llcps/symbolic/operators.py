@@ -20,7 +20,8 @@ import re
 from dataclasses import fields, dataclass, replace
 from typing import Callable, Collection, Mapping, Sequence
 
-from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, TrialSpec, fluent
+from llcps.domain import ACTION_ARITY, ACTIONS, ORIENTATIONS, ControllerParams, Fluent, State, fluent
+from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError
 from llcps.symbolic.pddl_domain import default_constants, default_is_subtype, default_predicates
 from llcps.symbolic.lifted import (
