@@ -423,7 +423,7 @@ def test_report_takes_the_random_baseline_from_another_preset(reference: tuple[S
 @pytest.mark.parametrize(
     "argv, error",
     [
-        (["experiment", "report"], "one of them"),
+        (["experiment", "report"], "no results directory given"),  # and results/paper holds none
         (["experiment", "report", "--from-db", "--preset", "paper"], "no results of preset 'paper'"),
         (["experiment", "run", "--preset", "smoke", "--engine", "local", "--ray-address", "auto"], "--ray-address needs --engine ray"),
     ],
