@@ -97,7 +97,8 @@ def test_restoring_a_snapshot_repeats_a_trial_exactly(world) -> None:
 REPLAY = textwrap.dedent(
     """
     import base64, json, sys
-    from llcps.domain import ControllerParams, TrialSpec
+    from llcps.domain import ControllerParams
+    from llcps.trial_records import TrialSpec
     from llcps.sim.trial import run_trial
     from llcps.sim.world import World
     job = json.load(sys.stdin)
