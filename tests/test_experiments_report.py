@@ -78,7 +78,7 @@ def test_pretraining_branch_is_shared_by_models_and_conditions() -> None:
 @pytest.mark.parametrize(
     "name",
     ["main", "exp-paper", "exp-paper-nb-most-changes-p200-maybe-s3", "exp-paper-nb-most-changes-p200-update-s03",
-     "exp-paper-nb-most-changes-p200-update-s3-scenario2", "exp-paper-nb-most-changes-p200-reset-s3-scenario9",
+     "exp-paper-nb-most-changes-p200-update-s3-scenario2", "exp-paper-nb-most-changes-p200-reset-s3-scenario99",
      "exp-paper-pretrain-p200-s3", "exp-paper-nb--p200-update-s3"],
 )  # fmt: skip
 def test_other_branch_names_do_not_parse(name: str) -> None:
