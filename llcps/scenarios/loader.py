@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 import json
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -23,10 +23,10 @@ from llcps.scenarios.goal import parse_atom
 from llcps.scenarios.file_format import CONDITION_NAMES, EntityModel, ScenarioModel, file_error
 from llcps.scenarios.variants import MAX_ATTEMPTS, Draws, check_variant
 from llcps.sim.builders import bucket, edge_lip, inside, open_box, shelf, solid, stacked
-from llcps.sim.specs import FixtureSpec, SceneSpec, TableSpec
+from llcps.sim.specs import EntitySpec, FixtureSpec, SceneSpec, TableSpec
 
 #: Fields whose value is a number or a range.
-_NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half"})
+_NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half", "friction"})
 #: Fields that list numbers or ranges.
 _LIST_FIELDS = frozenset({"size", "offset"})
 
@@ -167,6 +167,13 @@ class ScenarioSource:
 
 def _entity_spec(m: EntityModel, d: Draws, built: Mapping[str, Any], floor_z: float) -> Any:
     """The spec of one entity, through the same builders hand-written scenes use."""
+    spec = _built_entity(m, d, built, floor_z)
+    if m.friction is None:
+        return spec
+    return EntitySpec(**{**asdict(spec), "friction": d.number(m.friction, f"entities.{m.name}.friction")})
+
+
+def _built_entity(m: EntityModel, d: Draws, built: Mapping[str, Any], floor_z: float) -> Any:
     key = f"entities.{m.name}"
     size = [d.number(v, f"{key}.size[{i}]") for i, v in enumerate(m.size)]
     color = d.choice(m.color, f"{key}.color")

@@ -56,6 +56,8 @@ MAX_EXTENT = 10.0
 MAX_DISTANCE = 100.0
 MAX_MASS = 1000.0
 MAX_NAME = 64
+#: Largest Coulomb friction coefficient a scene may give a body or the table.
+MAX_FRICTION = 10.0
 
 #: Horizontal distances from the base (m) at which the tool reaches top-down onto things
 #: 5-20 cm above the table (measured with :meth:`llcps.sim.robot.Robot.reach_error` in every direction);
@@ -80,6 +82,24 @@ def _number(value: object, what: str, bound: float) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not -bound <= float(value) <= bound:
         raise ValueError(f"{what} must be a number within +-{bound:g}, got {value!r}")
     return float(value)
+
+
+def _friction(value: object, what: str) -> float | None:
+    """None (the default friction) or a coefficient in (0, MAX_FRICTION]."""
+    if value is None:
+        return None
+    number = _number(value, f"{what}'s friction", MAX_FRICTION)
+    if not number > 0:
+        raise ValueError(f"{what}'s friction must be positive, got {value!r}")
+    return number
+
+
+def _without_default_friction(data: dict[str, Any]) -> dict[str, Any]:
+    """A spec's JSON without ``friction`` when it is the default: the scenes written before
+    the field existed keep their exact description (and the trial cache its keys)."""
+    if data.get("friction") is None:
+        data.pop("friction", None)
+    return data
 
 
 def _name(value: object, what: str) -> None:
@@ -114,6 +134,9 @@ class EntitySpec(_Record):
         position: centre of the bounding box in the world frame (m).
         yaw: rotation about +z (rad).
         wall: wall and floor thickness of a container (m); unused for objects.
+        friction: its Coulomb friction coefficient; None: the default of every body
+            (:data:`llcps.sim.bodies.LATERAL_FRICTION`). The engine multiplies the
+            coefficients of two bodies in contact.
     """
 
     name: str
@@ -125,6 +148,7 @@ class EntitySpec(_Record):
     position: tuple[float, float, float]
     yaw: float = 0.0
     wall: float = DEFAULT_WALL
+    friction: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "size", _triple(self.size, "size", MAX_EXTENT))
@@ -132,6 +156,7 @@ class EntitySpec(_Record):
         object.__setattr__(self, "yaw", _number(self.yaw, "yaw", MAX_DISTANCE))
         object.__setattr__(self, "mass", _number(self.mass, "mass", MAX_MASS))
         object.__setattr__(self, "wall", _number(self.wall, "wall", MAX_EXTENT))
+        object.__setattr__(self, "friction", _friction(self.friction, f"entity {self.name!r}"))
         _name(self.name, "an entity")
         if self.kind not in KINDS:
             raise ValueError(f"unknown entity kind {self.kind!r}; expected one of {KINDS}")
@@ -151,6 +176,9 @@ class EntitySpec(_Record):
                 raise ValueError(f"container {self.name!r} must be a box or a cylinder")
             if not 0 < 2 * self.wall < min(sx, sy) or not self.wall < sz:
                 raise ValueError(f"container {self.name!r}: wall {self.wall} too thick for size {self.size}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return _without_default_friction(super().to_dict())
 
     @property
     def volume(self) -> float:
@@ -204,18 +232,25 @@ class TableSpec(_Record):
 
     The robot base stands on it at the origin; the defaults leave about 0.25 m of
     table beyond the arm's top-down reach so that some objects can be out of reach.
+    ``friction`` is its top's Coulomb friction coefficient (None: the default of every
+    body, :data:`llcps.sim.bodies.LATERAL_FRICTION`).
     """
 
     x_min: float = -0.3
     x_max: float = 1.05
     y_half: float = 0.6
     height: float = 0.45
+    friction: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("x_min", "x_max", "y_half", "height"):
             object.__setattr__(self, name, _number(getattr(self, name), f"table {name}", MAX_EXTENT))
+        object.__setattr__(self, "friction", _friction(self.friction, "the table"))
         if not (self.x_max > self.x_min and self.y_half > 0 and self.height > 0):
             raise ValueError(f"invalid table {self}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return _without_default_friction(super().to_dict())
 
     @property
     def floor_z(self) -> float:

@@ -169,6 +169,8 @@ class World:
                 color="wood",
             ),
         )
+        if table.friction is not None:
+            c.changeDynamics(self.fixtures[TABLE], -1, lateralFriction=table.friction)
         c.changeDynamics(self.fixtures[FLOOR], -1, lateralFriction=0.6, restitution=0.0)
         for spec in scene.fixtures:
             self.fixtures[spec.name] = build_fixture(c, spec)
