@@ -140,6 +140,13 @@ BAD: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
         lambda d: d["conditions"]["novelty"].update(table={"friction": 0}),
         "conditions.novelty.table.friction: must be positive",
     ),
+    "unknown robot key": (lambda d: d.update(robot={"reach": 0.5}), "robot.reach: unknown key"),
+    "negative grip": (lambda d: d.update(robot={"grip_force": -5}), "robot.grip_force: must be positive"),
+    "grip beyond the bound": (lambda d: d.update(robot={"grip_force": 5000}), "robot.grip_force: a grip is at most 1000 N"),
+    "grip not a number in a condition": (
+        lambda d: d["conditions"]["novelty"].update(robot={"grip_force": "weak"}),
+        "conditions.novelty.robot.grip_force: must be a positive number",
+    ),
     "unreachable entity within reach": (
         lambda d: d["conditions"]["novelty"]["entities"]["bin"].update(x=0.45, y=0.3, on="table", size=[0.2, 0.2, 0.1]),
         "entities[1] (bin): is 0.54 m from the robot base, within",
@@ -197,6 +204,22 @@ def test_friction_reaches_the_engine_and_default_scenes_keep_their_description()
         for condition in CONDITIONS:
             described = json.dumps(SCENARIOS[name].scene(condition).to_dict())
             assert "friction" not in described
+
+
+def test_a_condition_weakens_the_grip_of_the_robot_it_builds() -> None:
+    """`[conditions.novelty.robot] grip_force` is the grasp constraint's strength in that condition
+    alone; the other condition, and scenes that change nothing, describe no robot."""
+    data = copy.deepcopy(BASE)
+    data.update(name="mine")
+    data.pop("alias", None)
+    data["conditions"]["novelty"]["robot"] = {"grip_force": [2.0, 4.0]}
+    source = read_text(tomli_w.dumps(data), where="mine.toml")
+    novelty, original = source.scene("novelty", 0), source.scene("original", 0)
+    assert novelty.robot.grip_force == 3.0 and original.robot.grip_force is None
+    assert novelty.to_dict()["robot"] == {"grip_force": 3.0} and "robot" not in original.to_dict()
+    assert type(novelty).from_dict(novelty.to_dict()) == novelty
+    with World.from_scene(novelty) as weak, World.from_scene(original) as built:
+        assert (weak.robot.grip_force, built.robot.grip_force) == (3.0, 60.0)
 
 
 def test_bad_file_stores_nothing(tmp_path: Path) -> None:

@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, PlainValidator, ValidationErr
 from llcps.domain import COLORS, ORIENTATIONS
 from llcps.errors import LlcpsError
 from llcps.domain import CONDITIONS as CONDITION_NAMES
-from llcps.sim.specs import MAX_FRICTION
+from llcps.sim.specs import MAX_FRICTION, MAX_GRIP_FORCE
 
 #: What an entity, fixture, scenario or alias name may look like (a PDDL object name).
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -140,6 +140,20 @@ class TableModel(_Model):
     @classmethod
     def _friction_bound(cls, value: Scalar | None) -> Scalar | None:
         return _friction_at_most(value)
+
+
+class RobotModel(_Model):
+    """What the scene changes about the robot (omitted: the Panda as built)."""
+
+    grip_force: PositiveScalar | None = None
+
+    @field_validator("grip_force")
+    @classmethod
+    def _grip_bound(cls, value: Scalar | None) -> Scalar | None:
+        high = value[1] if isinstance(value, tuple) else value
+        if high is not None and high > MAX_GRIP_FORCE:
+            raise ValueError(f"a grip is at most {MAX_GRIP_FORCE:g} N, got {high}")
+        return value
 
 
 class EntityModel(_Model):
@@ -268,6 +282,7 @@ class ConditionModel(_Model):
     entities: dict[str, dict[str, Any]] = {}
     fixtures: list[FixtureModel] = []
     table: TableModel | None = None
+    robot: RobotModel | None = None
 
 
 class GridModel(_Model):
@@ -309,6 +324,7 @@ class ScenarioModel(_Model):
     story: str = ""
     goal: list[str] = Field(min_length=1)
     table: TableModel = TableModel()
+    robot: RobotModel = RobotModel()
     entities: list[EntityModel] = Field(min_length=1)
     fixtures: list[FixtureModel] = []
     conditions: dict[Literal["original", "novelty"], ConditionModel] = {}
@@ -395,6 +411,7 @@ __all__ = [
     "LipModel",
     "Range",
     "Scalar",
+    "RobotModel",
     "ScenarioModel",
     "ShelfModel",
     "TableModel",

@@ -23,10 +23,10 @@ from llcps.scenarios.goal import parse_atom
 from llcps.scenarios.file_format import CONDITION_NAMES, EntityModel, ScenarioModel, file_error
 from llcps.scenarios.variants import MAX_ATTEMPTS, Draws, check_variant
 from llcps.sim.builders import bucket, edge_lip, inside, open_box, shelf, solid, stacked
-from llcps.sim.specs import EntitySpec, FixtureSpec, SceneSpec, TableSpec
+from llcps.sim.specs import EntitySpec, FixtureSpec, RobotSpec, SceneSpec, TableSpec
 
 #: Fields whose value is a number or a range.
-_NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half", "friction"})
+_NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half", "friction", "grip_force"})
 #: Fields that list numbers or ranges.
 _LIST_FIELDS = frozenset({"size", "offset"})
 
@@ -138,6 +138,10 @@ class ScenarioSource:
         if changes is not None and changes.table is not None:
             table_fields.update(changes.table.model_dump(exclude_none=True))
         table = TableSpec(**{k: draws.number(v, f"table.{k}") for k, v in table_fields.items()})
+        robot_fields = dict(self.model.robot.model_dump(exclude_none=True))
+        if changes is not None and changes.robot is not None:
+            robot_fields.update(changes.robot.model_dump(exclude_none=True))
+        robot = RobotSpec(**{k: draws.number(v, f"robot.{k}") for k, v in robot_fields.items()})
         entities = self.entities(condition)
         built: dict[str, Any] = {}
         pending = list(entities)
@@ -156,6 +160,7 @@ class ScenarioSource:
                 fixtures=tuple(fixtures),
                 table=table,
                 name=f"{self.model.name}/{condition}{suffix}",
+                robot=robot,
             )
         except ValueError as exc:
             raise file_error(self.where, f"conditions.{condition}", str(exc)) from None
@@ -249,15 +254,17 @@ def _resolve(data: dict[str, Any], draws: Draws) -> dict[str, Any]:
         fields(entity, f"entities.{entity.get('name')}")
     for fixture in data.get("fixtures", []):
         fields(fixture, f"fixtures.{fixture.get('name', fixture.get('type'))}")
-    if isinstance(data.get("table"), dict):
-        fields(data["table"], "table")
+    for section in ("table", "robot"):
+        if isinstance(data.get(section), dict):
+            fields(data[section], section)
     for changes in data.get("conditions", {}).values():
         for name, patch in changes.get("entities", {}).items():
             fields(patch, f"entities.{name}")
         for fixture in changes.get("fixtures", []):
             fields(fixture, f"fixtures.{fixture.get('name', fixture.get('type'))}")
-        if isinstance(changes.get("table"), dict):
-            fields(changes["table"], "table")
+        for section in ("table", "robot"):
+            if isinstance(changes.get(section), dict):
+                fields(changes[section], section)
     return data
 
 

@@ -58,6 +58,8 @@ MAX_MASS = 1000.0
 MAX_NAME = 64
 #: Largest Coulomb friction coefficient a scene may give a body or the table.
 MAX_FRICTION = 10.0
+#: Largest grip (N) a scene may give the robot.
+MAX_GRIP_FORCE = 1000.0
 
 #: Horizontal distances from the base (m) at which the tool reaches top-down onto things
 #: 5-20 cm above the table (measured with :meth:`llcps.sim.robot.Robot.reach_error` in every direction);
@@ -259,6 +261,30 @@ class TableSpec(_Record):
 
 
 @dataclass(frozen=True)
+class RobotSpec(_Record):
+    """What a scene changes about the robot's capabilities (None: the Panda as built).
+
+    Attributes:
+        grip_force: strength (N) of the grasp that holds a lifted object; None:
+            :data:`llcps.sim.robot.GRASP_FORCE`. An object whose weight and
+            acceleration ask more slips out of the hand.
+    """
+
+    grip_force: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.grip_force is not None:
+            force = _number(self.grip_force, "the robot's grip_force", MAX_GRIP_FORCE)
+            if not force > 0:
+                raise ValueError(f"the robot's grip_force must be positive, got {self.grip_force!r}")
+            object.__setattr__(self, "grip_force", force)
+
+    @property
+    def default(self) -> bool:
+        return self.grip_force is None
+
+
+@dataclass(frozen=True)
 class SceneSpec:
     """Everything needed to rebuild a world: table geometry, fixtures, entities.
 
@@ -267,12 +293,14 @@ class SceneSpec:
         fixtures: static boxes beyond the table and floor (lips, walls, shelves).
         table: the table's geometry.
         name: a label (scenario and condition, or "pretrain").
+        robot: what the scene changes about the robot (by default nothing).
     """
 
     entities: tuple[EntitySpec, ...] = ()
     fixtures: tuple[FixtureSpec, ...] = ()
     table: TableSpec = field(default_factory=TableSpec)
     name: str = ""
+    robot: RobotSpec = field(default_factory=RobotSpec)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "entities", tuple(self.entities))
@@ -292,15 +320,20 @@ class SceneSpec:
         """The scene with some entities replaced by name (or appended when new)."""
         by_name = {s.name: s for s in specs}
         kept = [by_name.pop(e.name, e) for e in self.entities]
-        return SceneSpec(tuple(kept) + tuple(by_name.values()), self.fixtures, self.table, self.name)
+        return SceneSpec(tuple(kept) + tuple(by_name.values()), self.fixtures, self.table, self.name, self.robot)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """JSON data of the scene; ``robot`` only when the scene changes the robot, so the
+        scenes written before it existed keep their exact description (and cache keys)."""
+        data: dict[str, Any] = {
             "name": self.name,
             "table": self.table.to_dict(),
             "fixtures": [f.to_dict() for f in self.fixtures],
             "entities": [e.to_dict() for e in self.entities],
         }
+        if not self.robot.default:
+            data["robot"] = self.robot.to_dict()
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "SceneSpec":
@@ -323,6 +356,7 @@ class SceneSpec:
                 fixtures=tuple(FixtureSpec.from_dict(_object(f)) for f in fixtures),
                 table=TableSpec.from_dict(_object(data.get("table", {}))),
                 name=str(data.get("name", ""))[:200],
+                robot=RobotSpec.from_dict(_object(data.get("robot", {}))),
             )
         except (TypeError, ValueError, AttributeError, KeyError) as exc:
             raise LlcpsError(
