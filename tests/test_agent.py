@@ -71,7 +71,7 @@ def _llcps(*args: str, db: Path) -> subprocess.CompletedProcess[str]:
 @pytest.mark.parametrize(
     ("args", "expected"),
     [
-        (("solve", "scenario9"), "scenario1 (bucket)"),
+        (("solve", "scenario99"), "scenario1 (bucket)"),
         (("solve", "scenario1", "--model", "oracle"), "nb"),
         (("solve", "scenario1", "--measure", "luck"), "most-changes"),
         (("solve", "scenario1", "--budget", "-1"), "budget"),

@@ -71,7 +71,7 @@ def test_too_few_trials_is_a_note_not_a_crash(tmp_path):
 
 
 def test_unknown_scenario_is_one_line_and_exit_2(db):
-    result = run(db, "--scenario", "scenario9")
+    result = run(db, "--scenario", "scenario99")
     assert result.exit_code == 2
     assert "unknown scenario" in result.output and "Traceback" not in result.output
 

@@ -147,6 +147,21 @@ BAD: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
     "overlapping bodies": (lambda d: d["entities"][2].update(x=0.62, y=-0.05), "overlaps 'block'"),
     "floating body": (lambda d: d["entities"][2].update(x=0.98, y=-0.3), "entities[2] (block): floats"),
     "reachable entity out of reach": (lambda d: d["entities"][0].update(x=0.9, y=0.0), "entities[0] (can): is 0.90 m from the robot base"),
+    "negative entity friction": (lambda d: d["entities"][0].update(friction=-0.2), "entities[0].friction: must be positive"),
+    "entity friction beyond the engine's": (lambda d: d["entities"][0].update(friction=50.0), "entities[0].friction: a friction coefficient is at most 10"),
+    "entity friction not a number": (lambda d: d["entities"][0].update(friction="icy"), "entities[0].friction: must be a positive number"),
+    "inverted table friction range": (lambda d: d.update(table={**d["table"], "friction": [0.4, 0.1]}), "table.friction: the range [0.4, 0.1] is inverted"),
+    "zero table friction in a condition": (
+        lambda d: d["conditions"]["novelty"].update(table={"friction": 0}),
+        "conditions.novelty.table.friction: must be positive",
+    ),
+    "unknown robot key": (lambda d: d.update(robot={"reach": 0.5}), "robot.reach: unknown key"),
+    "negative grip": (lambda d: d.update(robot={"grip_force": -5}), "robot.grip_force: must be positive"),
+    "grip beyond the bound": (lambda d: d.update(robot={"grip_force": 5000}), "robot.grip_force: a grip is at most 1000 N"),
+    "grip not a number in a condition": (
+        lambda d: d["conditions"]["novelty"].update(robot={"grip_force": "weak"}),
+        "conditions.novelty.robot.grip_force: must be a positive number",
+    ),
     "unreachable entity within reach": (
         lambda d: d["conditions"]["novelty"]["entities"]["bin"].update(x=0.45, y=0.3, on="table", size=[0.2, 0.2, 0.1]),
         "entities[1] (bin): is 0.54 m from the robot base, within",
@@ -182,6 +197,44 @@ def test_bad_file_is_one_error_naming_file_and_field(tmp_path: Path, case: str) 
     for command in (["scenario", "show", str(path)], ["scenario", "render", str(path), "--out-dir", str(tmp_path / "out")]):
         _assert_one_error(runner.invoke(app, command), path, field)
     assert not (tmp_path / "out").exists()
+
+
+def test_friction_reaches_the_engine_and_default_scenes_keep_their_description() -> None:
+    """A declared friction is the body's and the table's coefficient in PyBullet; a scene that
+    declares none describes itself as it did before the field existed (trial cache keys)."""
+    data = copy.deepcopy(BASE)
+    data.update(name="mine", table={**data["table"], "friction": 0.05})
+    data.pop("alias", None)
+    data["entities"][0]["friction"] = [0.9, 1.1]
+    source = read_text(tomli_w.dumps(data), where="mine.toml")
+    scene = source.scene("novelty", 0)
+    assert scene.table.friction == 0.05 and scene.entities[0].friction == 1.0 and scene.entities[1].friction is None
+    assert "friction" in scene.to_dict()["table"] and "friction" not in scene.to_dict()["entities"][1]
+    with World.from_scene(scene) as world:
+        dynamics = world.client.getDynamicsInfo
+        assert dynamics(world.fixtures["table"], -1)[1] == pytest.approx(0.05)
+        assert dynamics(world.entity("can").body_id, -1)[1] == pytest.approx(1.0)
+        assert dynamics(world.entity("bin").body_id, -1)[1] == pytest.approx(0.5)
+    for name in (n for n in NAMES if "friction" not in SCENARIOS[n].source.text):  # type: ignore[union-attr]
+        for condition in CONDITIONS:
+            described = json.dumps(SCENARIOS[name].scene(condition).to_dict())
+            assert "friction" not in described
+
+
+def test_a_condition_weakens_the_grip_of_the_robot_it_builds() -> None:
+    """`[conditions.novelty.robot] grip_force` is the grasp constraint's strength in that condition
+    alone; the other condition, and scenes that change nothing, describe no robot."""
+    data = copy.deepcopy(BASE)
+    data.update(name="mine")
+    data.pop("alias", None)
+    data["conditions"]["novelty"]["robot"] = {"grip_force": [2.0, 4.0]}
+    source = read_text(tomli_w.dumps(data), where="mine.toml")
+    novelty, original = source.scene("novelty", 0), source.scene("original", 0)
+    assert novelty.robot.grip_force == 3.0 and original.robot.grip_force is None
+    assert novelty.to_dict()["robot"] == {"grip_force": 3.0} and "robot" not in original.to_dict()
+    assert type(novelty).from_dict(novelty.to_dict()) == novelty
+    with World.from_scene(novelty) as weak, World.from_scene(original) as built:
+        assert (weak.robot.grip_force, built.robot.grip_force) == (3.0, 60.0)
 
 
 def test_bad_file_stores_nothing(tmp_path: Path) -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Mapping
 
@@ -37,7 +38,13 @@ FILE_MEMO_SIZE = 128
 
 
 def _shipped_files() -> list[Path]:
-    return sorted(SHIPPED_DIR.glob("*.toml"))
+    """The shipped files in number order (scenario2 before scenario10)."""
+    return sorted(SHIPPED_DIR.glob("*.toml"), key=_number_order)
+
+
+def _number_order(path: Path) -> tuple[str, int, str]:
+    match = re.fullmatch(r"(.*?)(\d+)", path.stem)
+    return (match[1], int(match[2]), "") if match else (path.stem, -1, path.stem)
 
 
 def _read(path: Path, reserved: Mapping[str, str] | None = None) -> Scenario:

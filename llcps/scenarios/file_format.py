@@ -20,6 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, PlainValidator, ValidationErr
 from llcps.domain import COLORS, ORIENTATIONS
 from llcps.errors import LlcpsError
 from llcps.domain import CONDITIONS as CONDITION_NAMES
+from llcps.sim.specs import MAX_FRICTION, MAX_GRIP_FORCE
 
 #: What an entity, fixture, scenario or alias name may look like (a PDDL object name).
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -118,6 +119,14 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+def _friction_at_most(value: Scalar | None) -> Scalar | None:
+    """A friction coefficient (or range) no larger than the engine takes."""
+    high = value[1] if isinstance(value, tuple) else value
+    if high is not None and high > MAX_FRICTION:
+        raise ValueError(f"a friction coefficient is at most {MAX_FRICTION:g}, got {high}")
+    return value
+
+
 class TableModel(_Model):
     """The table (omitted fields keep :class:`~llcps.sim.specs.TableSpec`'s defaults)."""
 
@@ -125,6 +134,26 @@ class TableModel(_Model):
     x_max: AnyScalar | None = None
     y_half: PositiveScalar | None = None
     height: PositiveScalar | None = None
+    friction: PositiveScalar | None = None
+
+    @field_validator("friction")
+    @classmethod
+    def _friction_bound(cls, value: Scalar | None) -> Scalar | None:
+        return _friction_at_most(value)
+
+
+class RobotModel(_Model):
+    """What the scene changes about the robot (omitted: the Panda as built)."""
+
+    grip_force: PositiveScalar | None = None
+
+    @field_validator("grip_force")
+    @classmethod
+    def _grip_bound(cls, value: Scalar | None) -> Scalar | None:
+        high = value[1] if isinstance(value, tuple) else value
+        if high is not None and high > MAX_GRIP_FORCE:
+            raise ValueError(f"a grip is at most {MAX_GRIP_FORCE:g} N, got {high}")
+        return value
 
 
 class EntityModel(_Model):
@@ -144,6 +173,7 @@ class EntityModel(_Model):
     on_top_of: Name | None = None
     offset: Offset = (0.0, 0.0)
     wall: PositiveScalar | None = None
+    friction: PositiveScalar | None = None
     reachable: bool | None = None
 
     @field_validator("size")
@@ -175,6 +205,12 @@ class EntityModel(_Model):
                 if getattr(self, key) is None:
                     raise _FieldError(key, "missing: where the entity stands (or give inside = / on_top_of =)")
         return self
+
+
+    @field_validator("friction")
+    @classmethod
+    def _friction_bound(cls, value: Scalar | None) -> Scalar | None:
+        return _friction_at_most(value)
 
 
 class _FieldError(ValueError):
@@ -246,6 +282,7 @@ class ConditionModel(_Model):
     entities: dict[str, dict[str, Any]] = {}
     fixtures: list[FixtureModel] = []
     table: TableModel | None = None
+    robot: RobotModel | None = None
 
 
 class GridModel(_Model):
@@ -287,6 +324,7 @@ class ScenarioModel(_Model):
     story: str = ""
     goal: list[str] = Field(min_length=1)
     table: TableModel = TableModel()
+    robot: RobotModel = RobotModel()
     entities: list[EntityModel] = Field(min_length=1)
     fixtures: list[FixtureModel] = []
     conditions: dict[Literal["original", "novelty"], ConditionModel] = {}
@@ -373,6 +411,7 @@ __all__ = [
     "LipModel",
     "Range",
     "Scalar",
+    "RobotModel",
     "ScenarioModel",
     "ShelfModel",
     "TableModel",

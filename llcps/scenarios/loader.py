@@ -13,7 +13,7 @@ import copy
 import json
 import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -24,10 +24,10 @@ from llcps.scenarios.goal import parse_atom
 from llcps.scenarios.file_format import CONDITION_NAMES, EntityModel, ScenarioModel, file_error
 from llcps.scenarios.variants import MAX_ATTEMPTS, Draws, check_variant
 from llcps.sim.builders import bucket, edge_lip, inside, open_box, shelf, solid, stacked
-from llcps.sim.specs import FixtureSpec, SceneSpec, TableSpec
+from llcps.sim.specs import EntitySpec, FixtureSpec, RobotSpec, SceneSpec, TableSpec
 
 #: Fields whose value is a number or a range.
-_NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half"})
+_NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half", "friction", "grip_force"})
 #: Fields that list numbers or ranges.
 _LIST_FIELDS = frozenset({"size", "offset"})
 
@@ -139,6 +139,10 @@ class ScenarioSource:
         if changes is not None and changes.table is not None:
             table_fields.update(changes.table.model_dump(exclude_none=True))
         table = TableSpec(**{k: draws.number(v, f"table.{k}") for k, v in table_fields.items()})
+        robot_fields = dict(self.model.robot.model_dump(exclude_none=True))
+        if changes is not None and changes.robot is not None:
+            robot_fields.update(changes.robot.model_dump(exclude_none=True))
+        robot = RobotSpec(**{k: draws.number(v, f"robot.{k}") for k, v in robot_fields.items()})
         entities = self.entities(condition)
         built: dict[str, Any] = {}
         pending = list(entities)
@@ -157,6 +161,7 @@ class ScenarioSource:
                 fixtures=tuple(fixtures),
                 table=table,
                 name=f"{self.model.name}/{condition}{suffix}",
+                robot=robot,
             )
         except ValueError as exc:
             raise file_error(self.where, f"conditions.{condition}", str(exc)) from None
@@ -168,6 +173,13 @@ class ScenarioSource:
 
 def _entity_spec(m: EntityModel, d: Draws, built: Mapping[str, Any], floor_z: float) -> Any:
     """The spec of one entity, through the same builders hand-written scenes use."""
+    spec = _built_entity(m, d, built, floor_z)
+    if m.friction is None:
+        return spec
+    return EntitySpec(**{**asdict(spec), "friction": d.number(m.friction, f"entities.{m.name}.friction")})
+
+
+def _built_entity(m: EntityModel, d: Draws, built: Mapping[str, Any], floor_z: float) -> Any:
     key = f"entities.{m.name}"
     size = [d.number(v, f"{key}.size[{i}]") for i, v in enumerate(m.size)]
     color = d.choice(m.color, f"{key}.color")
@@ -243,15 +255,17 @@ def _resolve(data: dict[str, Any], draws: Draws) -> dict[str, Any]:
         fields(entity, f"entities.{entity.get('name')}")
     for fixture in data.get("fixtures", []):
         fields(fixture, f"fixtures.{fixture.get('name', fixture.get('type'))}")
-    if isinstance(data.get("table"), dict):
-        fields(data["table"], "table")
+    for section in ("table", "robot"):
+        if isinstance(data.get(section), dict):
+            fields(data[section], section)
     for changes in data.get("conditions", {}).values():
         for name, patch in changes.get("entities", {}).items():
             fields(patch, f"entities.{name}")
         for fixture in changes.get("fixtures", []):
             fields(fixture, f"fixtures.{fixture.get('name', fixture.get('type'))}")
-        if isinstance(changes.get("table"), dict):
-            fields(changes["table"], "table")
+        for section in ("table", "robot"):
+            if isinstance(changes.get(section), dict):
+                fields(changes[section], section)
     return data
 
 

@@ -147,7 +147,7 @@ def build_entity(client: Any, spec: EntitySpec) -> Entity:
     client.changeDynamics(
         body,
         -1,
-        lateralFriction=LATERAL_FRICTION,
+        lateralFriction=LATERAL_FRICTION if spec.friction is None else spec.friction,
         spinningFriction=SPINNING_FRICTION,
         rollingFriction=ROLLING_FRICTION if spec.shape != "box" else 0.0,
         restitution=0.0,

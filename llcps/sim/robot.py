@@ -170,8 +170,12 @@ class Robot:
         grasped: body id of the object held by the grasp constraint, if any.
     """
 
-    def __init__(self, client: Any, *, visuals: bool = True, reach: ReachSolutions | None = None) -> None:
+    def __init__(
+        self, client: Any, *, visuals: bool = True, reach: ReachSolutions | None = None, grip_force: float | None = None
+    ) -> None:
         self.client = client
+        #: Strength (N) of the grasp constraint that carries a lifted object.
+        self.grip_force = GRASP_FORCE if grip_force is None else grip_force
         #: The IK solutions of :meth:`reach_error`, shared by the robots of one engine.
         self.reach = reach if reach is not None else ReachSolutions()
         cid = client._client
@@ -299,7 +303,7 @@ class Robot:
             parentFrameOrientation=rel_orn,
             childFrameOrientation=(0, 0, 0, 1),
         )
-        c.changeConstraint(self._constraint, maxForce=GRASP_FORCE)
+        c.changeConstraint(self._constraint, maxForce=self.grip_force)
         # The constraint now carries the object: the fingers stop pressing on it
         # (their contacts would only fight the constraint) until it is released.
         for link in HOLD_LINKS:

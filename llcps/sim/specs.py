@@ -59,6 +59,10 @@ MAX_EXTENT = 10.0
 MAX_DISTANCE = 100.0
 MAX_MASS = 1000.0
 MAX_NAME = 64
+#: Largest Coulomb friction coefficient a scene may give a body or the table.
+MAX_FRICTION = 10.0
+#: Largest grip (N) a scene may give the robot.
+MAX_GRIP_FORCE = 1000.0
 
 #: Horizontal distances from the base (m) at which the tool reaches top-down onto things
 #: 5-20 cm above the table (measured with :meth:`llcps.sim.robot.Robot.reach_error` in every direction);
@@ -83,6 +87,24 @@ def _number(value: object, what: str, bound: float) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not -bound <= float(value) <= bound:
         raise ValueError(f"{what} must be a number within +-{bound:g}, got {value!r}")
     return float(value)
+
+
+def _friction(value: object, what: str) -> float | None:
+    """None (the default friction) or a coefficient in (0, MAX_FRICTION]."""
+    if value is None:
+        return None
+    number = _number(value, f"{what}'s friction", MAX_FRICTION)
+    if not number > 0:
+        raise ValueError(f"{what}'s friction must be positive, got {value!r}")
+    return number
+
+
+def _without_default_friction(data: dict[str, Any]) -> dict[str, Any]:
+    """A spec's JSON without ``friction`` when it is the default: the scenes written before
+    the field existed keep their exact description (and the trial cache its keys)."""
+    if data.get("friction") is None:
+        data.pop("friction", None)
+    return data
 
 
 def _name(value: object, what: str) -> None:
@@ -117,6 +139,9 @@ class EntitySpec(_Record):
         position: centre of the bounding box in the world frame (m).
         yaw: rotation about +z (rad).
         wall: wall and floor thickness of a container (m); unused for objects.
+        friction: its Coulomb friction coefficient; None: the default of every body
+            (:data:`llcps.sim.bodies.LATERAL_FRICTION`). The engine multiplies the
+            coefficients of two bodies in contact.
     """
 
     name: str
@@ -128,6 +153,7 @@ class EntitySpec(_Record):
     position: tuple[float, float, float]
     yaw: float = 0.0
     wall: float = DEFAULT_WALL
+    friction: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "size", _triple(self.size, "size", MAX_EXTENT))
@@ -135,6 +161,7 @@ class EntitySpec(_Record):
         object.__setattr__(self, "yaw", _number(self.yaw, "yaw", MAX_DISTANCE))
         object.__setattr__(self, "mass", _number(self.mass, "mass", MAX_MASS))
         object.__setattr__(self, "wall", _number(self.wall, "wall", MAX_EXTENT))
+        object.__setattr__(self, "friction", _friction(self.friction, f"entity {self.name!r}"))
         _name(self.name, "an entity")
         if self.kind not in KINDS:
             raise ValueError(f"unknown entity kind {self.kind!r}; expected one of {KINDS}")
@@ -154,6 +181,9 @@ class EntitySpec(_Record):
                 raise ValueError(f"container {self.name!r} must be a box or a cylinder")
             if not 0 < 2 * self.wall < min(sx, sy) or not self.wall < sz:
                 raise ValueError(f"container {self.name!r}: wall {self.wall} too thick for size {self.size}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return _without_default_friction(super().to_dict())
 
     @property
     def volume(self) -> float:
@@ -207,18 +237,25 @@ class TableSpec(_Record):
 
     The robot base stands on it at the origin; the defaults leave about 0.25 m of
     table beyond the arm's top-down reach so that some objects can be out of reach.
+    ``friction`` is its top's Coulomb friction coefficient (None: the default of every
+    body, :data:`llcps.sim.bodies.LATERAL_FRICTION`).
     """
 
     x_min: float = -0.3
     x_max: float = 1.05
     y_half: float = 0.6
     height: float = 0.45
+    friction: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("x_min", "x_max", "y_half", "height"):
             object.__setattr__(self, name, _number(getattr(self, name), f"table {name}", MAX_EXTENT))
+        object.__setattr__(self, "friction", _friction(self.friction, "the table"))
         if not (self.x_max > self.x_min and self.y_half > 0 and self.height > 0):
             raise ValueError(f"invalid table {self}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return _without_default_friction(super().to_dict())
 
     @property
     def floor_z(self) -> float:
@@ -232,6 +269,30 @@ class TableSpec(_Record):
 
 
 @dataclass(frozen=True)
+class RobotSpec(_Record):
+    """What a scene changes about the robot's capabilities (None: the Panda as built).
+
+    Attributes:
+        grip_force: strength (N) of the grasp that holds a lifted object; None:
+            :data:`llcps.sim.robot.GRASP_FORCE`. An object whose weight and
+            acceleration ask more slips out of the hand.
+    """
+
+    grip_force: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.grip_force is not None:
+            force = _number(self.grip_force, "the robot's grip_force", MAX_GRIP_FORCE)
+            if not force > 0:
+                raise ValueError(f"the robot's grip_force must be positive, got {self.grip_force!r}")
+            object.__setattr__(self, "grip_force", force)
+
+    @property
+    def default(self) -> bool:
+        return self.grip_force is None
+
+
+@dataclass(frozen=True)
 class SceneSpec:
     """Everything needed to rebuild a world: table geometry, fixtures, entities.
 
@@ -240,12 +301,14 @@ class SceneSpec:
         fixtures: static boxes beyond the table and floor (lips, walls, shelves).
         table: the table's geometry.
         name: a label (scenario and condition, or "pretrain").
+        robot: what the scene changes about the robot (by default nothing).
     """
 
     entities: tuple[EntitySpec, ...] = ()
     fixtures: tuple[FixtureSpec, ...] = ()
     table: TableSpec = field(default_factory=TableSpec)
     name: str = ""
+    robot: RobotSpec = field(default_factory=RobotSpec)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "entities", tuple(self.entities))
@@ -265,15 +328,20 @@ class SceneSpec:
         """The scene with some entities replaced by name (or appended when new)."""
         by_name = {s.name: s for s in specs}
         kept = [by_name.pop(e.name, e) for e in self.entities]
-        return SceneSpec(tuple(kept) + tuple(by_name.values()), self.fixtures, self.table, self.name)
+        return SceneSpec(tuple(kept) + tuple(by_name.values()), self.fixtures, self.table, self.name, self.robot)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """JSON data of the scene; ``robot`` only when the scene changes the robot, so the
+        scenes written before it existed keep their exact description (and cache keys)."""
+        data: dict[str, Any] = {
             "name": self.name,
             "table": self.table.to_dict(),
             "fixtures": [f.to_dict() for f in self.fixtures],
             "entities": [e.to_dict() for e in self.entities],
         }
+        if not self.robot.default:
+            data["robot"] = self.robot.to_dict()
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "SceneSpec":
@@ -296,6 +364,7 @@ class SceneSpec:
                 fixtures=tuple(FixtureSpec.from_dict(_object(f)) for f in fixtures),
                 table=TableSpec.from_dict(_object(data.get("table", {}))),
                 name=str(data.get("name", ""))[:200],
+                robot=RobotSpec.from_dict(_object(data.get("robot", {}))),
             )
         except (TypeError, ValueError, AttributeError, KeyError) as exc:
             raise LlcpsError(

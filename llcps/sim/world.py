@@ -169,10 +169,12 @@ class World:
                 color="wood",
             ),
         )
+        if table.friction is not None:
+            c.changeDynamics(self.fixtures[TABLE], -1, lateralFriction=table.friction)
         c.changeDynamics(self.fixtures[FLOOR], -1, lateralFriction=0.6, restitution=0.0)
         for spec in scene.fixtures:
             self.fixtures[spec.name] = build_fixture(c, spec)
-        self.robot = Robot(c, visuals=self.visuals, reach=self._connection.reach)
+        self.robot = Robot(c, visuals=self.visuals, reach=self._connection.reach, grip_force=scene.robot.grip_force)
         for link in (-1, 0):  # the base and shoulder stand on the table and never leave it
             c.setCollisionFilterPair(self.robot.body_id, self.fixtures[TABLE], link, -1, 0)
         for spec in scene.entities:
