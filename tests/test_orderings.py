@@ -27,6 +27,10 @@ def _synthetic(base, probability: np.ndarray, *, families: np.ndarray | None = N
     family's probabilities (a stand-in for the goal head's episode evidence)."""
 
     class Synthetic(base):  # type: ignore[misc, valid-type]
+        def random_side(self) -> list[int]:
+            n = len(self.exploration.point.candidates)
+            return [int(i) for i in np.random.default_rng(self.exploration.seed).permutation(n)]
+
         def rank(self) -> Ranking:
             p = probability.copy()
             if families is not None:
@@ -110,7 +114,7 @@ def test_the_hedge_reaches_a_resolver_within_its_bound_of_random_order_when_the_
     """The model ranks a family that never resolves first (``wrong`` of the candidates,
     sure of it or not) and the resolving candidates last: the episode still ends by trial
     1 + P / (1 - MAX_MODEL_SHARE), P the first resolver's position in the random order."""
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng([seed, 1])
     resolving = {int(i) for i in rng.choice(n, size=min(resolvers, n), replace=False)}
     p = np.where(rng.random(n) < wrong, 0.9 if confident else 0.02, 0.01)
     p[list(resolving)] = 0.001
@@ -128,8 +132,7 @@ def test_a_model_sure_of_what_fails_loses_its_share_and_the_hedge_costs_about_ra
     n, k = 400, 4
     costs, ranked_costs = [], []
     for seed in range(200):
-        rng = np.random.default_rng(seed)
-        order = rng.permutation(n)
+        order = np.random.default_rng([seed, 1]).permutation(n)  # the layout, apart from the random side's stream
         wrong, resolving = order[:100], {int(i) for i in order[100 : 100 + k]}
         p = np.full(n, 0.01)
         p[wrong] = 0.6

@@ -8,8 +8,12 @@ two:
 
 - *the ranking*: the best untried candidate under the model and measure
   (:class:`~llcps.cps.orderings.ranked.Ranked`, updated after every failed trial);
-- *random order*: the next untried candidate of one seeded random permutation of all
-  candidates, drawn once per episode.
+- *random order*: the next untried candidate of the order the random-order baseline
+  (the ``random`` world model, which scores each candidate by a hash of the seed and
+  the candidate) gives the same candidates under the same measure and seed, ranked
+  once. So the hedge's random side tries what the baseline it is compared with tries,
+  in the same order, and a run beside that baseline finds those trials in the physics
+  cache.
 
 **The share.** The model gets the first trial; after each trial it is credited its
 share ``min(w, MAX_MODEL_SHARE)`` and takes the next trial whenever its credit reaches
@@ -49,23 +53,32 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
+from llcps.cps.exploration import rank_candidates
 from llcps.cps.orderings.base import Exploration
 from llcps.cps.orderings.ranked import Ranked
 
 if TYPE_CHECKING:
     from llcps.domain import State
 
+#: The world model whose ranking is random order.
+RANDOM_ORDER = "random"
 #: Most of the trials the model's ranking may take (the rest follow random order).
 MAX_MODEL_SHARE = 0.5
 #: Belief, before any trial, that the resolving candidate lies where the model says.
 MODEL_PRIOR = 0.5
-#: Stream of the seed's random permutation, apart from the tie-breaking key's.
-_PERMUTATION_STREAM = 0x4E0D6E
 #: Largest probability of resolving a failed trial is counted with: no single failure
 #: more than halves the odds. In a novel scene the model's probabilities are not
 #: calibrated: one sure of a candidate K claims (p near 1) would otherwise lose every
 #: trial to random order after one failure, whatever it knows of the rest.
 MAX_EVIDENCE_PROBABILITY = 0.5
+
+
+def random_order(exploration: Exploration) -> list[int]:
+    """Every candidate, in the order the random-order baseline ranks them first."""
+    from llcps.models.registry import WORLD_MODELS
+
+    x = exploration
+    return list(rank_candidates(WORLD_MODELS[RANDOM_ORDER](x.seed), x.point, measure=x.measure, seed=x.seed).order)
 
 
 class Hedged(Ranked):
@@ -80,14 +93,17 @@ class Hedged(Ranked):
 
     def __init__(self, exploration: Exploration) -> None:
         super().__init__(exploration)
-        n = len(exploration.point.candidates)
-        rng = np.random.default_rng([int(exploration.seed), _PERMUTATION_STREAM])
-        self.permutation = [int(i) for i in rng.permutation(n)]
+        #: Random order's side: every candidate, in the order it tries them.
+        self.permutation = self.random_side()
         self._cursor = 0
         self.log_odds = math.log(MODEL_PRIOR / (1.0 - MODEL_PRIOR))
         self.credit = 1.0
         self.picks: list[str] = []
         self.beliefs: list[float] = []
+
+    def random_side(self) -> list[int]:
+        """Every candidate in random order's order (:func:`random_order`)."""
+        return random_order(self.exploration)
 
     @property
     def belief(self) -> float:
