@@ -371,7 +371,7 @@ def draw_life(life: Life, seed: int) -> LifeDraw:
         used[family].add(variant)
         episodes.append(LifeEpisode(index, family, variant, "original" if original else "novelty", first, family in probes))
     after: list[tuple[str, int]] = []
-    for family in met:
+    for family in met if life.forgetting else ():
         fresh = int(rng.integers(low, high))
         while fresh in used[family]:
             fresh = low + (fresh - low + 1) % (high - low)

@@ -217,7 +217,7 @@ def plan_life_tasks(life: Life, seeds: Iterable[int], *, cache_url: str | None =
                     measure=life.measure_name(),
                     budget=budget,
                     pretrain=pretrain if condition.pretrained else None,
-                    after=draw.after if life.forgetting and condition.forgets else (),
+                    after=draw.after if condition.forgets else (),
                     refit_every=life.refit_every,
                     cache_url=cache_url,
                 )
