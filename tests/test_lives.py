@@ -293,14 +293,16 @@ def test_a_killed_life_run_resumes_without_duplicate_or_lost_episodes(tiny: tupl
 
 @pytest.mark.slow
 def test_the_paper_life_solves_the_lifelong_presets_episodes(tmp_path: Path) -> None:
-    """Seed 0 of the `lifelong` preset and life 0 of `paper`: the same trials, episode by episode."""
+    """Seed 0 of the `lifelong` preset and life 0 of `paper`, both on their first two scenarios:
+    the same trials, episode by episode (update carries scenario 1's trials into scenario 2)."""
     from llcps.experiments.runner import run_experiment
 
     with Store.open(str(tmp_path / "both.db"), create=True) as store:
-        assert run_experiment(store, preset="lifelong", seeds=[0], workers=1).status == "ok"
-        assert run_lives(store, load_life("paper"), lives=[0], workers=1).status == "ok"
+        first_two = ["scenario1", "scenario2"]
+        assert run_experiment(store, preset="lifelong", seeds=[0], scenarios=first_two, workers=1).status == "ok"
+        assert run_lives(store, load_life("paper").with_episodes(2), lives=[0], workers=1).status == "ok"
         preset, life = store_signature(store, "exp-lifelong-"), store_signature(store, "life-paper-")
-    sequences = {s.cell.condition: s for s in PRESETS["lifelong"].sequences([0])}
+    sequences = {s.cell.condition: s for s in PRESETS["lifelong"].with_scenarios(first_two).sequences([0])}
     update = preset[sequences["update"].branch_name]
     assert update["episodes"] and update["own"] == life["life-paper-update-l0"]["own"]
     assert update["episodes"] == life["life-paper-update-l0"]["episodes"]

@@ -13,6 +13,7 @@ from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.errors import LlcpsError
 from llcps.experiments.executors import ENGINES
+from llcps.experiments.life import LIFE_CONDITIONS
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
 
@@ -63,7 +64,8 @@ def run_cli(
     ] = None,
     conditions: Annotated[
         Optional[str],
-        typer.Option("--conditions", metavar="A,B", help="Conditions to run instead of the file's: update, reset, scratch, random.", show_default=False),
+        typer.Option("--conditions", metavar="A,B", help="Conditions to run instead of the file's: "
+                     + "; ".join(f"{c.name} ({c.description})" for c in LIFE_CONDITIONS.values()) + ".", show_default=False),
     ] = None,
     workers: Annotated[
         Optional[int],
