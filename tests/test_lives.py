@@ -293,20 +293,24 @@ def test_a_killed_life_run_resumes_without_duplicate_or_lost_episodes(tiny: tupl
 
 @pytest.mark.slow
 def test_the_paper_life_solves_the_lifelong_presets_episodes(tmp_path: Path) -> None:
-    """Seed 0 of the `lifelong` preset and life 0 of `paper`, both on their first two scenarios:
-    the same trials, episode by episode (update carries scenario 1's trials into scenario 2)."""
+    """Seed 0 of the `lifelong` preset and life 0 of `paper`, both on their first two scenarios
+    and cut to 8 pretraining interactions and 5 trials per episode (the plan above checks the
+    real settings): the same trials, episode by episode, update carrying scenario 1 into 2."""
+    from dataclasses import replace
+
     from llcps.experiments.runner import run_experiment
 
+    first_two = ["scenario1", "scenario2"]
+    preset = replace(PRESETS["lifelong"], pretrain_sizes=(8,), pretrain_pool=8, budget=5).with_scenarios(first_two)
+    life = replace(load_life("paper").with_episodes(2), pretrain_count=8, budget=5)
     with Store.open(str(tmp_path / "both.db"), create=True) as store:
-        first_two = ["scenario1", "scenario2"]
-        assert run_experiment(store, preset="lifelong", seeds=[0], scenarios=first_two, workers=1).status == "ok"
-        assert run_lives(store, load_life("paper").with_episodes(2), lives=[0], workers=1).status == "ok"
-        preset, life = store_signature(store, "exp-lifelong-"), store_signature(store, "life-paper-")
-    sequences = {s.cell.condition: s for s in PRESETS["lifelong"].with_scenarios(first_two).sequences([0])}
-    update = preset[sequences["update"].branch_name]
-    assert update["episodes"] and update["own"] == life["life-paper-update-l0"]["own"]
-    assert update["episodes"] == life["life-paper-update-l0"]["episodes"]
-    assert update["seen_at_fork"] == life["life-paper-update-l0"]["seen_at_fork"]  # the same pretraining
+        assert run_experiment(store, preset=preset, seeds=[0], workers=1).status == "ok"
+        assert run_lives(store, life, lives=[0], workers=1).status == "ok"
+        theirs_all, ours_all = store_signature(store, "exp-lifelong-"), store_signature(store, "life-paper-")
+    sequences = {s.cell.condition: s for s in preset.sequences([0])}
+    update, ours = theirs_all[sequences["update"].branch_name], ours_all["life-paper-update-l0"]
+    assert len(update["episodes"]) == 2 and update["own"]
+    assert (update["own"], update["episodes"], update["seen_at_fork"]) == (ours["own"], ours["episodes"], ours["seen_at_fork"])
     for index, scenario in enumerate(sequences["reset"].scenarios):
-        theirs, ours = preset[sequences["reset"].episode_branch(scenario)], life[f"life-paper-reset-l0-e{index}"]
+        theirs, ours = theirs_all[sequences["reset"].episode_branch(scenario)], ours_all[f"life-paper-reset-l0-e{index}"]
         assert (theirs["own"], theirs["episodes"]) == (ours["own"], ours["episodes"])
