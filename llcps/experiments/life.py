@@ -28,7 +28,7 @@ from __future__ import annotations
 import functools
 import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -89,13 +89,9 @@ LIFE_CONDITIONS: Registry[LifeCondition] = Registry(
 )
 
 
+@functools.cache
 def _schema() -> Any:
     """The pydantic model of a life file (built on first use: pydantic is not loaded where the CLI starts)."""
-    return _life_model()
-
-
-@functools.cache
-def _life_model() -> Any:
     from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
     class Variants(BaseModel):
@@ -241,8 +237,6 @@ class Life:
                 f"--episodes must be from 1 to the life's {self.episodes}, not {episodes!r}",
                 hint="--episodes cuts a life short for a quick look",
             )
-        from dataclasses import replace
-
         return replace(self, episodes=episodes, cut_from=_cut_from(self))
 
     def with_conditions(self, conditions: list[str] | tuple[str, ...] | None) -> Life:
@@ -255,8 +249,6 @@ class Life:
         for name in chosen:
             if name not in LIFE_CONDITIONS:
                 raise UnknownNameError("life condition", name, tuple(LIFE_CONDITIONS))
-        from dataclasses import replace
-
         return replace(self, conditions=chosen)
 
     def model_for(self, condition: LifeCondition) -> str:
@@ -353,11 +345,8 @@ def draw_life(life: Life, seed: int) -> LifeDraw:
             family = probe_at[index]
         elif met and (recur or not new):
             family = met[int(rng.integers(len(met)))]
-        elif new:
+        else:  # a new family (there is one: the probes leave at least one family out)
             family = new[0] if life.order == "listed" else new[int(rng.integers(len(new)))]
-        else:  # only probes, none due yet: the first one comes early
-            family = next(n for n in probes if n not in met)
-            probe_at = {k: v for k, v in probe_at.items() if v != family}
         first = family not in met
         if life.variant_draw == "canonical":
             variant = 0
