@@ -261,10 +261,6 @@ class Life:
 
         return self.measure or MEASURES.default
 
-    def last_window(self) -> int:
-        """m of the novelty reaction: the last m episodes (default: the last quarter)."""
-        return min(self.episodes, self.last or max(1, self.episodes // 4))
-
     def solve_budget(self) -> int:
         """The budget each episode solves with (``whole``: the ``lifelong`` preset's whole-space budget)."""
         from llcps.experiments.presets import WHOLE_SPACE

@@ -104,7 +104,7 @@ def read_rows(store: Store, life: Life) -> list[LifeRow]:
 
 
 def _report(rows: list[LifeRow], life: Life, out_dir: str | Path | None, html: bool) -> tuple[LifeReportPaths, dict[str, Any]]:
-    metrics = life_metrics(rows, last=life.last_window())
+    metrics = life_metrics(rows, last=life.last)  # None: the last quarter of the episodes stored
     target = out_dir if out_dir is not None else default_life_dir(life.name)
     paths = write_life_report(rows, metrics, target, life=life.name, description=life.description, html=html)
     return paths, {"life": life.name, **metrics.as_json()}

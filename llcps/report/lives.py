@@ -204,7 +204,7 @@ def _num(value: float) -> str:
 
 def overview(life: str, metrics: LifeMetrics, description: str) -> str:
     return (
-        f"Life `{life}` ({description}): {len(metrics.lives)} lives of {metrics.episodes} episodes, conditions "
+        f"Life `{life}` ({description}): {len(metrics.lives)} {'life' if len(metrics.lives) == 1 else 'lives'} of {metrics.episodes} episodes, conditions "
         f"{', '.join(c.condition for c in metrics.conditions)}; tau = {metrics.tau} exploration trials."
     )
 
@@ -276,7 +276,7 @@ def render_life_html(life: str, text: str, blocks: Sequence[TableBlock], curve: 
         f"<h1>Life report: {escape(life)}</h1>",
         f"<p>{escape(text)}</p>",
         f'<p class="note">{escape(METHOD)}</p>',
-        '<section id="metrics"><h2>Transfer, forgetting and novelty reaction</h2>',
+        '<section id="metrics"><h2>Metrics</h2>',
         table_html(blocks[0], table_id="life-metrics"),
         "</section>",
         '<section id="curves"><h2>Learning curves per condition</h2>',
