@@ -314,3 +314,19 @@ def test_the_paper_life_solves_the_lifelong_presets_episodes(tmp_path: Path) -> 
     for index, scenario in enumerate(sequences["reset"].scenarios):
         theirs, ours = theirs_all[sequences["reset"].episode_branch(scenario)], ours_all[f"life-paper-reset-l0-e{index}"]
         assert (theirs["own"], theirs["episodes"]) == (ours["own"], ours["episodes"])
+
+
+def test_the_api_reads_a_lifes_episodes(tiny: tuple[Store, Path]) -> None:
+    from llcps.api import LIFE_COLUMNS, Workbench
+
+    store, path = tiny
+    wb = Workbench(store)
+    lives = wb.lives(str(path))
+    assert list(lives.columns) == list(LIFE_COLUMNS) == list(COLUMNS)
+    life = lives[lives["phase"] == "life"]
+    assert sorted(zip(life["condition"], life["episode"])) == sorted((c, k) for c in ("update", "reset") for k in range(4))
+    assert (lives["censored"] == ~lives["solved"]).all()
+    episodes = wb.episodes()
+    mine = episodes[episodes["life_name"] == "tiny"]
+    assert len(mine) == len(lives) and set(mine["life_condition"]) == {"update", "reset"}
+    assert mine.loc[mine["life_episode"] == 0, "first_encounter"].all()
