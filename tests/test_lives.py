@@ -209,6 +209,9 @@ def test_the_metrics_of_a_hand_made_life_table() -> None:
     family_a = next(f for f in metrics.families if f.family == "A")
     assert (family_a.auc, family_a.auc_reset) == (pytest.approx(0.8), pytest.approx(0.55))
     assert family_a.difference.value == pytest.approx(0.25)
+    # Family A's forgetting: life 0 1.0-0.9, life 1 1.0-1.0; family B: 0.7 and 0.1
+    assert family_a.forgetting.value == pytest.approx(0.05)
+    assert next(f for f in metrics.families if f.family == "B").forgetting.value == pytest.approx(0.4)
     assert math.isnan(next(c for c in metrics.conditions if c.condition == "reset").ft_first.value)
 
 

@@ -329,6 +329,8 @@ class FamilyMetrics:
     difference: Estimate
     p: float
     p_holm: float = math.nan
+    #: AUC of the family's first recurrence minus AUC of its re-solve after the life, over lives.
+    forgetting: Estimate = Estimate(math.nan)
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -340,6 +342,7 @@ class FamilyMetrics:
             "difference": self.difference.as_json(),
             "p": _finite(self.p),
             "p_holm": _finite(self.p_holm),
+            "forgetting": self.forgetting.as_json(),
         }
 
 
@@ -426,30 +429,38 @@ def stratified_logrank(data: LifeData, condition: str) -> float:
     return float(p) if math.isfinite(p) else math.nan
 
 
-def forgetting_by_life(data: LifeData, condition: str) -> tuple[np.ndarray, int, int]:
-    """Per life (in ``data.lives`` order): mean over families of (AUC of the family's first
-    recurrence - AUC of its re-solve after the life), NaN for a life without any; and
-    the original-condition re-solves that needed no exploration, of those run."""
-    index = {life: i for i, life in enumerate(data.lives)}
+def forgetting_pairs(data: LifeData, condition: str) -> dict[tuple[int, str], float]:
+    """(life index, family) -> AUC of the family's first recurrence in the life minus AUC of
+    its re-solve after the life, for the families that recurred and were re-solved."""
     after = {(r.life, r.family): r for r in data.after_rows if r.condition == condition and r.episode_condition == "novelty"}
-    originals = [r for r in data.after_rows if r.condition == condition and r.episode_condition == "original" and r.life in index]
-    kept = sum(1 for r in originals if r.solved and r.exploration_trials == 0)
-    values = np.full(len(data.lives), np.nan)
+    out: dict[tuple[int, str], float] = {}
     if condition not in data.auc:
-        return values, kept, len(originals)
-    for life, i in index.items():
-        diffs = []
+        return out
+    for i, life in enumerate(data.lives):
         seen: set[str] = set()
         for k in range(data.episodes):
-            family = data.family[i, k]
+            family = str(data.family[i, k])
             if data.first[i, k]:
                 seen.add(family)
-                continue
-            if family in seen and (life, family) in after:
-                diffs.append(data.auc[condition][i, k] - after[(life, family)].auc)
+            elif family in seen and (life, family) in after:
+                out[(i, family)] = float(data.auc[condition][i, k] - after[(life, family)].auc)
                 seen.discard(family)
-        if diffs:
-            values[i] = float(np.mean(diffs))
+    return out
+
+
+def forgetting_by_life(data: LifeData, condition: str) -> tuple[np.ndarray, int, int]:
+    """Per life (in ``data.lives`` order): the mean of :func:`forgetting_pairs` over its
+    families, NaN for a life without any; and the original-condition re-solves after the
+    life that needed no exploration, of those run."""
+    lives = set(data.lives)
+    originals = [r for r in data.after_rows if r.condition == condition and r.episode_condition == "original" and r.life in lives]
+    kept = sum(1 for r in originals if r.solved and r.exploration_trials == 0)
+    values = np.full(len(data.lives), np.nan)
+    by_life: dict[int, list[float]] = {}
+    for (i, _), diff in forgetting_pairs(data, condition).items():
+        by_life.setdefault(i, []).append(diff)
+    for i, diffs in by_life.items():
+        values[i] = float(np.mean(diffs))
     return values, kept, len(originals)
 
 
@@ -521,7 +532,12 @@ def family_metrics(data: LifeData, *, seed: int = 0) -> list[FamilyMetrics]:
         if condition == REFERENCE:
             continue
         rows = []
+        pairs = forgetting_pairs(data, condition)
         for family in families:
+            forgot = np.array([v for (_, f), v in pairs.items() if f == family])
+            forgetting = bootstrap_lives(
+                forgot.size, lambda idx: float(np.mean(forgot[idx])), rng=cell_rng(seed, "forgetting", condition, family)
+            )
             mask = data.family == family
             met = mask.any(axis=1)
             mine = np.array([np.mean(data.auc[condition][i][mask[i]]) for i in np.nonzero(met)[0]])
@@ -533,7 +549,7 @@ def family_metrics(data: LifeData, *, seed: int = 0) -> list[FamilyMetrics]:
             p, _ = paired_wilcoxon(mine, theirs)
             rows.append(
                 FamilyMetrics(condition, family, int(met.sum()), float(np.mean(mine)) if mine.size else math.nan,
-                              float(np.mean(theirs)) if theirs.size else math.nan, estimate, p)
+                              float(np.mean(theirs)) if theirs.size else math.nan, estimate, p, forgetting=forgetting)
             )  # fmt: skip
         adjusted = holm([r.p for r in rows])
         out.extend(FamilyMetrics(**{**r.__dict__, "p_holm": q}) for r, q in zip(rows, adjusted))

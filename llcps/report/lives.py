@@ -76,11 +76,12 @@ def metrics_block(metrics: LifeMetrics) -> TableBlock:
 
 
 def family_block(metrics: LifeMetrics) -> TableBlock:
-    header = ("condition", "family", "lives", "AUC", "AUC reset", "difference", "Wilcoxon p", "Holm p")
+    header = ("condition", "family", "lives", "AUC", "AUC reset", "difference", "Wilcoxon p", "Holm p", "forgetting")
     body = tuple(
-        (f.condition, f.family, str(f.lives), f"{f.auc:.3f}", f"{f.auc_reset:.3f}", _est(f.difference), format_p(f.p), format_p(f.p_holm))
+        (f.condition, f.family, str(f.lives), f"{f.auc:.3f}", f"{f.auc_reset:.3f}", _est(f.difference), format_p(f.p), format_p(f.p_holm),
+         _est(f.forgetting))
         for f in metrics.families
-    )
+    )  # fmt: skip
     return TableBlock("Per family, against reset on the same episodes", header, body)
 
 
@@ -191,10 +192,12 @@ def _metrics_csv(path: Path, conditions: Sequence[ConditionMetrics]) -> Path:
 def _families_csv(path: Path, metrics: LifeMetrics) -> Path:
     with path.open("w", newline="", encoding="utf-8") as fh:
         writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(["condition", "family", "lives", "auc", "auc_reset", "difference", "difference_low", "difference_high", "p", "p_holm"])
+        writer.writerow(["condition", "family", "lives", "auc", "auc_reset", "difference", "difference_low", "difference_high", "p", "p_holm",
+                         "forgetting", "forgetting_low", "forgetting_high"])  # fmt: skip
         for f in metrics.families:
-            d = f.difference
-            writer.writerow([f.condition, f.family, f.lives, _num(f.auc), _num(f.auc_reset), _num(d.value), _num(d.low), _num(d.high), _num(f.p), _num(f.p_holm)])
+            d, g = f.difference, f.forgetting
+            writer.writerow([f.condition, f.family, f.lives, _num(f.auc), _num(f.auc_reset), _num(d.value), _num(d.low), _num(d.high), _num(f.p),
+                             _num(f.p_holm), _num(g.value), _num(g.low), _num(g.high)])  # fmt: skip
     return path
 
 
