@@ -333,3 +333,25 @@ def test_the_api_reads_a_lifes_episodes(tiny: tuple[Store, Path]) -> None:
     mine = episodes[episodes["life_name"] == "tiny"]
     assert len(mine) == len(lives) and set(mine["life_condition"]) == {"update", "reset"}
     assert mine.loc[mine["life_episode"] == 0, "first_encounter"].all()
+
+
+def test_a_stored_life_with_other_episodes_is_refused(tiny: tuple[Store, Path], tmp_path: Path) -> None:
+    """An edited life file under the same name would pass for the stored lives: refused before anything runs."""
+    store, path = tiny
+    edited = load_life(str(_file(tmp_path, TINY.replace("range = [5000, 5010]", "range = [6000, 6010]"), "tiny.toml")))
+    with pytest.raises(LlcpsError, match="other episodes than this run draws"):
+        run_lives(store, edited, lives=1, workers=1)
+    again = run_lives(store, load_life(str(path)), lives=1, workers=1)  # the same file: everything is stored
+    assert (again.done, again.skipped, again.status) == (0, 3, "ok")
+
+
+def test_life_list_and_show_as_json() -> None:
+    runner = CliRunner()
+    listed = runner.invoke(app, ["life", "list", "--json"])
+    assert listed.exit_code == 0 and {"paper", "default"} <= {item["name"] for item in json.loads(listed.stdout)}
+    shown = runner.invoke(app, ["life", "show", "default", "--life", "4", "--json"])
+    assert shown.exit_code == 0
+    data = json.loads(shown.stdout)
+    expected = draw_life(load_life("default"), 4)
+    assert [e["family"] for e in data["episodes"]] == [e.family for e in expected.episodes]
+    assert data["probes"] == list(expected.probes) and 'name = "default"' in data["file"]
