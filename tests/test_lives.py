@@ -117,6 +117,16 @@ def test_a_lifes_seed_fixes_its_episodes_and_every_condition_gets_the_same_list(
     assert by["update"].after and not by["reset"].after and by["scratch"].pretrain is None
 
 
+def test_an_ordering_runs_as_a_condition() -> None:
+    from llcps.cps.orderings import ORDERINGS
+
+    life = load_life("default").with_conditions(["update", "reset", "ranked"])
+    tasks = {t.condition.name: t for t in plan_life_tasks(life, [0]) if isinstance(t, LifeTask)}
+    assert tasks["ranked"].ordering == "ranked" and tasks["ranked"].condition.carry == "update"
+    assert tasks["update"].ordering == tasks["reset"].ordering == ORDERINGS.default
+    assert tasks["ranked"].episodes == tasks["update"].episodes and tasks["ranked"].label == "life-default-ranked-l0"
+
+
 def test_the_draw_holds_probes_back_and_marks_first_encounters() -> None:
     life = load_life("default")
     quarter = life.episodes - life.episodes // 4
@@ -149,8 +159,8 @@ def test_the_paper_life_plans_the_lifelong_presets_episodes() -> None:
     assert [(t.seed, t.pool) for t in ours if isinstance(t, PretrainTask)] == [(t.seed, t.pool) for t in pretraining]
     for task in (t for t in ours if isinstance(t, LifeTask)):
         seq = sequences[(task.seed, task.condition.name)]
-        assert (task.model, task.measure, task.budget, task.refit_every) == (
-            seq.sequence.cell.model, seq.sequence.cell.measure, seq.budget, seq.refit_every,
+        assert (task.model, task.measure, task.budget, task.refit_every, task.ordering) == (
+            seq.sequence.cell.model, seq.sequence.cell.measure, seq.budget, seq.refit_every, seq.ordering,
         )  # fmt: skip
         assert [(e.family, e.variant, e.condition) for e in task.episodes] == [(s, 0, "novelty") for s in seq.sequence.scenarios]
         # update: one branch for the whole sequence; reset: each episode on its own fork of the pretraining

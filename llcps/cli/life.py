@@ -13,7 +13,7 @@ from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.errors import LlcpsError
 from llcps.experiments.executors import ENGINES
-from llcps.experiments.life import LIFE_CONDITIONS
+from llcps.experiments.life import LIFE_CONDITIONS, condition_names
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
 
@@ -46,6 +46,7 @@ HtmlFlag = Annotated[bool, typer.Option("--html", help="Also write report.html: 
         "llcps --db lives.db life run paper --lives 20 --workers 2          # the lifelong preset's episodes, as lives",
         "llcps --db lives.db life run default --lives 20 --workers 2 --html",
         "llcps --db lives.db life run default --lives 2 --episodes 8 --conditions update,reset   # a quick look",
+        "llcps --db lives.db life run default --lives 20 --conditions update,reset,ranked   # an ordering as a condition",
         "llcps --db postgresql://host/lives life run default --first-life 20 --lives 20   # another machine's share",
         "llcps --db lives.db life run mine.toml --lives 5 --json",
     ),
@@ -65,7 +66,9 @@ def run_cli(
     conditions: Annotated[
         Optional[str],
         typer.Option("--conditions", metavar="A,B", help="Conditions to run instead of the file's: "
-                     + "; ".join(f"{c.name} ({c.description})" for c in LIFE_CONDITIONS.values()) + ".", show_default=False),
+                     + "; ".join(f"{c.name} ({c.description})" for c in LIFE_CONDITIONS.values())
+                     + "; or an exploration ordering, update exploring in it: "
+                     + ", ".join(n for n in condition_names() if n not in LIFE_CONDITIONS) + ".", show_default=False),
     ] = None,
     workers: Annotated[
         Optional[int],

@@ -16,7 +16,9 @@ life N solves that same list (paired lives), each on its own branches:
 - ``update``: the world model and K' carry over from episode to episode (one branch);
 - ``reset``: every episode from the pretraining point (a branch per episode);
 - ``scratch``: like ``update``, without pretraining;
-- ``random``: like ``update``, exploring in a random order (the ``random`` model).
+- ``random``: like ``update``, exploring in a random order (the ``random`` model);
+- an exploration ordering's name (``ranked``, ``hedged``, ...): like ``update``,
+  exploring in that ordering, so every ordering runs as a condition.
 
 After the life, the conditions that carry experience over re-solve a fresh variant of
 every family met, and its original condition, each on a fork of the life's end
@@ -89,6 +91,26 @@ LIFE_CONDITIONS: Registry[LifeCondition] = Registry(
 )
 
 
+def life_condition(name: str) -> LifeCondition:
+    """The condition called ``name``: one of :data:`LIFE_CONDITIONS`, or an exploration
+    ordering's name (:data:`~llcps.cps.orderings.ORDERINGS`), which is ``update`` exploring
+    in that ordering, so every ordering (a baseline among them) runs as a condition."""
+    from llcps.cps.orderings import ORDERINGS
+
+    if name in LIFE_CONDITIONS:
+        return LIFE_CONDITIONS[name]
+    if name in ORDERINGS and _FIELD.match(name):
+        return LifeCondition(name, "update", ordering=name, description=f"update, exploring in the {name} ordering")
+    raise UnknownNameError("life condition", name, condition_names())
+
+
+def condition_names() -> tuple[str, ...]:
+    """Every name :func:`life_condition` accepts: the conditions, then the orderings."""
+    from llcps.cps.orderings import ORDERINGS
+
+    return tuple(dict.fromkeys((*LIFE_CONDITIONS, *(n for n in ORDERINGS if _FIELD.match(n)))))
+
+
 @functools.cache
 def _schema() -> Any:
     """The pydantic model of a life file (built on first use: pydantic is not loaded where the CLI starts)."""
@@ -146,6 +168,9 @@ def _schema() -> Any:
         refit_every: int = Field(1, ge=1, le=100_000)
         model: str | None = None
         measure: str | None = None
+        #: The exploration ordering (None: the registry's default); a condition named after
+        #: an ordering explores in that one instead.
+        ordering: str | None = None
         #: Episodes in the last-m window of the novelty reaction (None: the last quarter).
         last: int | None = Field(None, ge=1)
         #: Re-solve every met family after the life (fresh variant and original condition).
@@ -173,8 +198,8 @@ def _schema() -> Any:
             if not value:
                 raise ValueError("name at least one condition")
             for name in value:
-                if name not in LIFE_CONDITIONS:
-                    raise ValueError(f"unknown condition {name!r}: choose from {', '.join(LIFE_CONDITIONS)}")
+                if name not in condition_names():
+                    raise ValueError(f"unknown condition {name!r}: choose from {', '.join(condition_names())}")
             if len(set(value)) != len(value):
                 raise ValueError("a condition is named twice")
             return value
@@ -209,6 +234,7 @@ class Life:
     refit_every: int = 1
     model: str | None = None
     measure: str | None = None
+    ordering: str | None = None
     last: int | None = None
     forgetting: bool = True
     variant_draw: str = "random"
@@ -247,14 +273,18 @@ class Life:
         if not chosen:
             raise LlcpsError("name at least one condition", hint=f"choose from {', '.join(LIFE_CONDITIONS)}")
         for name in chosen:
-            if name not in LIFE_CONDITIONS:
-                raise UnknownNameError("life condition", name, tuple(LIFE_CONDITIONS))
+            life_condition(name)
         return replace(self, conditions=chosen)
 
     def model_for(self, condition: LifeCondition) -> str:
         from llcps.models.registry import WORLD_MODELS
 
         return condition.model or self.model or WORLD_MODELS.default
+
+    def ordering_for(self, condition: LifeCondition) -> str:
+        from llcps.cps.orderings import ORDERINGS
+
+        return condition.ordering or self.ordering or ORDERINGS.default
 
     def measure_name(self) -> str:
         from llcps.models.measures import MEASURES
@@ -483,6 +513,10 @@ def life_from_data(where: str, data: dict[str, Any], *, text: str = "") -> Life:
         raise _field_error(where, "model", f"unknown world model {model.model!r}: choose from {', '.join(WORLD_MODELS)}")
     if model.measure is not None and model.measure not in MEASURES:
         raise _field_error(where, "measure", f"unknown measure {model.measure!r}: choose from {', '.join(MEASURES)}")
+    from llcps.cps.orderings import ORDERINGS
+
+    if model.ordering is not None and model.ordering not in ORDERINGS:
+        raise _field_error(where, "ordering", f"unknown ordering {model.ordering!r}: choose from {', '.join(ORDERINGS)}")
     return Life(
         name=model.name,
         families=families,
@@ -497,6 +531,7 @@ def life_from_data(where: str, data: dict[str, Any], *, text: str = "") -> Life:
         refit_every=model.refit_every,
         model=model.model,
         measure=model.measure,
+        ordering=model.ordering,
         last=model.last,
         forgetting=model.forgetting,
         variant_draw=model.variants.draw,
@@ -537,7 +572,9 @@ __all__ = [
     "LifeDraw",
     "LifeEpisode",
     "after_branch",
+    "condition_names",
     "draw_life",
+    "life_condition",
     "episode_branch",
     "life_branch",
     "load_life",

@@ -54,6 +54,7 @@ def run_experiment(
     variants: bool = False,
     scenarios: Iterable[str] | None = None,
     with_others: bool = False,
+    ordering: str | None = None,
     workers: int = 1,
     engine: str = "local",
     ray_address: str | None = None,
@@ -72,6 +73,8 @@ def run_experiment(
             paths); None: the preset's own list (the paper's three for the paper's presets).
         with_others: solve each scenario after the list's other scenarios on its branch
             (the preset's ``reset`` becomes ``others``; see :meth:`Preset.with_others`).
+        ordering: the exploration ordering of every episode (None: the preset's). The
+            branch names do not say it: run another ordering into another store.
         workers: processes (local) or concurrent Ray tasks.
         engine: one of :data:`ENGINES`.
         ray_address: a Ray cluster (None: start a local instance with ``workers`` CPUs).
@@ -86,7 +89,7 @@ def run_experiment(
         What ran; on Ctrl-C the tasks imported so far stay and ``status`` is ``interrupted``.
     """
     grid = get_preset(preset) if isinstance(preset, str) else preset
-    grid = grid.with_scenarios(scenarios)
+    grid = grid.with_scenarios(scenarios).with_ordering(ordering)
     if with_others:
         grid = grid.with_others()
     validate_preset(grid)
@@ -103,11 +106,15 @@ def run_experiment(
         "variants": variants,
         "scenarios": [name for name in grid.scenario_names()],
         "conditions": list(grid.conditions),
+        "ordering": grid.ordering,
         "workers": workers,
         "engine": engine,
         "cache": cache,
     }
-    command = f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else "") + (" --with-others" if with_others else "")
+    command = (
+        f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else "") + (" --with-others" if with_others else "")
+        + (f" --ordering {grid.ordering}" if ordering else "")
+    )  # fmt: skip
     return run_tasks(
         store, tasks, summary, command=command, config=config, engine=engine, ray_address=ray_address, progress=progress, cache=cache
     )

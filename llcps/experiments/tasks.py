@@ -24,6 +24,7 @@ from typing import Any, Iterable
 
 from llcps.domain import ACTIONS
 from llcps.experiments.design import Sequence, pretrain_branch_name
+from llcps.cps.orderings import PAPER_ORDERING
 from llcps.experiments.life import Life, LifeCondition, LifeEpisode, after_branch, episode_branch, life_branch
 from llcps.experiments.presets import Preset, resolve_scenarios, seed_list
 from llcps.experiments.transfer import Payload
@@ -59,6 +60,8 @@ class SequenceTask:
     base: Payload | None = None
     #: Exploration trials between world-model refits (the preset's ``refit_every``).
     refit_every: int = 1
+    #: The exploration ordering (the preset's ``ordering``).
+    ordering: str = PAPER_ORDERING
     #: The store whose physics cache answers trials simulated before (None: no cache).
     #: A URL with its credentials: the worker opens the store itself.
     cache_url: str | None = None
@@ -115,6 +118,7 @@ class LifeTask:
     pretrain: str | None
     after: tuple[tuple[str, int], ...] = ()
     refit_every: int = 1
+    ordering: str = PAPER_ORDERING
     base: Payload | None = None
     cache_url: str | None = None
 
@@ -180,7 +184,7 @@ def plan_tasks(
     for seed in chosen:
         tasks.append(PretrainTask(preset.name, seed, preset.pretrain_pool, tuple(preset.pretrain_sizes)))
         tasks.extend(
-            SequenceTask(s, budget, refit_every=preset.refit_every, cache_url=cache_url, sources=sources)
+            SequenceTask(s, budget, refit_every=preset.refit_every, ordering=preset.ordering, cache_url=cache_url, sources=sources)
             for s in sequences
             if s.seed == seed
         )
@@ -193,9 +197,9 @@ def plan_life_tasks(life: Life, seeds: Iterable[int], *, cache_url: str | None =
 
     Every condition of life N gets the same draw (:func:`~llcps.experiments.life.draw_life`).
     """
-    from llcps.experiments.life import LIFE_CONDITIONS, draw_life, pretrain_branch, pretrain_preset, pretrain_seed
+    from llcps.experiments.life import draw_life, life_condition, pretrain_branch, pretrain_preset, pretrain_seed
 
-    conditions = [LIFE_CONDITIONS[name] for name in life.conditions]
+    conditions = [life_condition(name) for name in life.conditions]
     budget = life.solve_budget()
     tasks: list[Task] = []
     planned: set[str] = set()
@@ -219,6 +223,7 @@ def plan_life_tasks(life: Life, seeds: Iterable[int], *, cache_url: str | None =
                     pretrain=pretrain if condition.pretrained else None,
                     after=draw.after if condition.forgets else (),
                     refit_every=life.refit_every,
+                    ordering=life.ordering_for(condition),
                     cache_url=cache_url,
                 )
             )

@@ -194,6 +194,7 @@ def _solve(store: Store, task: SequenceTask, branch: str, source: str) -> str:
         variant=seq.variant,
         budget=task.budget,
         refit_every=task.refit_every,
+        ordering=task.ordering,
     )
     result = solve(store, branch=branch, config=config, command=f"{COMMAND} --preset {seq.preset}", cache=_cache(task))
     if result.status == "interrupted":
@@ -216,6 +217,7 @@ def _solve_life_episode(
         condition=condition,
         model=task.model,
         measure=task.measure,
+        ordering=task.ordering,
         seed=task.seed,
         variant=variant,
         budget=task.budget,

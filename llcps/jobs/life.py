@@ -14,7 +14,7 @@ from typing import Any, Iterable, Mapping
 
 from llcps.analysis.lives import LifeRow, life_metrics, life_rows
 from llcps.errors import LlcpsError
-from llcps.experiments.life import LIFE_CONDITIONS, Life, LifeDraw, draw_life, load_life, shipped_lives
+from llcps.experiments.life import Life, LifeDraw, condition_names, draw_life, load_life, shipped_lives
 from llcps.experiments.life import MAX_LIVES
 from llcps.experiments.runner import run_lives
 from llcps.experiments.scheduler import ProgressCallback, RunSummary
@@ -177,10 +177,8 @@ def show_life_job(*, life: str, seed: int | None = None, episodes: int | None = 
     return LifeShow(chosen, None if seed is None else draw_life(chosen, seed))
 
 
-CONDITION_NAMES: tuple[str, ...] = tuple(LIFE_CONDITIONS)
-
 __all__ = [
-    "CONDITION_NAMES",
+    "condition_names",
     "LifeListing",
     "LifeReport",
     "LifeRun",
