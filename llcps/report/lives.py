@@ -112,11 +112,14 @@ def learning_curve_plot(metrics: LifeMetrics, stem: Path) -> tuple[Path, ...]:
     conditions = list(dict.fromkeys(p.condition for p in metrics.curve))
     fig = Figure(figsize=(8.0, 4.2))
     ax = fig.add_subplot(1, 1, 1)
-    for c in conditions:
+    markers = "osD^vP*X"
+    for j, c in enumerate(conditions):
         points = [p for p in metrics.curve if p.condition == c]
         xs = [p.episode for p in points]
         color = _color(c, conditions)
-        ax.plot(xs, [p.mean for p in points], color=color, label=f"{c}: mean", linewidth=1.6)
+        # Markers of their own, so a condition's line hidden under another's still shows.
+        ax.plot(xs, [p.mean for p in points], color=color, label=f"{c}: mean", linewidth=1.6, marker=markers[j % len(markers)],
+                markersize=7 - j, alpha=0.85)  # fmt: skip
         lows = [p.low if math.isfinite(p.low) else p.mean for p in points]
         highs = [p.high if math.isfinite(p.high) else p.mean for p in points]
         ax.fill_between(xs, lows, highs, color=color, alpha=0.15, linewidth=0)
@@ -125,7 +128,8 @@ def learning_curve_plot(metrics: LifeMetrics, stem: Path) -> tuple[Path, ...]:
     ax.set_xlabel("episode of the life")
     ax.set_ylabel("exploration trials")
     ax.set_yscale("symlog", linthresh=1.0)
-    ax.set_title(f"Learning curves over {len(metrics.lives)} lives (band: 95% bootstrap over lives)")
+    lives = len(metrics.lives)
+    ax.set_title(f"Learning curves over {lives} {'life' if lives == 1 else 'lives'} (band: 95% bootstrap over lives)")
     ax.legend(fontsize=7, ncol=2)
     return save(fig, stem)
 
