@@ -148,6 +148,18 @@ def test_the_draw_holds_probes_back_and_marks_first_encounters() -> None:
     assert draw_life(cut, 5).episodes == draw_life(life, 5).episodes[:10]
 
 
+def test_original_condition_episodes_are_drawn_among_recurrences_only() -> None:
+    from dataclasses import replace
+
+    life = replace(load_life("default"), original_share=0.5)
+    episodes = [e for seed in range(5) for e in draw_life(life, seed).episodes]
+    originals = [e for e in episodes if e.condition == "original"]
+    recurrences = [e for e in episodes if not e.first_encounter]
+    assert originals and not any(e.first_encounter for e in originals)
+    assert 0.3 < len(originals) / len(recurrences) < 0.7
+    assert all(e.condition == "novelty" for e in draw_life(load_life("default"), 0).episodes)
+
+
 def test_the_paper_life_plans_the_lifelong_presets_episodes() -> None:
     """Same pretraining, model, measure, budget, refits, scenes and branch structure, seed by seed."""
     preset = PRESETS["lifelong"]
