@@ -377,3 +377,16 @@ def test_life_list_and_show_as_json() -> None:
     expected = draw_life(load_life("default"), 4)
     assert [e["family"] for e in data["episodes"]] == [e.family for e in expected.episodes]
     assert data["probes"] == list(expected.probes) and 'name = "default"' in data["file"]
+
+
+def test_scratch_starts_from_nothing_and_needs_no_pretraining(tmp_path: Path) -> None:
+    life = load_life(str(_file(tmp_path, TINY.replace('conditions = ["update", "reset"]', 'conditions = ["scratch"]'))))
+    life = life.with_episodes(2)
+    assert not any(isinstance(t, PretrainTask) for t in plan_life_tasks(life, [0]))
+    with Store.open(str(tmp_path / "scratch.db"), create=True) as store:
+        summary = run_lives(store, life, lives=1, workers=1)
+        assert (summary.status, summary.done) == ("ok", 1)
+        branch = store.resolve_branch("life-tiny-scratch-l0")
+        assert (branch.parent, branch.fork_point) == ("main", 0)
+        assert not [t for t in store.visible_trials("life-tiny-scratch-l0") if t.source == "pretrain"]
+        assert len([e for e in store.list_episodes() if e.summary.get("life", {}).get("phase") == "life"]) == 2
