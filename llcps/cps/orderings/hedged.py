@@ -17,7 +17,8 @@ one (random order takes the others). ``w`` is the posterior probability that the
 points the right way in this scene, starting from :data:`MODEL_PRIOR`. Each failed
 trial of a candidate the model gave probability ``p`` of resolving the novelty, whichever
 side chose it, multiplies the odds of that by ``(1 - p) / (1 - p_mean)``, ``p_mean``
-being the model's mean over the untried candidates: the chance of that failure if the
+being the model's mean over the untried candidates (both at most
+:data:`MAX_EVIDENCE_PROBABILITY`, so one failure at most halves the odds): the chance of that failure if the
 model is right, over its chance if the candidate were one of the others at random. A
 model that was sure of candidates that then failed loses its share quickly; one that
 expected the failures keeps it. Comparing with the model's own mean judges how well it
@@ -60,8 +61,11 @@ MAX_MODEL_SHARE = 0.5
 MODEL_PRIOR = 0.5
 #: Stream of the seed's random permutation, apart from the tie-breaking key's.
 _PERMUTATION_STREAM = 0x4E0D6E
-#: Largest probability a failed candidate may have had (keeps the odds finite).
-_MAX_PROBABILITY = 1.0 - 1e-9
+#: Largest probability of resolving a failed trial is counted with: no single failure
+#: more than halves the odds. In a novel scene the model's probabilities are not
+#: calibrated: one sure of a candidate K claims (p near 1) would otherwise lose every
+#: trial to random order after one failure, whatever it knows of the rest.
+MAX_EVIDENCE_PROBABILITY = 0.5
 
 
 class Hedged(Ranked):
@@ -124,6 +128,6 @@ class Hedged(Ranked):
         given = {i: float(p) for i, p in zip(ranking.indices, probability) if i in untried}
         if index not in given or len(given) < 2:
             return 0.0
-        p = min(given[index], _MAX_PROBABILITY)
-        mean = min(sum(given.values()) / len(given), _MAX_PROBABILITY)
+        p = min(given[index], MAX_EVIDENCE_PROBABILITY)
+        mean = min(sum(given.values()) / len(given), MAX_EVIDENCE_PROBABILITY)
         return math.log1p(-p) - math.log1p(-mean)
