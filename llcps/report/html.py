@@ -124,4 +124,10 @@ def render_html(
     return "\n".join(parts) + "\n"
 
 
-__all__ = ["data_uri", "render_html"]
+#: Public names of the page's parts, for other pages of the report (the lives' report).
+STYLE = _STYLE
+escape = _e
+table_html = _table
+figure_html = _figure
+
+__all__ = ["STYLE", "data_uri", "escape", "figure_html", "render_html", "table_html"]
