@@ -17,6 +17,8 @@ from typing import Iterator, Mapping, Sequence
 
 from llcps.cps.discretization import EXPLORATION_ORIENTATIONS, MOVEMENT_MAGNITUDES, RATES
 from llcps.domain import ACTIONS, ControllerParams
+from llcps.errors import LlcpsError
+from llcps.limits import MAX_GRID_POINTS, MAX_GRID_VALUES
 from llcps.trial_records import TrialSpec
 
 #: Entity kinds an argument slot accepts, per action.
@@ -41,6 +43,13 @@ class Grid:
             self.orientations, self.movement_magnitudes, self.rates
         ):
             yield ControllerParams(rate=rate, movement_magnitude=magnitude, orientation=orientation)
+
+    def __post_init__(self) -> None:
+        if self.size > MAX_GRID_POINTS:
+            raise LlcpsError(
+                f"a grid of {self.size} points, more than the {MAX_GRID_POINTS} exploration may search",
+                hint=f"list at most {MAX_GRID_VALUES} rates and {MAX_GRID_VALUES} movement magnitudes",
+            )
 
     @property
     def size(self) -> int:
