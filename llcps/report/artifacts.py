@@ -15,6 +15,7 @@ from llcps.analysis.results import ResultsTable
 from llcps.cps.film import episode_shots, reenact
 from llcps.experiments.design import scenario_rank
 from llcps.experiments.rows import ResultRow
+from llcps.outputs import write_text
 from llcps.provenance import Provenance
 from llcps.store import Store
 
@@ -35,8 +36,7 @@ def table_provenance(store: Store, table: ResultsTable) -> list[dict[str, Any]]:
 
 def write_provenance(out_dir: Path, provenance: Sequence[Mapping[str, Any]]) -> Path:
     path = out_dir / PROVENANCE_FILE
-    path.write_text(json.dumps(list(provenance), indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    return path
+    return write_text(path, json.dumps(list(provenance), indent=1, sort_keys=True) + "\n", what="report")
 
 
 def read_provenance(out_dir: Path) -> list[dict[str, Any]]:

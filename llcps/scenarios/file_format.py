@@ -90,6 +90,8 @@ AnyScalar = Annotated[Scalar, PlainValidator(lambda v: _scalar(v))]
 PositiveScalar = Annotated[Scalar, PlainValidator(lambda v: _scalar(v, positive=True, what="a positive number"))]
 #: A positive length of a body (m), at most :data:`~llcps.limits.MAX_EXTENT`.
 Extent = Annotated[Scalar, PlainValidator(lambda v: _scalar(v, positive=True, what="a positive number", bound=MAX_EXTENT))]
+#: A positive force (N), finite: its bound is checked where it is declared.
+Force = Annotated[Scalar, PlainValidator(lambda v: _scalar(v, positive=True, what="a positive number", bound=math.inf))]
 #: A positive mass (kg), at most :data:`~llcps.limits.MAX_MASS`.
 Mass = Annotated[Scalar, PlainValidator(lambda v: _scalar(v, positive=True, what="a positive number", bound=MAX_MASS))]
 
@@ -171,7 +173,7 @@ class TableModel(_Model):
 class RobotModel(_Model):
     """What the scene changes about the robot (omitted: the Panda as built)."""
 
-    grip_force: PositiveScalar | None = None
+    grip_force: Force | None = None
 
     @field_validator("grip_force")
     @classmethod
