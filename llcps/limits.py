@@ -17,7 +17,7 @@ MAX_SCENARIO_FILE_BYTES = 1 << 20
 #: Largest results file (results.csv or results.json, bytes): ~200 bytes a row, so
 #: about 300,000 rows.
 MAX_RESULTS_FILE_BYTES = 64 << 20
-#: Deepest nesting of tables and arrays in a scenario file (the format needs 5:
+#: Deepest nesting of tables and arrays in a scenario file (the format needs 6:
 #: conditions.novelty.entities.bin.size with a range in it).
 MAX_FILE_DEPTH = 8
 #: Most items in one array or table of a scenario file.
