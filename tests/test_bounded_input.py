@@ -104,6 +104,7 @@ BAD_FILES: dict[str, tuple[Callable[[dict[str, Any]], Any] | str, str]] = {
     "a long story": (lambda d: d.update(story="x" * (limits.MAX_TEXT + 1)), "story: 4,097 characters"),
     "contradictory goal": (lambda d: d.update(goal=["(in can bin)", "(not (in can bin))"]), "goal[1]: '(not (in can bin))' contradicts"),
     "too many goal atoms": (lambda d: d.update(goal=["(in can bin)"] * 33), "goal: 33 items, more than the 32"),
+    "a wall too thick": (lambda d: d["entities"][1].update(wall=0.5), "entities[1] (bin): container 'bin': wall 0.5 too thick"),
     "a file too large": ("# " + "x" * limits.MAX_SCENARIO_FILE_BYTES + "\n", "larger than the 1,048,576 bytes"),
 }  # fmt: skip
 

@@ -14,9 +14,10 @@ import json
 import math
 import re
 import tomllib
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 from llcps.domain import Fluent
 from llcps.errors import LlcpsError
@@ -136,27 +137,40 @@ class ScenarioSource:
                 return f"entities[{index}] ({name})"
         return name
 
+    @contextmanager
+    def _blamed(self, where: str, condition: str) -> Iterator[None]:
+        """A value the scene's own checks refuse (a wall too thick for its container) as an
+        error naming the file and the part of it."""
+        try:
+            yield
+        except ValueError as exc:
+            raise file_error(self.where, where, f"{exc} (in the {condition} condition)") from None
+
     def _build(self, condition: str, draws: Draws) -> tuple[Any, dict[str, layout.Declared]]:
         table_fields = dict(self.model.table.model_dump(exclude_none=True))
         changes = self.model.conditions.get(condition)
         if changes is not None and changes.table is not None:
             table_fields.update(changes.table.model_dump(exclude_none=True))
-        table = TableSpec(**{k: draws.number(v, f"table.{k}") for k, v in table_fields.items()})
+        with self._blamed("table", condition):
+            table = TableSpec(**{k: draws.number(v, f"table.{k}") for k, v in table_fields.items()})
         robot_fields = dict(self.model.robot.model_dump(exclude_none=True))
         if changes is not None and changes.robot is not None:
             robot_fields.update(changes.robot.model_dump(exclude_none=True))
-        robot = RobotSpec(**{k: draws.number(v, f"robot.{k}") for k, v in robot_fields.items()})
+        with self._blamed("robot", condition):
+            robot = RobotSpec(**{k: draws.number(v, f"robot.{k}") for k, v in robot_fields.items()})
         entities = self.entities(condition)
         built: dict[str, Any] = {}
         pending = list(entities)
         while pending:  # containers and supports before what rests on them (no cycles: checked at load)
             ready = [e for e in pending if (e.inside or e.on_top_of) is None or (e.inside or e.on_top_of) in built]
             for entity in ready:
-                built[entity.name] = _entity_spec(entity, draws, built, table.floor_z)
+                with self._blamed(self._entity_path(entity.name), condition):
+                    built[entity.name] = _entity_spec(entity, draws, built, table.floor_z)
                 pending.remove(entity)
         fixtures: list[Any] = []
         for fixture in (*self.model.fixtures, *(changes.fixtures if changes is not None else ())):
-            fixtures.extend(_fixture_specs(fixture, draws, table))
+            with self._blamed(f"fixtures ({fixture.name})", condition):
+                fixtures.extend(_fixture_specs(fixture, draws, table))
         suffix = "" if draws.variant == 0 else f"/v{draws.variant}"
         try:
             scene = SceneSpec(
