@@ -17,6 +17,8 @@ MAX_SCENARIO_FILE_BYTES = 1 << 20
 #: Largest results file (results.csv or results.json, bytes): ~200 bytes a row, so
 #: about 300,000 rows.
 MAX_RESULTS_FILE_BYTES = 64 << 20
+#: Largest file a report embeds (a film or plot in report.html, bytes).
+MAX_EMBEDDED_BYTES = 64 << 20
 #: Deepest nesting of tables and arrays in a scenario file (the format needs 6:
 #: conditions.novelty.entities.bin.size with a range in it).
 MAX_FILE_DEPTH = 8

@@ -315,3 +315,17 @@ def test_a_report_from_a_bad_results_file_names_row_and_column(tmp_path: Path, c
     assert_one_error(result, f"{path}: row {1 if value is None else 3}", needle)
     assert sorted(p.name for p in path.parent.iterdir()) == before  # no report written
     assert set(COLUMNS) >= {column}
+
+
+def test_a_stored_scene_is_held_to_the_same_limits() -> None:
+    """The scene of a stored snapshot is read through ``SceneSpec.from_dict``: the entity bound of
+    a file holds for it too."""
+    from llcps.sim.builders import solid
+    from llcps.sim.specs import SceneSpec
+
+    entities = [solid(f"b{i}", "box", "red", (0.03, 0.03, 0.03), at=(0.3 + 0.05 * (i // 4), -0.2 + 0.05 * (i % 4))) for i in range(limits.MAX_ENTITIES + 1)]
+    data = SceneSpec(tuple(entities[:-1])).to_dict()
+    assert len(SceneSpec.from_dict(data).entities) == limits.MAX_ENTITIES
+    data["entities"].append(entities[-1].to_dict())
+    with pytest.raises(LlcpsError, match=f"more than {limits.MAX_ENTITIES} entities"):
+        SceneSpec.from_dict(data)
