@@ -52,6 +52,8 @@ def check_output_file(path: str | Path, *, what: str, suffixes: tuple[str, ...] 
         except OSError as exc:
             raise LlcpsError(f"{what}: cannot write {path}: {exc.strerror or exc}", hint=f"choose another {what}") from None
         return path
+    if path.is_file() and not path.is_symlink() and not os.access(path, os.W_OK):
+        raise LlcpsError(f"{what}: cannot write {path}: Permission denied", hint=f"choose another {what}")
     _probe_directory(parent, what)  # anything else is written beside it and renamed over it
     return path
 
@@ -87,14 +89,15 @@ def write_error(path: str | Path, exc: OSError, *, what: str) -> LlcpsError:
     return LlcpsError(f"{what}: writing {path} failed: {exc.strerror or exc}", hint=f"free some space or choose another {what}")
 
 
-#: Directories whose special files (``/dev/stdout``, ``/dev/full``, ``/proc/self/fd/1``) a
-#: path may name to be written directly: the system's, which no user can plant a link in.
-SYSTEM_DIRECTORIES: tuple[str, ...] = ("/dev/", "/proc/")
+#: Directories whose files (``/dev/stdout``, ``/dev/full``, ``/proc/self/fd/1``) a path may
+#: name to be written in place: the system's, where no user can plant a link (``/dev/shm``,
+#: which anyone may write, is not one of them).
+SYSTEM_DIRECTORIES: frozenset[str] = frozenset({"/dev", "/dev/fd", "/proc/self/fd"})
 
 
 def _written_directly(path: Path) -> bool:
-    """Whether ``path`` names a system device or pipe (written in place, not replaced)."""
-    return str(path.absolute()).startswith(SYSTEM_DIRECTORIES) and path.exists() and not path.is_file()
+    """Whether ``path`` names a stream or device of the system (written in place, never renamed over)."""
+    return str(path.absolute().parent) in SYSTEM_DIRECTORIES
 
 
 @contextmanager
@@ -105,8 +108,8 @@ def written_atomically(path: str | Path, *, what: str) -> Iterator[Path]:
     renamed over it at the end, so a failed write leaves no half-written file (and an
     existing one untouched), and a symbolic link at ``path`` is replaced, never written
     through: a link planted in a shared directory cannot make llcps overwrite its target.
-    Only a device or pipe under /dev or /proc (``/dev/stdout``, ``/dev/full``) is
-    yielded as it is and written directly.
+    Only a stream or device of the system (a path in :data:`SYSTEM_DIRECTORIES`:
+    ``/dev/stdout``, ``/dev/full``) is yielded as it is and written in place.
 
     Raises:
         LlcpsError: writing failed (see :func:`write_error`).
