@@ -39,6 +39,7 @@ from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError
 from sqlalchemy.pool import NullPool, StaticPool
 
 from llcps.errors import StoreError
+from llcps.inputs import check_regular_file
 from llcps.store.tables import SQLITE_APPLICATION_ID
 
 #: How long a SQLite writer waits for another writer's lock, in milliseconds.
@@ -97,6 +98,7 @@ def check_sqlite_file(path: Path, *, create: bool) -> bool:
                 raise StoreError(f"cannot create {path}: directory {path.parent} is not writable", hint="choose another --db path")
             return False
         raise StoreError(f"no llcps database at {path}", hint=f"create one with `llcps --db {path} db init` (or pass --create)")
+    check_regular_file(path, what="--db", hint="pass the path of an llcps store (a regular file), or a new path with `db init`")
     try:
         with path.open("rb") as fh:
             header = fh.read(100)

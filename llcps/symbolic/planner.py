@@ -20,9 +20,11 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from typing import Collection
 
 from llcps.errors import LlcpsError
+from llcps.limits import MAX_GROUND_ACTIONS, MAX_PLANNER_STATES
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
 from llcps.symbolic.lifted import GroundAction
@@ -35,21 +37,32 @@ MAX_EXPANSIONS = 200_000
 
 
 class PlanningLimitError(LlcpsError):
-    """The search ran out of its expansion budget before it could decide the task."""
+    """The search ran out of its budget (expansions, states held, ground actions) before
+    it could decide the task."""
 
     exit_code = 1
 
 
-def ground(kb: KnowledgeBase, task: Task) -> list[GroundAction]:
+def ground(kb: KnowledgeBase, task: Task, *, max_actions: int = MAX_GROUND_ACTIONS) -> list[GroundAction]:
     """Every ground action of K over the task's objects, in a deterministic order.
 
     A parameter of type t takes every object whose type is t or a subtype of t.
+
+    Raises:
+        PlanningLimitError: more than ``max_actions`` argument tuples to try.
     """
     objects = task.all_objects(kb)
     names = sorted(objects)
     actions: list[GroundAction] = []
+    tried = 0
     for op in sorted(kb.operators(), key=lambda o: o.name):
         domains = [[o for o in names if kb.is_subtype(objects[o], kind)] for _, kind in op.parameters]
+        tried += math.prod(len(d) for d in domains)
+        if tried > max_actions:
+            raise PlanningLimitError(
+                f"the task grounds more than {max_actions:,} actions ({len(objects)} objects)",
+                hint="give the task fewer objects (see Limits in docs/scenarios.md)",
+            )
         for args in itertools.product(*domains):
             step = op.ground(args)
             if step is not None:
@@ -63,6 +76,7 @@ def plan(
     *,
     exclude: Collection[tuple[str, tuple[str, ...]]] = (),
     max_expansions: int = MAX_EXPANSIONS,
+    max_states: int = MAX_PLANNER_STATES,
 ) -> Plan | None:
     """The cheapest plan from the task's initial state to its goal.
 
@@ -72,6 +86,8 @@ def plan(
         exclude: ground actions ``(operator name, args)`` the plan may not use, e.g.
             a step that just failed (plan repair).
         max_expansions: how many states the search may expand before giving up.
+        max_states: how many states it may hold (reached, with cost and parent): this,
+            not the expansions, bounds its memory.
 
     Returns:
         A cheapest plan (empty when s0 already satisfies the goal), or None when no plan
@@ -113,6 +129,11 @@ def plan(
                 continue
             key = (cost + kb.step_cost(action, state), steps + 1)
             if key < best.get(successor, (float("inf"), 0)):
+                if successor not in best and len(best) >= max_states:
+                    raise PlanningLimitError(
+                        f"planning gave up holding {max_states:,} states",
+                        hint="give the task fewer objects (see Limits in docs/scenarios.md)",
+                    )
                 best[successor] = key
                 parent[successor] = (state, action)
                 heapq.heappush(frontier, (*key, next(counter), successor))
