@@ -38,6 +38,7 @@ from sqlalchemy import URL, Engine, create_engine, event, make_url
 from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError
 from sqlalchemy.pool import NullPool, StaticPool
 
+from llcps import bounded_json
 from llcps.errors import StoreError
 from llcps.store.tables import SQLITE_APPLICATION_ID
 
@@ -45,6 +46,9 @@ from llcps.store.tables import SQLITE_APPLICATION_ID
 BUSY_TIMEOUT_MS = 30_000
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
+
+#: Hint of a row that does not decode: it was not written by llcps.
+CHANGED_HINT = "the row was changed outside llcps; restore the database from a copy (or delete the row)"
 
 #: Execution option that marks a connection's transaction as a write.
 WRITE_OPTION = "llcps_write"
@@ -179,6 +183,19 @@ def _on_postgresql_begin(conn: Any) -> None:
         conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({WRITER_LOCK})")
 
 
+def stored_json(text: str | bytes) -> Any:
+    """Decode a JSON column's text: every JSON column an engine of :func:`make_engine`
+    reads comes here, bounded in size and nesting (:mod:`llcps.bounded_json`).
+
+    Raises:
+        StoreError: the text is not JSON, or larger or deeper than the bounds.
+    """
+    try:
+        return bounded_json.loads(text)
+    except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError, JsonLimitError
+        raise StoreError(f"a stored JSON value is malformed ({exc})", hint=CHANGED_HINT) from None
+
+
 def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, plain: bool = False) -> Engine:
     """Create the engine for an already checked URL.
 
@@ -189,11 +206,11 @@ def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, pla
         plain: SQLite files only: no pragmas at all, for looking at a file that may
             not be ours without changing a byte of it.
     """
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = {"json_deserializer": stored_json}
     is_sqlite = url.get_backend_name() == "sqlite"
     file_backed = is_sqlite and sqlite_path(url) is not None
     if plain and file_backed:
-        return create_engine(url, poolclass=NullPool)
+        return create_engine(url, poolclass=NullPool, json_deserializer=stored_json)
     if is_sqlite and not file_backed:
         # One shared connection, or every checkout would see a fresh empty DB.
         kwargs["poolclass"] = StaticPool

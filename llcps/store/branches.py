@@ -67,6 +67,7 @@ class BranchQueries(SettingQueries):
     def __init__(self, engine: Engine, url: URL) -> None:
         super().__init__(engine, url)
         self._branch_ids: dict[str, int] = {}  # name -> id, for writing trials; dropped when a branch goes
+        self._forks_checked: set[tuple[int, int, int]] = set()  # (branch id, parent id, fork point) within the parent's head
 
     def _branches(self, conn: Connection) -> list[Any]:
         rows = list(conn.execute(select(Branch.id, Branch.name, Branch.parent_id, Branch.fork_point, Branch.created_at).order_by(Branch.id)))
@@ -76,7 +77,30 @@ class BranchQueries(SettingQueries):
         return rows
 
     def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[Link]:
-        return visibility.Tree(self._branches(conn) if rows is None else rows).chain(name)
+        tree = visibility.Tree(self._branches(conn) if rows is None else rows)
+        links = tree.chain(name)
+        for link in links:
+            self._check_fork(conn, tree, tree.by_id[link.branch_id])
+        return links
+
+    def _check_fork(self, conn: Connection, tree: visibility.Tree, row: Any) -> None:
+        """Refuse a branch whose fork point lies beyond its parent's last visible trial:
+        every fork llcps makes is at a trial the parent sees (or 0), so a later one is
+        a changed row, and the branch would see the parent's trials still to come.
+        Checked once per row and :class:`Store`."""
+        if row.parent_id is None or row.fork_point == 0:
+            return
+        key = (row.id, row.parent_id, row.fork_point)
+        if key in self._forks_checked:
+            return
+        parent = tree.by_id[row.parent_id]
+        head = self._max_visible(conn, tree.chain(parent.name))
+        if row.fork_point > head:
+            raise StoreError(
+                f"branch {row.name!r} forks from {parent.name!r} at trial {row.fork_point}, beyond {parent.name!r}'s last trial ({head})",
+                hint=CHANGED_HINT,
+            )
+        self._forks_checked.add(key)
 
     def _name(self, conn: Connection, name: str | None) -> str:
         if name is not None:

@@ -7,11 +7,11 @@ branch and by branches forked from it later, like the trials they followed.
 
 from __future__ import annotations
 
-import json
 from typing import Any, Mapping, Sequence
 
 from sqlalchemy import insert, select
 
+from llcps import bounded_json
 from llcps.errors import StoreError
 from llcps.store import visibility
 from llcps.store.branches import BranchQueries
@@ -25,7 +25,7 @@ def _context_atoms(row_id: int, context: Any) -> tuple[tuple[str, ...], ...]:
     """A stored execution context, checked: a list of atoms, each a list of 2 to 4 strings."""
     if isinstance(context, str):
         try:
-            context = json.loads(context)
+            context = bounded_json.loads(context)
         except ValueError:
             context = None
     if not isinstance(context, list) or not all(

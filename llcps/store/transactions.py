@@ -22,9 +22,10 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from llcps.errors import StoreError
 from llcps.store import backends
+from llcps.store.backends import CHANGED_HINT
 
-#: Hint of a row that does not decode: it was not written by llcps.
-CHANGED_HINT = "the row was changed outside llcps; restore the database from a copy (or delete the row)"
+__all__ = ["CHANGED_HINT", "Transactions", "db_error", "utc_now"]
+
 
 
 def utc_now() -> datetime:
