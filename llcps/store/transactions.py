@@ -35,17 +35,34 @@ def utc_now() -> datetime:
 
 def db_error(exc: SQLAlchemyError) -> StoreError:
     """A database error as a :class:`StoreError`, with a hint at the likely cause."""
-    detail = str(getattr(exc, "orig", None) or exc).splitlines()[0]
+    detail = (str(getattr(exc, "orig", None) or exc).splitlines() or ["?"])[0]
     lowered = detail.lower()
-    if "locked" in lowered or "busy" in lowered:
-        hint = "another process held the database for longer than the busy timeout; retry when it is done"
-    elif "readonly" in lowered or "read-only" in lowered or "permission" in lowered:
-        hint = "the database file or its directory is not writable"
+    wait = f"{backends.TIMEOUT_VARIABLE} (now {backends.timeout_seconds_or_default():g} s)"
+    if "locked" in lowered or "busy" in lowered or "lock timeout" in lowered:
+        message = f"the database stayed locked by another process for longer than {wait}: {detail}"
+        hint = f"retry when the other process is done, or wait longer: {backends.TIMEOUT_VARIABLE}=SECONDS"
+    elif "statement timeout" in lowered:
+        message = f"a database statement ran longer than {backends.STATEMENT_TIMEOUT_VARIABLE} allows: {detail}"
+        hint = f"check the server's load, or allow more: {backends.STATEMENT_TIMEOUT_VARIABLE}=SECONDS (0: no limit)"
+    elif "timeout expired" in lowered or "timed out" in lowered:
+        message = f"the database server did not answer within {wait}: {detail}"
+        hint = f"check the --db URL's host and port and that the server is running; {backends.TIMEOUT_VARIABLE}=SECONDS waits longer"
+    elif "readonly" in lowered or "read-only" in lowered:
+        message = f"the store is read-only: {detail}"
+        hint = "the database file, its directory or its file system is not writable: check permissions and mounts (reading works: `llcps db status`)"
+    elif "disk is full" in lowered or "no space" in lowered or "database or disk is full" in lowered:
+        message = f"the disk holding the store is full: {detail}"
+        hint = "free space on that file system (or move the store), then run the command again; what was committed is kept"
+    elif "permission" in lowered or "unable to open" in lowered:
+        message = f"database error: {detail}"
+        hint = "the database file or its directory cannot be opened for writing: check permissions, or whether the file system is read-only"
     elif "connect" in lowered:
+        message = f"database error: {detail}"
         hint = "check the --db URL and that the database server is running"
     else:
+        message = f"database error: {detail}"
         hint = "check `llcps db status`"
-    return StoreError(f"database error: {detail}", hint=hint)
+    return StoreError(message, hint=hint)
 
 
 class Transactions:
