@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import signal
 import sys
 from dataclasses import dataclass
 from enum import Enum
@@ -49,6 +50,21 @@ YesFlag = Annotated[bool, typer.Option("--yes", help="Really do it; without it, 
 CreateFlag = Annotated[
     bool, typer.Option("--create", help="Create the store if --db names none yet (otherwise only `llcps db init` creates one).")
 ]
+
+
+def terminate_like_interrupt() -> None:
+    """Make SIGTERM (``kill``, a scheduler's stop, a container's shutdown) end a command
+    the way Ctrl-C does: a ``KeyboardInterrupt`` where the command is, so its episode
+    and run are marked ``interrupted``, completed work is kept and the exit code is 130."""
+
+    def on_sigterm(signum: int, _frame: Any) -> None:
+        signal.signal(signum, signal.SIG_DFL)  # a second SIGTERM ends the process at once
+        raise KeyboardInterrupt(f"signal {int(signum)}")
+
+    try:
+        signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # pragma: no cover - not the main thread (an embedding program)
+        pass
 
 
 def report_error(exc: LlcpsError) -> None:
@@ -126,8 +142,8 @@ class LlcpsGroup(ConventionGroup):
         except LlcpsError as exc:
             report_error(exc)
             return exc.exit_code
-        except (typer.Abort, KeyboardInterrupt):
-            typer.echo("error: interrupted", err=True)
+        except (typer.Abort, KeyboardInterrupt) as exc:
+            typer.echo(f"error: interrupted{' by SIGTERM' if str(exc) == f'signal {int(signal.SIGTERM)}' else ''}", err=True)
             typer.echo("hint: completed work is kept; run the same command again to go on", err=True)
             return 130
         except Exception as exc:  # noqa: BLE001 - the contract: never a traceback

@@ -254,6 +254,29 @@ def stored_json(text: str | bytes) -> Any:
         raise StoreError(f"a stored JSON value is malformed ({exc})", hint=CHANGED_HINT) from None
 
 
+def read_only(path: Path) -> bool:
+    """Whether this process cannot write the SQLite file at ``path`` or its directory
+    (where SQLite keeps the write-ahead log): a read-only file, directory or mount."""
+    return not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK))
+
+
+def _read_only_connector(path: Path, timeout_s: float):  # noqa: ANN202 - a DBAPI connect function
+    """Connections that only read ``path``: ``mode=ro`` while SQLite can share the
+    write-ahead log's index with writers, else ``immutable=1`` (a read-only directory or
+    mount, where that index cannot be made; nothing writes there anyway)."""
+
+    def connect() -> sqlite3.Connection:
+        conn = sqlite3.connect(f"{path.as_uri()}?mode=ro", uri=True, timeout=timeout_s, check_same_thread=False)
+        try:
+            conn.execute("PRAGMA schema_version").fetchone()
+            return conn
+        except sqlite3.Error:
+            conn.close()
+        return sqlite3.connect(f"{path.as_uri()}?immutable=1", uri=True, timeout=timeout_s, check_same_thread=False)
+
+    return connect
+
+
 def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, plain: bool = False) -> Engine:
     """Create the engine for an already checked URL.
 
@@ -267,16 +290,21 @@ def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, pla
     kwargs: dict[str, Any] = {"json_deserializer": stored_json}
     is_sqlite = url.get_backend_name() == "sqlite"
     file_backed = is_sqlite and sqlite_path(url) is not None
+    path = sqlite_path(url) if file_backed else None
+    wait_s = timeout_seconds()
+    only_reads = path is not None and path.exists() and read_only(path)
+    if only_reads:
+        assert path is not None
+        kwargs["creator"] = _read_only_connector(path, wait_s)
     if plain and file_backed:
-        return create_engine(url, poolclass=NullPool, json_deserializer=stored_json)
+        return create_engine(url, poolclass=NullPool, **kwargs)
     if is_sqlite and not file_backed:
         # One shared connection, or every checkout would see a fresh empty DB.
         kwargs["poolclass"] = StaticPool
         kwargs["connect_args"] = {"check_same_thread": False}
     elif not pooled:
         kwargs["poolclass"] = NullPool
-    wait_s = timeout_seconds()
-    if is_sqlite:
+    if is_sqlite and not only_reads:
         kwargs.setdefault("connect_args", {})["timeout"] = wait_s
     elif url.get_backend_name() == "postgresql":
         statement_s = timeout_seconds(STATEMENT_TIMEOUT_VARIABLE, STATEMENT_TIMEOUT_S)
@@ -290,7 +318,7 @@ def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, pla
             hint="for PostgreSQL install the extra: pip install 'llcps[postgres]' and use postgresql+psycopg://...",
         ) from exc
     if is_sqlite:
-        event.listen(engine, "connect", _on_sqlite_connect(foreign_keys, file_backed, round(wait_s * 1000)))
+        event.listen(engine, "connect", _on_sqlite_connect(foreign_keys, file_backed and not only_reads, round(wait_s * 1000)))
         event.listen(engine, "begin", _on_sqlite_begin)
     elif url.get_backend_name() == "postgresql":
         event.listen(engine, "begin", _on_postgresql_begin)

@@ -13,6 +13,7 @@ order, as :mod:`llcps.store.visibility` needs. Both turn a database error into a
 from __future__ import annotations
 
 import json
+import os
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from typing import Iterator
@@ -33,8 +34,13 @@ def utc_now() -> datetime:
     return datetime.now(timezone.utc).replace(tzinfo=None)
 
 
-def db_error(exc: SQLAlchemyError) -> StoreError:
-    """A database error as a :class:`StoreError`, with a hint at the likely cause."""
+def db_error(exc: SQLAlchemyError, url: URL | None = None) -> StoreError:
+    """A database error as a :class:`StoreError`, with a hint at the likely cause.
+
+    Args:
+        url: the store's URL: for a SQLite file, an I/O error on a file system with
+            (almost) no space left is reported as a full disk, which is what it is.
+    """
     detail = (str(getattr(exc, "orig", None) or exc).splitlines() or ["?"])[0]
     lowered = detail.lower()
     wait = f"{backends.TIMEOUT_VARIABLE} (now {backends.timeout_seconds_or_default():g} s)"
@@ -50,7 +56,7 @@ def db_error(exc: SQLAlchemyError) -> StoreError:
     elif "readonly" in lowered or "read-only" in lowered:
         message = f"the store is read-only: {detail}"
         hint = "the database file, its directory or its file system is not writable: check permissions and mounts (reading works: `llcps db status`)"
-    elif "disk is full" in lowered or "no space" in lowered or "database or disk is full" in lowered:
+    elif "disk is full" in lowered or "no space" in lowered or ("i/o error" in lowered and _disk_full(url)):
         message = f"the disk holding the store is full: {detail}"
         hint = "free space on that file system (or move the store), then run the command again; what was committed is kept"
     elif "permission" in lowered or "unable to open" in lowered:
@@ -63,6 +69,23 @@ def db_error(exc: SQLAlchemyError) -> StoreError:
         message = f"database error: {detail}"
         hint = "check `llcps db status`"
     return StoreError(message, hint=hint)
+
+
+def _disk_full(url: URL | None) -> bool:
+    """Whether the file system of the SQLite store at ``url`` has (almost) no space left."""
+    path = backends.sqlite_path(url) if url is not None else None
+    if path is None:
+        return False
+    try:
+        stats = os.statvfs(path.parent)
+    except OSError:
+        return False
+    return stats.f_bavail * stats.f_frsize < FULL_BELOW_BYTES
+
+
+#: Free space under which a SQLite I/O error is taken for a full disk (SQLite needs a
+#: few pages for its write-ahead log and index; under 1 MiB it often cannot get them).
+FULL_BELOW_BYTES = 2**20
 
 
 class Transactions:
@@ -88,7 +111,7 @@ class Transactions:
             with self._engine.connect() as conn:
                 yield conn
         except SQLAlchemyError as exc:
-            raise db_error(exc) from exc
+            raise db_error(exc, self._url) from exc
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # a JSON column's text, decoded as rows are read
             raise StoreError(f"a stored JSON value is malformed ({exc})", hint=CHANGED_HINT) from None
 
@@ -104,4 +127,4 @@ class Transactions:
                 with conn.begin():
                     yield conn
         except SQLAlchemyError as exc:
-            raise db_error(exc) from exc
+            raise db_error(exc, self._url) from exc
