@@ -111,7 +111,10 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
             )
 
     def close(self) -> None:
-        """Release pooled connections."""
+        """Stop renewing heartbeats and release pooled connections."""
+        beats = self.__dict__.get("_run_heartbeats")
+        if beats is not None:
+            beats.close()
         self._engine.dispose()
 
     def __enter__(self) -> Store:
