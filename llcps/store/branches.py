@@ -364,7 +364,7 @@ class BranchQueries(SettingQueries):
         """Refuse a removal from a branch a live process writes to; with ``force``, mark
         those runs (and their running episodes) ``aborted``: their process fails at its
         next write, and what it wrote so far goes with the removal."""
-        live = [w for w in change.writers if w.live]
+        live = [w for w in change.writers if w.live and not w.this_process]  # this process knows what it does
         stale = [w.run_id for w in change.writers if not w.live]
         if stale:  # left running by a process that is gone: it ended, unrecorded
             conn.execute(update(Run).where(Run.id.in_(stale), Run.status == "running").values(status="abandoned"))

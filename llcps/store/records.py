@@ -61,7 +61,7 @@ class BranchChange:
             f"{self.world_models} world model(s) and {self.episodes} episode(s) "
             f"from branch {self.branch!r}"
         )
-        live = [w for w in self.writers if w.live]
+        live = [w for w in self.writers if w.live and not w.this_process]
         if live:
             text += "; " + ("live writer(s), refused without --force: " if self.dry_run else "aborted live writer(s): ")
             text += "; ".join(w.describe() for w in live)

@@ -47,6 +47,11 @@ class Writer:
     #: Why it counts as live or stale, for people.
     reason: str
 
+    @property
+    def this_process(self) -> bool:
+        """Whether the run is written by the process asking (not a concurrent writer)."""
+        return self.pid == os.getpid() and self.host == this_host()
+
     def describe(self) -> str:
         where = f"pid {self.pid} on {self.host or '?'}" if self.pid is not None else f"on {self.host or '?'}"
         return f"run {self.run_id} ({self.command[:60]}, {where}): {self.reason}"
@@ -89,17 +94,17 @@ def liveness(host: str | None, pid: Any, heartbeat: datetime | None, now: dateti
     """Whether the process of a running run is alive, and why it counts so."""
     if not isinstance(pid, int) or heartbeat is None:
         return False, "stale: no live-writer marker (a run of an older llcps, or a changed row)"
-    age = (now - heartbeat).total_seconds()
-    beat = f"last heartbeat {max(age, 0):.0f} s ago"
+    old = (now - heartbeat) > STALE_AFTER
+    beat = f"last heartbeat {heartbeat.isoformat(sep=' ', timespec='seconds')} UTC"
     if host == this_host():
         if pid <= 0 or not _pid_exists(pid):
             return False, f"stale: process {pid} is gone ({beat})"
-        if age > STALE_AFTER.total_seconds():
-            return False, f"stale: {beat} (process {pid} is another program now)"
-        return True, f"live, {beat}"
-    if age > STALE_AFTER.total_seconds():
-        return False, f"stale: {beat}, from another host"
-    return True, f"live, {beat} (another host)"
+        if old:
+            return False, f"stale: {beat}, over {STALE_AFTER.total_seconds() / 60:.0f} min ago (process {pid} is another program now)"
+        return True, f"live ({'this process' if pid == os.getpid() else beat})"
+    if old:
+        return False, f"stale: {beat}, over {STALE_AFTER.total_seconds() / 60:.0f} min ago, from another host"
+    return True, f"live ({beat}, another host)"
 
 
 def writers(conn: Connection, branch: str | None = None) -> list[Writer]:
