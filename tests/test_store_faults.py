@@ -26,6 +26,7 @@ import pytest
 from conftest import BACKENDS, new_store_url
 from fixtures.store_writer import sample_trial
 from sqlalchemy import create_engine, insert, text, update
+from sqlalchemy.pool import NullPool
 from typer.testing import CliRunner
 
 from llcps.cli.main import app
@@ -246,8 +247,8 @@ def test_a_lock_held_by_another_session_is_one_error(backend: str, tmp_path: Pat
     if backend == "sqlite":
         holder: Any = sqlite3.connect(url, isolation_level=None)
         holder.execute("BEGIN IMMEDIATE")
-    else:
-        holder = create_engine(url).connect()
+    else:  # a session-level lock: it outlives transactions, so the session itself must end
+        holder = create_engine(url, poolclass=NullPool).connect()
         holder.execute(text("SELECT pg_advisory_lock(:key)"), {"key": backends.WRITER_LOCK})
     try:
         result = llcps(url, "db", "branch", "exp", env={"LLCPS_DB_TIMEOUT": "1"})

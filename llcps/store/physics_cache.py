@@ -416,7 +416,6 @@ def status(store: Any) -> CacheStatus:
                     PhysicsCacheEntry.size < 0,
                     PhysicsCacheEntry.size > MAX_ENTRY_BYTES,
                     PhysicsCacheEntry.hits < 0,
-                    PhysicsCacheEntry.hits > 2**53,
                 )
             ).limit(1)
         ).first()
