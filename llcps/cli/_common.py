@@ -86,10 +86,20 @@ def printable(text: str, *, keep: str = "") -> str:
     return "".join(c if c.isprintable() or c in keep else repr(c)[1:-1] for c in text)
 
 
+#: Longest text a table cell shows (a name from a store may be any length).
+MAX_CELL_CHARS = 240
+
+
 def literal(text: object) -> str:
-    """Text from the store or a file for a rich table: :func:`printable`, and its markup
-    escaped (``[bold]`` prints as written)."""
-    return escape(printable(str(text)))
+    """Text from the store or a file for a rich table: :func:`printable`, cut to
+    :data:`MAX_CELL_CHARS` (ending in ``…``), and its markup escaped (``[bold]`` prints as written)."""
+    shown = str(text)
+    if len(shown) > MAX_CELL_CHARS:
+        shown = shown[: MAX_CELL_CHARS - 1] + "…"
+    shown = printable(shown)
+    if len(shown) > MAX_CELL_CHARS:  # escapes lengthen it
+        shown = shown[: MAX_CELL_CHARS - 1] + "…"
+    return escape(shown)
 
 
 _SUGGESTION = re.compile(r"\s*\(?(?:Did you mean|Possible options:) (.+?)\??\)?\s*$", re.IGNORECASE)

@@ -114,6 +114,8 @@ class Transactions:
             raise db_error(exc, self._url) from exc
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # a JSON column's text, decoded as rows are read
             raise StoreError(f"a stored JSON value is malformed ({exc})", hint=CHANGED_HINT) from None
+        except (ValueError, TypeError, OverflowError) as exc:  # a value the driver cannot convert (a time that is not one)
+            raise StoreError(f"a stored value is malformed ({type(exc).__name__}: {str(exc)[:120]})", hint=CHANGED_HINT) from None
 
     @contextmanager
     def _write(self) -> Iterator[Connection]:
@@ -128,3 +130,5 @@ class Transactions:
                     yield conn
         except SQLAlchemyError as exc:
             raise db_error(exc, self._url) from exc
+        except (ValueError, TypeError, OverflowError) as exc:  # a stored value read on the way, as in _read
+            raise StoreError(f"a stored value is malformed ({type(exc).__name__}: {str(exc)[:120]})", hint=CHANGED_HINT) from None
