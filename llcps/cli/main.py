@@ -21,7 +21,7 @@ from typing import Annotated, Optional
 import typer
 
 from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, life, pretrain, replay, scenario, solve  # noqa: F401 - inspect_* add `inspect` subcommands
-from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
+from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app, terminate_like_interrupt
 from llcps.cli._conventions import examples
 
 app = new_app(
@@ -112,6 +112,7 @@ app.add_typer(scenario.app, name="scenario")
 
 def main() -> None:
     """Console-script entry point."""
+    terminate_like_interrupt()
     app(prog_name="llcps")
 
 

@@ -10,7 +10,11 @@ K' as :mod:`llcps.symbolic.export` writes it.
 
 Steps are costed by K's experience in the context they would run in, and a step is
 left out where its operator has failed in that context and never worked there
-(:meth:`KnowledgeBase.step_cost`, :meth:`KnowledgeBase.allowed`).
+(:meth:`KnowledgeBase.step_cost`, :meth:`KnowledgeBase.allowed`). Experience only
+orders plans, it never removes the last one: when every plan uses a step experience
+left out, the search runs again with those steps allowed (at their experience cost).
+A task K can solve has a plan under any experience, so the agent always reaches a
+step to fail at, and explores from there.
 
 Ties between plans of equal cost are broken deterministically: fewer steps first, then
 the order in which operators and their arguments sort.
@@ -91,7 +95,7 @@ def plan(
 
     Returns:
         A cheapest plan (empty when s0 already satisfies the goal), or None when no plan
-        exists with K.
+        exists with K (whatever its experience: see the module docstring).
 
     Raises:
         LlcpsError: the task does not fit K (unknown objects, predicates, types).
@@ -100,6 +104,18 @@ def plan(
     task.check(kb)
     banned = {(name.lower(), tuple(args)) for name, args in exclude}
     actions = [a for a in ground(kb, task) if (a.name.lower(), a.args) not in banned]
+    found = _search(kb, task, actions, max_expansions=max_expansions, max_states=max_states, by_experience=True)
+    if found is None and kb.experience.entries:
+        # Experience left out every plan: it may make a step dear, never impossible.
+        found = _search(kb, task, actions, max_expansions=max_expansions, max_states=max_states, by_experience=False)
+    return found
+
+
+def _search(
+    kb: KnowledgeBase, task: Task, actions: list[GroundAction], *, max_expansions: int, max_states: int, by_experience: bool
+) -> Plan | None:
+    """Uniform-cost search over ``actions``; ``by_experience`` leaves out the steps
+    experience does not allow (:meth:`KnowledgeBase.allowed`)."""
     start = task.init
     # (cost, steps, insertion order, state); the insertion order makes ties deterministic.
     counter = itertools.count()
@@ -122,7 +138,7 @@ def plan(
                 hint="raise max_expansions or give the task fewer objects",
             )
         for action in actions:
-            if not action.applicable(state) or not kb.allowed(action, state):
+            if not action.applicable(state) or (by_experience and not kb.allowed(action, state)):
                 continue
             successor = action.apply(state)
             if successor in closed:
