@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 from llcps.analysis.lives import COLUMNS, ConditionMetrics, Estimate, LifeMetrics, LifeRow, row_as_csv
-from llcps.outputs import check_output_dir
+from llcps.outputs import check_output_dir, replaced_atomically, write_text
 from llcps.report.formatting import format_p
 from llcps.report.tables import TableBlock, block_lines
 
@@ -168,7 +168,7 @@ def family_plot(metrics: LifeMetrics, stem: Path) -> tuple[Path, ...]:
 
 
 def _write_csv(path: Path, rows: Iterable[LifeRow]) -> Path:
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with replaced_atomically(path, what="life report") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(COLUMNS), lineterminator="\n")
         writer.writeheader()
         for row in rows:
@@ -178,7 +178,7 @@ def _write_csv(path: Path, rows: Iterable[LifeRow]) -> Path:
 
 def _metrics_csv(path: Path, conditions: Sequence[ConditionMetrics]) -> Path:
     names = ["auc_life", "auc_difference", "ft_first", "ft_recurrence", "curve_ratio", "nrp", "forgetting"]
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with replaced_atomically(path, what="life report") as fh:
         writer = csv.writer(fh, lineterminator="\n")
         header = ["condition", "lives"]
         for n in names:
@@ -194,7 +194,7 @@ def _metrics_csv(path: Path, conditions: Sequence[ConditionMetrics]) -> Path:
 
 
 def _families_csv(path: Path, metrics: LifeMetrics) -> Path:
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with replaced_atomically(path, what="life report") as fh:
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(["condition", "family", "lives", "auc", "auc_reset", "difference", "difference_low", "difference_high", "p", "p_holm",
                          "forgetting", "forgetting_low", "forgetting_high"])  # fmt: skip
@@ -237,7 +237,7 @@ def write_life_report(
     metrics_csv = _metrics_csv(out / "metrics.csv", metrics.conditions)
     families_csv = _families_csv(out / "families.csv", metrics)
     metrics_json = out / "metrics.json"
-    metrics_json.write_text(json.dumps({"life": life, **metrics.as_json()}, indent=2, default=_json_default) + "\n", encoding="utf-8")
+    write_text(metrics_json, json.dumps({"life": life, **metrics.as_json()}, indent=2, default=_json_default) + "\n", what="life report")
     plots: list[Path] = []
     curve_png = family_png = None
     if metrics.curve:
@@ -258,11 +258,11 @@ def write_life_report(
         lines += ["![Per family](families.png)", ""]
     lines += block_lines(blocks[2]) + [""]
     markdown = out / "report.md"
-    markdown.write_text("\n".join(lines), encoding="utf-8")
+    write_text(markdown, "\n".join(lines), what="life report")
     page = None
     if html:
         page = out / "report.html"
-        page.write_text(render_life_html(life, text, blocks, curve_png, family_png), encoding="utf-8")
+        write_text(page, render_life_html(life, text, blocks, curve_png, family_png), what="life report")
     return LifeReportPaths(out, episodes, after, metrics_csv, metrics_json, families_csv, markdown, page, tuple(plots))
 
 
