@@ -389,9 +389,9 @@ def test_a_family_s_scale_falls_with_failures_but_never_rules_it_out(mean_probab
     assert family_scale(3, 1.0, mean_probability) > 1.0
 
 
-def test_families_are_action_predicate_sign_roles_and_each_setting(query):
+def test_families_are_action_predicate_sign_roles_orientation_and_magnitude(query):
     rows = encode_queries(query)
-    coarse, by_orientation, by_magnitude, by_rate, motion = family_keys(rows)
+    coarse, by_orientation, by_magnitude, motion = family_keys(rows)
     settings = [c.params for c in query.candidates]
     actions = [c.action for c in query.candidates]
     for i in range(0, len(rows), 37):
@@ -401,12 +401,11 @@ def test_families_are_action_predicate_sign_roles_and_each_setting(query):
                 assert coarse[i] == coarse[j]
                 assert (by_orientation[i] == by_orientation[j]) == (settings[i].orientation == settings[j].orientation)
                 assert (by_magnitude[i] == by_magnitude[j]) == (settings[i].movement_magnitude == settings[j].movement_magnitude)
-                assert (by_rate[i] == by_rate[j]) == (settings[i].rate == settings[j].rate)
             if actions[i] == actions[j]:  # the motion: the action and all its settings, whatever the bodies
                 assert (motion[i] == motion[j]) == (settings[i] == settings[j])
             if actions[i] != actions[j]:
                 assert coarse[i] != coarse[j] and motion[i] != motion[j]
-                assert by_orientation[i] != by_orientation[j] and by_magnitude[i] != by_magnitude[j] and by_rate[i] != by_rate[j]
+                assert by_orientation[i] != by_orientation[j] and by_magnitude[i] != by_magnitude[j]
 
 
 def test_each_stratum_backs_off_to_its_own_action_and_sign(toy):

@@ -12,9 +12,8 @@ trial; it does not retrain the learner (a refit on tens of thousands of examples
 take many failures to move, and costs a second for some learners) but keeps
 *episode evidence*: every example of the trials the learner has not seen, grouped into
 families by :func:`~llcps.models.families.family_keys` (action, predicate, sign and
-roles; and that with the same orientation, with the same movement magnitude, with the
-same rate; and the motion, the action with all three settings, whatever bodies it
-names). Physics is deterministic and every exploration trial
+roles; and that with the same orientation, with the same movement magnitude; and the
+motion, the action with all three settings, whatever bodies it names). Physics is deterministic and every exploration trial
 starts from the same state, so the outcomes of one family's parameterizations are not
 independent draws: either the family can work in this scene or it cannot. That holds
 from one start state only, so the agent names it (``start``: the failure snapshot) and
@@ -36,13 +35,11 @@ by the posterior chance that a further member works over the prior one
 (:func:`family_scale`). With the defaults, for a family the learner gave 0.25, the first failure lowers its
 probability to 0.44 of that, the fifth to 0.08 and the fortieth to 0.002 (a fixed share
 of one half: 0.67, 0.06 and 2e-12), and each setting
-(orientation, magnitude, rate) a member shares with a failure lowers it again:
+(orientation, magnitude) a member shares with a failure lowers it again:
 exploration moves away from what failed in every setting, then in kind; and a motion
 that failed drops on the action's other bodies too, so one stroke is not tried on every
-pair of bodies in turn before any other. (Without the
-rate, a learner that prefers slow trials tried the slow setting of every family before
-any fast one, and strikes are fast.) The evidence lives for one fit: the next fit learns
-from those trials anyway.
+pair of bodies in turn before any other. The evidence lives for one fit: the next fit
+learns from those trials anyway.
 
 **Nothing is ruled out, and K is heard.** A learner trained on random interactions
 gives a change it never saw (a push that lands an object in a container) a vanishing
