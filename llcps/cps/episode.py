@@ -305,13 +305,9 @@ def solve(
 
 def _run(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, model: WorldModel, config: SolveConfig, found: _Progress) -> None:
     """Plan with K and repair the plan; only if no plan reaches the goal, explore."""
-    from llcps.cps.plan_execution import plan_and_repair
+    from llcps.cps.plan_execution import find_failure
 
-    state = executor.perceive()
-    if executor.scenario.goal_reached(state):
-        found.status = "solved"
-        return
-    failure = plan_and_repair(executor, experience, kb, state, found.plan)
+    failure = find_failure(executor, experience, kb, found.plan)
     if found.plan.solved:
         found.status = "solved"
         return
@@ -331,16 +327,13 @@ def _explore(
     found: _Progress,
 ) -> None:
     """Try ranked candidates from the failure snapshot until one resolves the novelty."""
-    from llcps.cps.exploration import failure_point, rank_candidates
+    from llcps.cps.exploration import rank_candidates, start_exploration
     from llcps.cps.learning import learn
     from llcps.cps.plan_execution import resolves
 
     snapshot = failure.snapshot
     assert snapshot is not None  # the episode stores its plan
-    executor.restore(snapshot)
-    point = failure_point(
-        executor, failure.monitor, failure.state, kb, grid=config.candidate_grid(executor.scenario), known=experience.costed(kb)
-    )
+    point = start_exploration(executor, experience, kb, failure, grid=config.candidate_grid(executor.scenario))
     candidates = point.candidates
     found.candidates = len(candidates)
     remaining = list(range(len(candidates)))

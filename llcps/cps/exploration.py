@@ -44,6 +44,8 @@ from llcps.symbolic.monitor import StepFailure
 from llcps.symbolic.planner import GroundAction, ground
 
 if TYPE_CHECKING:
+    from llcps.cps.branch_knowledge import BranchExperience
+    from llcps.cps.plan_execution import Failure
     from llcps.scenarios.base import Scenario
     from llcps.sim.world import World
 
@@ -229,6 +231,28 @@ def failure_point(
         claimed=claimed,
         subgoals=routes,
     )
+
+
+class ExplorationSite(FailureSite, Protocol):
+    """A :class:`FailureSite` that can return its world to a stored snapshot."""
+
+    def restore(self, snapshot_id: int) -> None: ...
+
+
+def start_exploration(
+    site: ExplorationSite, experience: BranchExperience, kb: KnowledgeBase, failure: Failure, *, grid: Grid
+) -> FailurePoint:
+    """Return the world to the stored state a_f was executed from and describe the
+    failure point there (subgoals from K costed by the branch's experience now).
+
+    What an episode (:mod:`llcps.cps.episode`) and the Gymnasium environment
+    (:mod:`llcps.gym`) both do once K's plan failed; every candidate starts from
+    ``failure.snapshot``.
+    """
+    if failure.snapshot is None:
+        raise ValueError("exploration starts from a stored snapshot: run the plan with store=True")
+    site.restore(failure.snapshot)
+    return failure_point(site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb))
 
 
 @dataclass(frozen=True)
