@@ -28,7 +28,7 @@ No gymnasium here: numpy only (plus the world model's ranking).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Collection
+from typing import TYPE_CHECKING, Any, Collection
 
 import numpy as np
 
@@ -78,6 +78,25 @@ def _unscaled_encoder() -> FeatureEncoder:
     """The Table-1 encoding with the continuous columns as they are (mean 0, scale 1)."""
     width = len(CONTINUOUS_COLUMNS)
     return FeatureEncoder.from_params({"mean": np.zeros(width), "scale": np.ones(width)})
+
+
+def observation_space() -> Any:
+    """The observation's ``gymnasium.spaces.Dict`` (loads gymnasium)."""
+    from gymnasium import spaces
+
+    return spaces.Dict(
+        {
+            "failure": spaces.Box(0.0, 1.0, shape=(FAILURE_FEATURES,), dtype=np.float32),
+            "candidates": spaces.Box(-FEATURE_BOUND, FEATURE_BOUND, shape=(MAX_CANDIDATES, CANDIDATE_FEATURES), dtype=np.float32),
+        }
+    )
+
+
+def action_space() -> Any:
+    """One action per candidate row: ``gymnasium.spaces.Discrete(MAX_CANDIDATES)`` (loads gymnasium)."""
+    from gymnasium import spaces
+
+    return spaces.Discrete(MAX_CANDIDATES)
 
 
 @dataclass

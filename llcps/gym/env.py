@@ -42,13 +42,12 @@ from typing import Any, Sequence
 
 import gymnasium
 import numpy as np
-from gymnasium import spaces
 
 from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
 from llcps.cps.episode import DEFAULT_BUDGET, SolveConfig
 from llcps.cps.executor import TrialExecutor
 from llcps.cps.exploration import FailurePoint, rank_candidates, start_exploration
-from llcps.cps.observation import CANDIDATE_FEATURES, FEATURE_BOUND, FAILURE_FEATURES, MAX_CANDIDATES, FailureObservation
+from llcps.cps.observation import MAX_CANDIDATES, FailureObservation, action_space, observation_space
 from llcps.cps.plan_execution import Failure, PlanLog, find_failure, resolves
 from llcps.errors import LlcpsError
 from llcps.models import MEASURES, WORLD_MODELS
@@ -128,13 +127,8 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         self.budget = budget
         self.trial_cost = float(trial_cost)
         self.seed_value = seed
-        self.observation_space = spaces.Dict(
-            {
-                "failure": spaces.Box(0.0, 1.0, shape=(FAILURE_FEATURES,), dtype=np.float32),
-                "candidates": spaces.Box(-FEATURE_BOUND, FEATURE_BOUND, shape=(MAX_CANDIDATES, CANDIDATE_FEATURES), dtype=np.float32),
-            }
-        )
-        self.action_space = spaces.Discrete(MAX_CANDIDATES)
+        self.observation_space = observation_space()
+        self.action_space = action_space()
         self._tmp: str | None = None
         if db is None:
             self._tmp = tempfile.mkdtemp(prefix="llcps-gym-")
@@ -157,6 +151,9 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         self.trials = 0
         self.resolved = False
         self._resolving: int | None = None
+        #: One entry per finished episode (solved or out of budget), oldest first:
+        #: scenario, variant, trials, resolved.
+        self.history: list[dict[str, Any]] = []
         #: The store id of the last trial :meth:`step` took (None: the action was masked).
         self.last_trial_id: int | None = None
 
@@ -351,3 +348,5 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         }
         self.store.finish_episode(self._episode_id, status=status, summary=summary)
         self._episode_id = None
+        if status != "interrupted":
+            self.history.append({"scenario": summary["scenario"], "variant": config.variant, "trials": self.trials, "resolved": self.resolved})
