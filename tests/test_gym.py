@@ -77,3 +77,38 @@ def test_bad_settings_are_refused_before_anything_runs(tmp_path: Path) -> None:
     for kwargs in ({"budget": 0}, {"trial_cost": -1.0}, {"scenario": "no-such"}, {"variant": -1}):
         with pytest.raises(LlcpsError):
             llcps.gym.ExploreEnv(**{"scenario": "scenario2", "db": str(tmp_path / "x.db"), **kwargs})
+
+
+@pytest.mark.slow
+def test_a_smoke_training_run_stores_a_policy_that_loads_without_pickle(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import pickle
+
+    import torch
+
+    from llcps.cps import policy as policies
+    from llcps.jobs.rl import train
+
+    db, out = tmp_path / "rl.db", tmp_path / "policy.npz"
+    result = train(store=str(db), scenarios=["scenario2"], timesteps=192, budget=10, seed=0, out=out, create=True)
+    assert result.timesteps >= 192 and result.episodes and all(1 <= e.trials <= 10 for e in result.episodes)
+    assert sum(e.trials for e in result.episodes) <= result.timesteps
+
+    def no_unpickling(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a policy must load without pickle")
+
+    monkeypatch.setattr(pickle, "loads", no_unpickling)
+    monkeypatch.setattr(pickle, "load", no_unpickling)
+    with Store.open(str(db)) as store:
+        stored = policies.load_stored_policy(store, "main")
+    from_file = policies.read_policy_file(out.read_bytes())
+    loaded = policies.import_policy(from_file.data, from_file.meta)
+    assert stored is not None
+    for a, b in zip(stored.state_dict().values(), loaded.state_dict().values()):
+        assert torch.equal(a, b)
+    assert from_file.meta["timesteps"] == result.timesteps and from_file.meta["episodes"] == len(result.episodes)
+    # A damaged file is refused with an error, never executed.
+    broken = bytearray(out.read_bytes())
+    broken[len(broken) // 2] ^= 0xFF
+    with pytest.raises(LlcpsError):
+        art = policies.read_policy_file(bytes(broken))
+        policies.import_policy(art.data, art.meta)

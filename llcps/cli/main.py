@@ -20,7 +20,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, pretrain, replay, scenario, solve  # noqa: F401 - inspect_* add `inspect` subcommands
+from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, pretrain, replay, rl, scenario, solve  # noqa: F401 - inspect_* add `inspect` subcommands
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
 from llcps.cli._conventions import examples
 
@@ -107,6 +107,7 @@ app.command("bench", epilog=bench.EXAMPLES)(bench.bench_cli)
 app.add_typer(experiment.app, name="experiment")
 app.add_typer(cache.app, name="cache")
 app.add_typer(scenario.app, name="scenario")
+app.add_typer(rl.app, name="rl")
 
 
 def main() -> None:

@@ -112,9 +112,15 @@ def train(
         LlcpsError: bad settings (checked before the store is opened), or the rl extra missing.
     """
     from llcps.domain import check_seed
+    from llcps.scenarios import get_scenario
+    from llcps.scenarios.variants import check_variant
 
     if not scenarios:
         raise LlcpsError("name at least one scenario to train on", hint="e.g. --scenario scenario2")
+    for name in scenarios:
+        get_scenario(name)
+    for v in variants:
+        check_variant(v)
     if not 1 <= timesteps <= MAX_TIMESTEPS:
         raise LlcpsError(f"timesteps must be from 1 to {MAX_TIMESTEPS}, got {timesteps}")
     check_seed(seed)
