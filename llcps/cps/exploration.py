@@ -317,3 +317,18 @@ def rank_candidates(
     return Ranking(
         order=[chosen[i] for i in order], indices=chosen, score=score, outcome=outcome, goal=goal, subgoals=subgoal, resolve=resolve
     )
+
+
+def candidate_probability(point: FailurePoint, ranking: Ranking) -> np.ndarray:
+    """Per candidate of ``point`` (n,): the world model's probability that it resolves the
+    failure, as ``ranking`` holds it (:func:`resolve_probability` when the point has
+    subgoals, else the missing atoms' joint probability); 0.5 for a measure without
+    the goal-aware head, and for the candidates ``ranking`` left out."""
+    probability = np.full(len(point.candidates), 0.5)
+    resolve = ranking.resolve if ranking.resolve is not None and point.subgoals else None
+    if resolve is None and ranking.goal is not None:
+        resolve = joint_probability(ranking.goal)
+    if resolve is not None and ranking.indices:
+        probability[np.asarray(ranking.indices)] = resolve
+    return probability
+

@@ -35,7 +35,8 @@ import numpy as np
 from llcps.domain import ACTIONS
 from llcps.errors import LlcpsError
 from llcps.models.features import CONTINUOUS_COLUMNS, ENCODED_FEATURE_NAMES, FeatureEncoder, encode_inputs
-from llcps.models.goal import joint_probability
+
+from llcps.cps.exploration import candidate_probability
 
 if TYPE_CHECKING:
     from llcps.cps.exploration import FailurePoint, Ranking
@@ -133,12 +134,7 @@ class FailureObservation:
         focused = np.array([c.action == action and c.arguments == arguments for c in point.candidates], dtype=np.float32)
         missing = len(point.failure.missing_add) + len(point.failure.missing_del)
         claimed = np.array([len(c) / missing if missing else 0.0 for c in (point.claimed or [frozenset()] * n)], dtype=np.float32)
-        probability = np.full(n, 0.5)
-        resolve = ranking.resolve if ranking.resolve is not None and point.subgoals else None
-        if resolve is None and ranking.goal is not None:
-            resolve = joint_probability(ranking.goal)
-        if resolve is not None:
-            probability[np.asarray(ranking.indices)] = resolve
+        probability = candidate_probability(point, ranking)
         place = np.empty(n)
         place[np.asarray(ranking.order, dtype=np.int64)] = 1.0 - np.arange(n) / max(n, 1)
         table = np.zeros((MAX_CANDIDATES, CANDIDATE_FEATURES), dtype=np.float32)

@@ -23,7 +23,9 @@ resets of the same pair start from the stored failure snapshot at once.
 Every trial goes to the store with ``source = "gym"`` (the re-plans that check whether
 it resolved the novelty as ``plan`` trials), in one store episode per RL episode, so the
 world models train on them like on any other. The environment learns no operator: K
-stays as it was when the environment was made, so its episodes are alike. The world
+and its operator experience stay as they were when the environment was made (a plan
+run's failed steps count for that failure point only, and are not stored), so its
+episodes are alike and the failure points do not depend on the order of the resets. The world
 model (``model``, ``measure``) is fitted once, when the environment is made, on what
 the branch saw then; its predictions are features of the candidates.
 
@@ -43,7 +45,7 @@ from typing import Any, Sequence
 import gymnasium
 import numpy as np
 
-from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
+from llcps.cps.branch_knowledge import BranchExperience, load_experience, load_knowledge
 from llcps.cps.episode import DEFAULT_BUDGET, SolveConfig
 from llcps.cps.executor import TrialExecutor
 from llcps.cps.exploration import FailurePoint, rank_candidates, start_exploration
@@ -52,12 +54,26 @@ from llcps.cps.plan_execution import Failure, PlanLog, find_failure, resolves
 from llcps.errors import LlcpsError
 from llcps.models import MEASURES, WORLD_MODELS
 from llcps.store import Store
+from llcps.symbolic.experience import Context, Experience
 from llcps.symbolic.knowledge_base import KnowledgeBase
 
 #: What each trial costs in reward (a resolve earns 1).
 DEFAULT_TRIAL_COST = 0.01
 #: The trial source of the environment's trials.
 GYM_SOURCE = "gym"
+
+
+class _SiteExperience(BranchExperience):
+    """The branch's operator experience as the environment was made, plus what one
+    failure point's own plan runs add, kept in memory: the failure points do not depend
+    on each other or on the order of the resets."""
+
+    def __init__(self, store: Store, branch: str, experience: Experience) -> None:
+        self.store, self.branch, self.episode_id = store, branch, None
+        self.experience = experience
+
+    def record(self, operator: str, context: Context, success: bool, trial_id: int | None) -> None:
+        self.experience = self.experience.added(operator, context, success)
 
 
 @dataclass
@@ -142,6 +158,8 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
 
             self._cache = StorePhysicsCache(self.store.engine)
         self._sites: dict[int, _Site] = {}
+        self._kb = load_knowledge(self.store, self.branch)
+        self._experience = load_experience(self.store, self.branch)
         self._model: Any = None
         self._run_id: int | None = None
         self._episode_id: int | None = None
@@ -212,8 +230,8 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
                 changes=self.store.visible_changes(self.branch),
                 cache=self._cache,
             )
-            experience = BranchExperience(self.store, self.branch, episode_id=self._episode_id)
-            kb = load_knowledge(self.store, self.branch)
+            experience = _SiteExperience(self.store, self.branch, self._experience)
+            kb = self._kb
             failure = find_failure(executor, experience, kb, PlanLog())
             if failure is None:
                 raise LlcpsError(
@@ -250,7 +268,6 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         )
         site = self._site_of(self._config_index)
         site.executor.run_id, site.executor.episode_id = run_id, self._episode_id
-        site.experience.episode_id = self._episode_id
         site.executor.restore(site.snapshot)
         self._site = site
         self.tried, self.trials, self.resolved, self._resolving = [], 0, False, None
