@@ -99,10 +99,12 @@ def test_a_smoke_training_run_stores_a_policy_that_loads_without_pickle(tmp_path
     monkeypatch.setattr(pickle, "loads", no_unpickling)
     monkeypatch.setattr(pickle, "load", no_unpickling)
     with Store.open(str(db)) as store:
-        stored = policies.load_stored_policy(store, "main")
+        found = policies.load_stored_policy(store, "main")
+    assert found is not None
+    stored, meta = found
+    assert meta["budget"] == 10
     from_file = policies.read_policy_file(out.read_bytes())
     loaded = policies.import_policy(from_file.data, from_file.meta)
-    assert stored is not None
     for a, b in zip(stored.state_dict().values(), loaded.state_dict().values()):
         assert torch.equal(a, b)
     assert from_file.meta["timesteps"] == result.timesteps and from_file.meta["episodes"] == len(result.episodes)

@@ -180,11 +180,12 @@ def action_probabilities(policy: CandidatePolicy, observation: Mapping[str, np.n
     return np.where(mask, probs, 0.0)
 
 
-def load_stored_policy(store: Any, branch: str) -> CandidatePolicy | None:
-    """The newest policy stored on ``branch`` (or a branch it descends from), None if none.
+def load_stored_policy(store: Any, branch: str) -> tuple[CandidatePolicy, dict[str, Any]] | None:
+    """The newest policy stored on ``branch`` (or a branch it descends from) and its
+    meta; None if there is none.
 
     Raises:
         LlcpsError: the stored policy is not intact.
     """
     stored = store.latest_world_model(branch, POLICY_NAME, 0)
-    return None if stored is None else import_policy(stored.artifact, stored.meta)
+    return None if stored is None else (import_policy(stored.artifact, stored.meta), dict(stored.meta))

@@ -174,6 +174,8 @@ def train(
             "scenarios": [str(x) for x in scenarios],
             "variants": [int(v) for v in variants],
             "seed": seed,
+            "budget": budget,
+            "trial_cost": trial_cost,
             "timesteps": int(agent.num_timesteps),
             "episodes": len(history),
             "wall_seconds": round(wall, 3),
