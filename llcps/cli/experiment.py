@@ -15,6 +15,7 @@ from llcps.domain import MAX_SEED
 from llcps.errors import LlcpsError
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
+from llcps.cps.orderings import ORDERINGS
 from llcps.experiments.executors import ENGINES
 from llcps.experiments.presets import MAX_SEEDS, PRESETS
 from llcps.scenarios.variants import parse_range
@@ -107,6 +108,16 @@ def run_cli(
             "becomes 'others'): the held-out family with experience of the rest.",
         ),
     ] = False,
+    ordering: Annotated[
+        Optional[str],
+        typer.Option(
+            "--ordering",
+            metavar="NAME",
+            help="Exploration ordering of every episode (default: the preset's: ranked for the paper's presets, "
+            "hedged for generalization); one of: " + ", ".join(ORDERINGS) + ". Run another ordering into another store.",
+            show_default=False,
+        ),
+    ] = None,
     workers: Annotated[
         Optional[int],
         typer.Option("--workers", metavar="N", min=1, max=MAX_WORKERS, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
@@ -145,7 +156,7 @@ def run_cli(
     chosen = None if scenarios is None else [s.strip() for s in scenarios.split(",") if s.strip()]
     target = check_output_dir(out_dir if out_dir is not None else default_out_dir(name), what="--out-dir")
     # The seeds and scenarios are checked before the store opens, so bad options create no store file.
-    grid = get_preset(name).with_scenarios(chosen)
+    grid = get_preset(name).with_scenarios(chosen).with_ordering(ordering)
     if with_others:
         grid.with_others()
     run_seeds(grid, seeds=seeds, first_seed=first_seed, variants=scenes)
@@ -164,6 +175,7 @@ def run_cli(
                     variants=scenes,
                     scenarios=chosen,
                     with_others=with_others,
+                    ordering=ordering,
                     workers=workers if workers is not None else cpu_count(),
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,

@@ -11,6 +11,7 @@ from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, cli_context, er
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.cps.episode import DEFAULT_BUDGET, MAX_BUDGET
+from llcps.cps.orderings import ORDERINGS
 from llcps.domain import MAX_SEED
 from llcps.jobs.solve import solve
 from llcps.models import MEASURES, WORLD_MODELS
@@ -23,6 +24,7 @@ if TYPE_CHECKING:
 
 ModelName = choice_enum("ModelName", tuple(WORLD_MODELS))
 MeasureName = choice_enum("MeasureName", tuple(MEASURES))
+OrderingName = choice_enum("OrderingName", tuple(ORDERINGS))
 Condition = choice_enum("Condition", CONDITIONS)
 
 #: Exit codes of ``llcps solve``.
@@ -41,6 +43,14 @@ def solve_cli(
     condition: Annotated[Condition, typer.Option("--condition", help="Original (the plan works) or novelty (it fails).")] = "novelty",  # type: ignore[valid-type, assignment]
     model: Annotated[ModelName, typer.Option("--model", help="World model that ranks exploration.")] = WORLD_MODELS.default,  # type: ignore[valid-type, assignment]
     measure: Annotated[MeasureName, typer.Option("--measure", help="Measure that orders candidates by the model's prediction.")] = MEASURES.default,  # type: ignore[valid-type, assignment]
+    ordering: Annotated[
+        OrderingName,  # type: ignore[valid-type]
+        typer.Option(
+            "--ordering",
+            help="Order of the exploration trials: the ranking hedged with a random order (hedged), "
+            "or the ranking alone (ranked, the paper's); see docs/world_models.md.",
+        ),
+    ] = ORDERINGS.default,  # type: ignore[assignment]
     variant: Annotated[
         int,
         typer.Option(
@@ -100,6 +110,7 @@ def solve_cli(
             condition=str(condition.value),  # type: ignore[attr-defined]
             model=str(model.value),  # type: ignore[attr-defined]
             measure=str(measure.value),  # type: ignore[attr-defined]
+            ordering=str(ordering.value),  # type: ignore[attr-defined]
             seed=seed,
             model_seed=model_seed,
             budget=budget,
@@ -124,6 +135,7 @@ EXAMPLES = examples(
     "llcps solve bucket --model nn --measure most-changes --budget 50 --json",
     "llcps solve scenario1 --gif scenario1.gif              # then film it",
     "llcps solve scenario2 --variant 3                      # another layout, drawn from the file's ranges",
+    "llcps solve scenario2 --ordering ranked                # the ranking alone, as the paper's agent",
     "llcps solve my_scenario.toml                           # a scenario straight from a file",
 )
 
@@ -152,7 +164,7 @@ def show(result: "SolveResult") -> None:
             ("plan", " ".join(result.plan) or "-"),
             ("failed action", result.failed_action or "-"),
             ("failure", result.missing_effects or "-"),
-            ("world model / measure", f"{result.model} / {result.measure} (seed {result.seed})"),
+            ("world model / measure / ordering", f"{result.model} / {result.measure} / {result.ordering} (seed {result.seed})"),
             ("exploration trials", f"{result.exploration_trials} of {result.candidates} candidates"),
             ("plan trials", result.plan_trials),
             ("sim seconds", f"{result.sim_seconds:.1f}"),

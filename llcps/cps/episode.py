@@ -25,9 +25,10 @@ import time
 from datetime import datetime, timezone
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Collection, Mapping
 
 from llcps.cps.candidates import Grid
+from llcps.cps.orderings import ORDERINGS
 from llcps.domain import check_seed
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.models import MEASURES, WORLD_MODELS
@@ -44,6 +45,7 @@ if TYPE_CHECKING:
     from llcps.sim.cache import PhysicsCache
     from llcps.store import Store
     from llcps.symbolic.knowledge_base import KnowledgeBase
+    from llcps.trial_records import TrialRecord
 
 DEFAULT_BUDGET = 300
 #: Largest exploration budget (and refit interval) accepted: far beyond any candidate space.
@@ -58,6 +60,8 @@ class SolveConfig:
     condition: str = "novelty"
     model: str = WORLD_MODELS.default
     measure: str = MEASURES.default
+    #: The exploration ordering (:mod:`llcps.cps.orderings`).
+    ordering: str = ORDERINGS.default
     seed: int = 0
     budget: int = DEFAULT_BUDGET
     refit_every: int = 1
@@ -87,6 +91,8 @@ class SolveConfig:
             raise UnknownNameError("world model", self.model, list(WORLD_MODELS))
         if self.measure not in MEASURES:
             raise UnknownNameError("measure", self.measure, list(MEASURES))
+        if self.ordering not in ORDERINGS:
+            raise UnknownNameError("ordering", self.ordering, list(ORDERINGS))
         check_seed(self.seed)
         if self.model_seed is not None:
             check_seed(self.model_seed, "model seed")
@@ -108,6 +114,7 @@ class SolveResult:
     seed: int
     branch: str
     variant: int = 0
+    ordering: str = ORDERINGS.default
     status: str = "running"
     plan: list[str] = field(default_factory=list)
     plan_repairs: list[dict[str, object]] = field(default_factory=list)
@@ -136,6 +143,7 @@ class SolveResult:
             "condition": self.condition,
             "model": self.model,
             "measure": self.measure,
+            "ordering": self.ordering,
             "seed": self.seed,
             "variant": self.variant,
             "branch": self.branch,
@@ -273,6 +281,7 @@ def solve(
             seed=config.seed,
             branch=branch_name,
             variant=config.variant,
+            ordering=config.ordering,
             status="error" if found.status == "running" else found.status,
             plan=list(log.plan),
             plan_repairs=list(log.repairs),
@@ -326,9 +335,11 @@ def _explore(
     failure: Failure,
     found: _Progress,
 ) -> None:
-    """Try ranked candidates from the failure snapshot until one resolves the novelty."""
-    from llcps.cps.exploration import rank_candidates, start_exploration
+    """Try candidates from the failure snapshot, in the config's ordering, until one resolves the novelty."""
+    from llcps.cps.exploration import start_exploration
     from llcps.cps.learning import learn
+    from llcps.cps.orderings import get_ordering
+    from llcps.cps.orderings.base import Exploration
     from llcps.cps.plan_execution import resolves
 
     snapshot = failure.snapshot
@@ -336,31 +347,46 @@ def _explore(
     point = start_exploration(executor, experience, kb, failure, grid=config.candidate_grid(executor.scenario))
     candidates = point.candidates
     found.candidates = len(candidates)
-    remaining = list(range(len(candidates)))
-    order = rank_candidates(model, point, measure=config.measure, seed=config.seed, indices=remaining).order
+    trial_ids: dict[int, int | None] = {}  # candidate index -> the id of its stored trial
+    ordering = get_ordering(config.ordering)(
+        Exploration(
+            model=model,
+            point=point,
+            measure=config.measure,
+            seed=config.seed,
+            refit_every=config.refit_every,
+            update=lambda only: model.update(_taken(executor.records, trial_ids, only), executor.changes, start=snapshot),
+            store=executor.store,
+            branch=executor.branch,
+            episode_id=executor.episode_id,
+        )
+    )
     executor.report("explore", total=min(config.budget, len(candidates)))
-    tried = 0
-    subgoal_failures = [0] * len(point.subgoals)  # trials that met a subgoal, and K's plan still failed
-    while order and executor.tally.exploration_trials < config.budget:
-        index = order.pop(0)
-        remaining.remove(index)
+    while executor.tally.exploration_trials < config.budget:
+        index = ordering.next()
+        if index is None:
+            break
         spec = candidates[index]
         trial, record = executor.execute(spec, source="exploration", snapshot_id=snapshot, start=snapshot)
-        tried += 1
+        trial_ids[index] = record.id if record is not None else None
         executor.report("explore")
         if resolves(executor, experience, kb, trial, failure):
             found.learned_operators.append(learn(executor, experience, kb, spec, trial, failure, record))
             found.resolving_trial_id = record.id if record is not None else None
             found.status = "solved"
             return
-        for k, subgoal in enumerate(point.subgoals):
-            subgoal_failures[k] += subgoal.met(trial.after)
-        if tried % config.refit_every == 0 and remaining:
-            model.update(executor.records, executor.changes, start=snapshot)
-            order = rank_candidates(
-                model, point, measure=config.measure, seed=config.seed, indices=remaining, subgoal_failures=subgoal_failures
-            ).order
+        ordering.observe(index, trial.after)
     found.status = "budget_exhausted"
+
+
+def _taken(records: list[TrialRecord], trial_ids: Mapping[int, int | None], only: Collection[int] | None) -> list[TrialRecord]:
+    """The training set with this episode's exploration trials of candidates outside
+    ``only`` left out (None: nothing left out)."""
+    if only is None:
+        return records
+    kept = set(only)
+    left_out = {trial_id for index, trial_id in trial_ids.items() if index not in kept and trial_id is not None}
+    return [r for r in records if r.id not in left_out] if left_out else records
 
 
 def _config_json(config: SolveConfig) -> dict[str, Any]:
@@ -369,6 +395,7 @@ def _config_json(config: SolveConfig) -> dict[str, Any]:
         "condition": config.condition,
         "model": config.model,
         "measure": config.measure,
+        "ordering": config.ordering,
         "seed": config.seed,
         "variant": config.variant,
         "model_seed": config.fit_seed,

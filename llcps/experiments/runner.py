@@ -43,6 +43,7 @@ def run_experiment(
     variants: bool = False,
     scenarios: Iterable[str] | None = None,
     with_others: bool = False,
+    ordering: str | None = None,
     workers: int = 1,
     engine: str = "local",
     ray_address: str | None = None,
@@ -61,6 +62,8 @@ def run_experiment(
             paths); None: the preset's own list (the paper's three for the paper's presets).
         with_others: solve each scenario after the list's other scenarios on its branch
             (the preset's ``reset`` becomes ``others``; see :meth:`Preset.with_others`).
+        ordering: the exploration ordering of every episode (None: the preset's). The
+            branch names do not say it: run another ordering into another store.
         workers: processes (local) or concurrent Ray tasks.
         engine: one of :data:`ENGINES`.
         ray_address: a Ray cluster (None: start a local instance with ``workers`` CPUs).
@@ -75,7 +78,7 @@ def run_experiment(
         What ran; on Ctrl-C the tasks imported so far stay and ``status`` is ``interrupted``.
     """
     grid = get_preset(preset) if isinstance(preset, str) else preset
-    grid = grid.with_scenarios(scenarios)
+    grid = grid.with_scenarios(scenarios).with_ordering(ordering)
     if with_others:
         grid = grid.with_others()
     validate_preset(grid)
@@ -98,7 +101,7 @@ def run_experiment(
     summary.skipped = len(tasks) - len(todo)
     started = time.perf_counter()
     summary.run_id = store.start_run(
-        command=f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else "") + (" --with-others" if with_others else ""),
+        command=f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else "") + (" --with-others" if with_others else "") + (f" --ordering {grid.ordering}" if ordering else ""),
         seed=None,
         config={
             "preset": grid.name,
@@ -106,6 +109,7 @@ def run_experiment(
             "variants": variants,
             "scenarios": [name for name in grid.scenario_names()],
             "conditions": list(grid.conditions),
+            "ordering": grid.ordering,
             "workers": workers,
             "engine": engine,
             "cache": cache,

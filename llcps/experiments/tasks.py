@@ -24,6 +24,7 @@ from typing import Any, Iterable
 
 from llcps.domain import ACTIONS
 from llcps.experiments.design import Sequence, pretrain_branch_name
+from llcps.cps.orderings import PAPER_ORDERING
 from llcps.experiments.presets import Preset, resolve_scenarios, seed_list
 from llcps.experiments.transfer import Payload
 
@@ -58,6 +59,8 @@ class SequenceTask:
     base: Payload | None = None
     #: Exploration trials between world-model refits (the preset's ``refit_every``).
     refit_every: int = 1
+    #: The exploration ordering (the preset's ``ordering``).
+    ordering: str = PAPER_ORDERING
     #: The store whose physics cache answers trials simulated before (None: no cache).
     #: A URL with its credentials: the worker opens the store itself.
     cache_url: str | None = None
@@ -125,7 +128,7 @@ def plan_tasks(
     for seed in chosen:
         tasks.append(PretrainTask(preset.name, seed, preset.pretrain_pool, tuple(preset.pretrain_sizes)))
         tasks.extend(
-            SequenceTask(s, budget, refit_every=preset.refit_every, cache_url=cache_url, sources=sources)
+            SequenceTask(s, budget, refit_every=preset.refit_every, ordering=preset.ordering, cache_url=cache_url, sources=sources)
             for s in sequences
             if s.seed == seed
         )

@@ -190,6 +190,7 @@ def _solve(store: Store, task: SequenceTask, branch: str, source: str) -> str:
         variant=seq.variant,
         budget=task.budget,
         refit_every=task.refit_every,
+        ordering=task.ordering,
     )
     result = solve(store, branch=branch, config=config, command=f"{COMMAND} --preset {seq.preset}", cache=_cache(task))
     if result.status == "interrupted":

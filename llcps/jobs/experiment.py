@@ -49,6 +49,7 @@ def run_experiment_job(
     variants: range | None = None,
     scenarios: Iterable[str] | None = None,
     with_others: bool = False,
+    ordering: str | None = None,
     workers: int = 1,
     engine: str = "local",
     ray_address: str | None = None,
@@ -72,13 +73,14 @@ def run_experiment_job(
             ``generalization``). The report covers these scenarios only.
         with_others: give each held-out scenario the other scenarios' episodes first
             (the preset's ``reset`` becomes ``others``).
+        ordering: the exploration ordering (None: the preset's; :mod:`llcps.cps.orderings`).
         workers, engine, ray_address, cache, progress: see
             :func:`~llcps.experiments.runner.run_experiment`.
         out_dir: the report's directory (default: ``results/<preset>``).
         html: also write report.html, with a film of a resolving trial per scenario.
         report_progress: called as ``(phase, done, total)`` while the report is built.
     """
-    grid = (get_preset(preset) if isinstance(preset, str) else preset).with_scenarios(scenarios)
+    grid = (get_preset(preset) if isinstance(preset, str) else preset).with_scenarios(scenarios).with_ordering(ordering)
     if with_others:
         grid = grid.with_others()
     chosen = run_seeds(grid, seeds=seeds, first_seed=first_seed, variants=variants)

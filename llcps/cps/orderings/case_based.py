@@ -141,9 +141,6 @@ class CaseBased(Ordering):
 
     def __init__(self, exploration: Exploration) -> None:
         super().__init__(exploration)
-        from llcps.cps.orderings import ORDERINGS, get_ordering
-
-        self.fallback = get_ordering(ORDERINGS.default)(exploration)
         store, branch = exploration.store, exploration.branch
         cases = past_cases(store, branch, exclude=exploration.episode_id) if store is not None and branch is not None else []
         scored: dict[int, tuple[float, int]] = {}
@@ -156,6 +153,8 @@ class CaseBased(Ordering):
         ranked = sorted(scored.items(), key=lambda item: (-item[1][0], -item[1][1], item[0]))
         self.reused = [index for index, _ in ranked]
         self.similarity = [score for _, (score, _) in ranked]
+        self.fallback: Ordering | None = None
+        self._tried: list[int] = []
 
     def _match(self, case: Case) -> tuple[int, float] | None:
         """The present candidate ``case``'s resolving trial maps to, and the case's score."""
@@ -194,9 +193,20 @@ class CaseBased(Ordering):
         for index in self.reused:
             if index in self.remaining:
                 return index
+        if self.fallback is None:
+            # The cases are spent: the default ordering takes over, from the model taken
+            # up to the trials so far, without the candidates tried.
+            from llcps.cps.orderings import ORDERINGS, get_ordering
+
+            if self._tried:
+                self.exploration.update(self._tried)
+            self.fallback = get_ordering(ORDERINGS.default)(self.exploration)
+            self.fallback.exclude(self._tried)
         choice = self.fallback.next()
-        assert choice is not None  # the fallback was told every trial: it has what remains
+        assert choice is not None  # it has every candidate still untried
         return choice
 
     def learn(self, index: int, after: State) -> None:
-        self.fallback.observe(index, after)
+        self._tried.append(index)
+        if self.fallback is not None:
+            self.fallback.observe(index, after)

@@ -49,23 +49,26 @@ class Uncertainty(Ordering):
 
     def __init__(self, exploration: Exploration) -> None:
         super().__init__(exploration)
+        self.disagreement = np.std(self.members(), axis=0)
+        self.tie = tie_break_key(len(exploration.point.candidates), exploration.seed)
+        self.taken: list[int] = []
+        self._rank()
+
+    def members(self) -> np.ndarray:
+        """(MEMBERS, n): each bootstrap member's probability that each candidate resolves the failure."""
         from llcps.models import WORLD_MODELS
 
-        point, model = exploration.point, exploration.model
-        store, branch = exploration.store, exploration.branch
-        records = list(store.visible_trials(branch)) if store is not None and branch is not None else []
-        changes = store.visible_changes(branch) if store is not None and branch is not None else {}
-        goal = get_measure(exploration.measure).uses_goal
-        rng = np.random.default_rng([int(exploration.seed), _STREAM])
-        members = []
-        for m in range(MEMBERS):
+        x = self.exploration
+        records = list(x.store.visible_trials(x.branch)) if x.store is not None and x.branch is not None else []
+        changes = x.store.visible_changes(x.branch) if x.store is not None and x.branch is not None else {}
+        goal = get_measure(x.measure).uses_goal
+        rng = np.random.default_rng([int(x.seed), _STREAM])
+        out = []
+        for _ in range(MEMBERS):
             sample = [records[i] for i in rng.integers(len(records), size=len(records))] if records else []
-            member = WORLD_MODELS[model.name](int(exploration.seed) * MEMBERS + m).fit(sample, changes, goal=goal)
-            members.append(candidate_probability(point, rank_candidates(member, point, measure=exploration.measure, seed=exploration.seed)))
-        self.disagreement = np.std(np.stack(members), axis=0)
-        self.tie = tie_break_key(len(point.candidates), exploration.seed)
-        self.failed = 0
-        self._rank()
+            member = WORLD_MODELS[x.model.name](int(rng.integers(2**31))).fit(sample, changes, goal=goal)
+            out.append(candidate_probability(x.point, rank_candidates(member, x.point, measure=x.measure, seed=x.seed)))
+        return np.stack(out)
 
     def _rank(self) -> None:
         point = self.exploration.point
@@ -77,7 +80,7 @@ class Uncertainty(Ordering):
         return min(self.remaining, key=lambda i: (-self.score[i], self.tie[i]))
 
     def learn(self, index: int, after: State) -> None:
-        self.failed += 1
-        if self.remaining and self.failed % self.exploration.refit_every == 0:
-            self.exploration.update()
+        self.taken.append(index)
+        if self.remaining and len(self.taken) % self.exploration.refit_every == 0:
+            self.exploration.update(self.taken)
             self._rank()

@@ -1,0 +1,129 @@
+"""``hedged``: the model's ranking, hedged against the model being wrong in a novel scene.
+
+A world model trained on other scenes may rank first, in a novel one, candidates that
+can never work there (placements into a container out of reach), and its episode
+evidence (:mod:`llcps.models.goal`) moves away from them only as fast as its prior lets
+it. Random order knows nothing, but it is never misled. This ordering interleaves the
+two:
+
+- *the ranking*: the best untried candidate under the model and measure
+  (:class:`~llcps.cps.orderings.ranked.Ranked`, updated after every failed trial);
+- *random order*: the next untried candidate of one seeded random permutation of all
+  candidates, drawn once per episode.
+
+**The share.** The model gets the first trial; after each trial it is credited its
+share ``min(w, MAX_MODEL_SHARE)`` and takes the next trial whenever its credit reaches
+one (random order takes the others). ``w`` is the posterior probability that the model
+points the right way in this scene, starting from :data:`MODEL_PRIOR`. Each failed
+trial of a candidate the model gave probability ``p`` of resolving the novelty, whichever
+side chose it, multiplies the odds of that by ``(1 - p) / (1 - p_mean)``, ``p_mean``
+being the model's mean over the untried candidates: the chance of that failure if the
+model is right, over its chance if the candidate were one of the others at random. A
+model that was sure of candidates that then failed loses its share quickly; one that
+expected the failures keeps it. Comparing with the model's own mean judges how well it
+points in this scene, not how confident it is overall. A measure without probabilities
+of resolving (the paper's four) gives no evidence: its share stays at the prior.
+
+**The two sides stay apart.** The ranking takes in only the trials it chose: a failed
+random trial does not move it (it would lower the whole family of a resolving
+candidate after one unlucky member). So the model's side is ``ranked`` over the
+candidates not yet tried, moved by its own failures only, and random order's side
+its permutation.
+
+**The guarantee.** Whatever the model predicts, it takes at most
+``1 + MAX_MODEL_SHARE * (T - 1)`` of the first ``T`` trials, so random order takes at
+least ``(1 - MAX_MODEL_SHARE) (T - 1)`` of them, in its permutation's order, skipping
+candidates the model already tried (which only brings a resolving one nearer). If the
+permutation's first resolving candidate stands at position ``P``, the episode ends by
+trial ``1 + P / (1 - MAX_MODEL_SHARE)``: with the default share of one half, at most
+``2 P + 1`` trials, where random order with that permutation needs ``P``. While the
+model keeps its full share (``w`` at least one half) the model's side loses at most the
+same factor: ``ranked``'s ``k``-th trial is tried by trial ``2 k - 1``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from llcps.cps.orderings.base import Exploration
+from llcps.cps.orderings.ranked import Ranked
+
+if TYPE_CHECKING:
+    from llcps.domain import State
+
+#: Most of the trials the model's ranking may take (the rest follow random order).
+MAX_MODEL_SHARE = 0.5
+#: Belief, before any trial, that the resolving candidate lies where the model says.
+MODEL_PRIOR = 0.5
+#: Stream of the seed's random permutation, apart from the tie-breaking key's.
+_PERMUTATION_STREAM = 0x4E0D6E
+#: Largest probability a failed candidate may have had (keeps the odds finite).
+_MAX_PROBABILITY = 1.0 - 1e-9
+
+
+class Hedged(Ranked):
+    """The ranking interleaved with a random order (see the module docstring).
+
+    Attributes:
+        picks: per trial so far, ``"model"`` or ``"random"``: which side chose it.
+        beliefs: per trial so far, the belief ``w`` when it was chosen.
+    """
+
+    name: ClassVar[str] = "hedged"
+
+    def __init__(self, exploration: Exploration) -> None:
+        super().__init__(exploration)
+        n = len(exploration.point.candidates)
+        rng = np.random.default_rng([int(exploration.seed), _PERMUTATION_STREAM])
+        self.permutation = [int(i) for i in rng.permutation(n)]
+        self._cursor = 0
+        self.log_odds = math.log(MODEL_PRIOR / (1.0 - MODEL_PRIOR))
+        self.credit = 1.0
+        self.picks: list[str] = []
+        self.beliefs: list[float] = []
+
+    @property
+    def belief(self) -> float:
+        """The posterior probability that the model points the right way in this scene."""
+        return 1.0 / (1.0 + math.exp(-self.log_odds))
+
+    def choose(self) -> int:
+        self.beliefs.append(self.belief)
+        if self.credit >= 1.0:
+            self.picks.append("model")
+            return self.order[0]
+        self.picks.append("random")
+        untried = set(self.remaining)
+        while self.permutation[self._cursor] not in untried:
+            self._cursor += 1
+        return self.permutation[self._cursor]
+
+    def learn(self, index: int, after: State) -> None:
+        self.log_odds += self._evidence(index)
+        chosen_by_model = self.picks[-1] == "model"
+        if chosen_by_model:
+            self.credit -= 1.0
+        self.credit += min(self.belief, MAX_MODEL_SHARE)
+        self.order.remove(index)
+        if chosen_by_model:
+            self.evidence(index, after)
+
+    def _evidence(self, index: int) -> float:
+        """The log factor a failed trial of ``index`` applies to the odds that the model
+        points the right way (0 without probabilities of resolving)."""
+        ranking = self.ranking
+        probability = ranking.resolve if ranking.resolve is not None and self.exploration.point.subgoals else None
+        if probability is None and ranking.goal is not None:
+            probability = np.prod(np.clip(ranking.goal, 0.0, 1.0), axis=1)
+        if probability is None:
+            return 0.0
+        untried = set(self.remaining) | {index}
+        given = {i: float(p) for i, p in zip(ranking.indices, probability) if i in untried}
+        if index not in given or len(given) < 2:
+            return 0.0
+        p = min(given[index], _MAX_PROBABILITY)
+        mean = min(sum(given.values()) / len(given), _MAX_PROBABILITY)
+        return math.log1p(-p) - math.log1p(-mean)

@@ -1,0 +1,63 @@
+"""``ranked``: the measure's ranking of the untried candidates (the paper's agent)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, ClassVar, Collection
+
+from llcps.cps.exploration import Ranking, rank_candidates
+from llcps.cps.orderings.base import Exploration, Ordering
+
+if TYPE_CHECKING:
+    from llcps.domain import State
+
+
+class Ranked(Ordering):
+    """Try the best-ranked untried candidate; after every ``refit_every`` failed trials,
+    take them into the world model (episode evidence) and rank the rest again.
+
+    A failed trial that met one of K's subgoals (:class:`~llcps.cps.exploration.Subgoal`)
+    halves the trust in that subgoal's step for the next ranking.
+    """
+
+    name: ClassVar[str] = "ranked"
+
+    def __init__(self, exploration: Exploration) -> None:
+        super().__init__(exploration)
+        self.tried = 0
+        #: Per subgoal of the failure point: failed trials that met it.
+        self.subgoal_failures = [0] * len(exploration.point.subgoals)
+        #: The failed trials (candidate indices) the ranking took in, in order.
+        self.taken: list[int] = []
+        self.ranking = self.rank()
+        self.order = list(self.ranking.order)
+
+    def rank(self) -> Ranking:
+        """The untried candidates ranked by the model and measure as they are now."""
+        x = self.exploration
+        return rank_candidates(
+            x.model, x.point, measure=x.measure, seed=x.seed, indices=self.remaining, subgoal_failures=self.subgoal_failures
+        )
+
+    def choose(self) -> int:
+        return self.order[0]
+
+    def exclude(self, indices: Collection[int]) -> None:
+        super().exclude(indices)
+        gone = set(indices)
+        self.order = [i for i in self.order if i not in gone]
+
+    def learn(self, index: int, after: State) -> None:
+        self.order.remove(index)
+        self.evidence(index, after)
+
+    def evidence(self, index: int, after: State) -> None:
+        """Take the failed trial of ``index`` into the ranking: count the subgoals it met
+        and, every ``refit_every`` such trials, update the model and rank again."""
+        self.tried += 1
+        self.taken.append(index)
+        for k, subgoal in enumerate(self.exploration.point.subgoals):
+            self.subgoal_failures[k] += subgoal.met(after)
+        if self.tried % self.exploration.refit_every == 0 and self.remaining:
+            self.exploration.update(self.taken)
+            self.ranking = self.rank()
+            self.order = list(self.ranking.order)

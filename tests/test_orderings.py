@@ -1,0 +1,150 @@
+"""Exploration orderings (llcps.cps.orderings): the paper's ranking and the hedge.
+
+The orderings run here on synthetic failure points: a fixed probability of resolving the
+novelty per candidate stands in for the world model, and a set of resolving candidates
+for physics, so the hedge's guarantee can be checked over many seeds and layouts.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from llcps.cps.exploration import Ranking
+from llcps.cps.orderings import ORDERINGS, get_ordering
+from llcps.cps.orderings.base import Exploration
+from llcps.cps.orderings.hedged import MAX_MODEL_SHARE, Hedged
+from llcps.cps.orderings.ranked import Ranked
+from llcps.domain import State
+
+
+def _synthetic(base, probability: np.ndarray, *, families: np.ndarray | None = None):
+    """``base`` ranking by fixed probabilities; a failed trial of a family halves the
+    family's probabilities (a stand-in for the goal head's episode evidence)."""
+
+    class Synthetic(base):  # type: ignore[misc, valid-type]
+        def rank(self) -> Ranking:
+            p = probability.copy()
+            if families is not None:
+                for index in getattr(self, "taken", []):
+                    p[families == families[index]] *= 0.5
+            chosen = list(self.remaining)
+            score = p[chosen]
+            order = np.lexsort((np.arange(len(chosen)), -score))
+            return Ranking(
+                order=[chosen[i] for i in order],
+                indices=chosen,
+                score=score,
+                outcome=np.zeros((len(chosen), 6)),
+                goal=score[:, None],
+            )
+
+    return Synthetic
+
+
+def _exploration(n: int, seed: int) -> Exploration:
+    point = SimpleNamespace(candidates=tuple(range(n)), subgoals=())
+    return Exploration(model=None, point=point, measure="goal-directed", seed=seed)  # type: ignore[arg-type]
+
+
+def _run(ordering, resolving: set[int]) -> list[int]:
+    """The candidates tried until one in ``resolving`` (included), or every one."""
+    tried = []
+    while (index := ordering.next()) is not None:
+        tried.append(index)
+        if index in resolving:
+            break
+        ordering.observe(index, State())
+    return tried
+
+
+def test_the_registry_names_both_orderings_and_hedged_is_the_default():
+    assert set(ORDERINGS) >= {"ranked", "hedged"}
+    assert ORDERINGS.default == "hedged"
+    assert get_ordering("hedged").ordering_class() is Hedged
+
+
+def test_ranked_tries_the_candidates_best_first():
+    p = np.array([0.1, 0.9, 0.5, 0.3])
+    ordering = _synthetic(Ranked, p)(_exploration(4, seed=0))
+    assert _run(ordering, resolving=set()) == [1, 2, 3, 0]
+
+
+def test_the_hedge_is_a_function_of_the_seed():
+    p = np.random.default_rng(1).random(200)
+    runs = [_run(_synthetic(Hedged, p)(_exploration(200, seed=seed)), resolving={7}) for seed in (3, 3, 4)]
+    assert runs[0] == runs[1]
+    assert runs[0] != runs[2]
+
+
+def test_the_ranking_inside_the_hedge_learns_from_its_own_trials_only():
+    rng = np.random.default_rng(2)
+    p, families = 0.1 * rng.random(300), rng.integers(0, 12, 300)
+    hedge = _synthetic(Hedged, p, families=families)(_exploration(300, seed=0))
+    tried = _run(hedge, resolving=set())
+    model_side = [index for index, pick in zip(tried, hedge.picks) if pick == "model"]
+    assert hedge.taken == model_side
+    assert 10 < len(model_side) < len(tried) == 300
+    # Each model pick is the best untried candidate under the evidence of the model's own picks.
+    for j, index in enumerate(model_side[:40]):
+        untried = [i for i in range(300) if i not in tried[: tried.index(index)]]
+        halved = p * 0.5 ** np.array([sum(families[t] == families[i] for t in model_side[:j]) for i in range(300)])
+        assert index == max(untried, key=lambda i: (halved[i], -untried.index(i)))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(20, 400),
+    resolvers=st.integers(1, 8),
+    wrong=st.floats(0.05, 0.95),
+    confident=st.booleans(),
+)
+def test_the_hedge_reaches_a_resolver_within_its_bound_of_random_order_when_the_model_points_away(
+    seed, n, resolvers, wrong, confident
+):
+    """The model ranks a family that never resolves first (``wrong`` of the candidates,
+    sure of it or not) and the resolving candidates last: the episode still ends by trial
+    1 + P / (1 - MAX_MODEL_SHARE), P the first resolver's position in the random order."""
+    rng = np.random.default_rng(seed)
+    resolving = {int(i) for i in rng.choice(n, size=min(resolvers, n), replace=False)}
+    p = np.where(rng.random(n) < wrong, 0.9 if confident else 0.02, 0.01)
+    p[list(resolving)] = 0.001
+    hedge = _synthetic(Hedged, p, families=(p * 1000).astype(int))(_exploration(n, seed))
+    tried = _run(hedge, resolving)
+    assert tried[-1] in resolving
+    position = 1 + min(hedge.permutation.index(i) for i in resolving)
+    assert len(tried) <= 1 + position / (1.0 - MAX_MODEL_SHARE)
+
+
+def test_a_model_sure_of_what_fails_loses_its_share_and_the_hedge_costs_about_random_order():
+    """Averaged over layouts: a model sure of 100 candidates that all fail, in 400 with 4
+    resolvers, costs the ranking about 100 trials; the hedge stays within a fifth of random
+    order's expected position (N + 1) / (k + 1) = 80.2."""
+    n, k = 400, 4
+    costs, ranked_costs = [], []
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        order = rng.permutation(n)
+        wrong, resolving = order[:100], {int(i) for i in order[100 : 100 + k]}
+        p = np.full(n, 0.01)
+        p[wrong] = 0.6
+        p[list(resolving)] = 0.001
+        costs.append(len(_run(_synthetic(Hedged, p)(_exploration(n, seed)), resolving)))
+        ranked_costs.append(len(_run(_synthetic(Ranked, p)(_exploration(n, seed)), resolving)))
+    expected_random = (n + 1) / (k + 1)
+    assert np.mean(ranked_costs) > 1.5 * expected_random
+    assert np.mean(costs) <= 1.2 * expected_random
+
+
+@pytest.mark.parametrize("k", [1, 3, 10])
+def test_where_the_model_is_right_the_hedge_tries_its_kth_best_by_trial_2k_minus_1(k):
+    n = 300
+    p = np.linspace(0.5, 0.01, n)  # candidate i is the model's (i+1)-th best
+    hedge = _synthetic(Hedged, p)(_exploration(n, seed=5))
+    tried = _run(hedge, resolving={k - 1})
+    assert len(tried) <= max(2 * k - 1, 1) or hedge.beliefs[-1] < MAX_MODEL_SHARE
