@@ -1,8 +1,8 @@
 """``uncertainty``: the model's probability plus a bonus where a bootstrap ensemble disagrees.
 
-As in active sampler learning (Kumar et al., "Learning Efficient Abstract Planning
-Models that Choose What to Predict", CoRL 2023; the *predicators* active sampler
-explorer) and bootstrapped exploration in general (Osband et al., "Deep Exploration
+As in active sampler learning (Kumar et al., "Practice Makes Perfect: Planning to Learn
+Skill Parameter Policies", RSS 2024; the *predicators* active sampler explorer) and
+bootstrapped exploration in general (Osband et al., "Deep Exploration
 via Bootstrapped DQN", NeurIPS 2016): a candidate the model is unsure about is worth a
 trial because it teaches the model most. :data:`MEMBERS` copies of the episode's world
 model (same kind, their own seeds) are fitted on bootstrap resamples of the trials the
