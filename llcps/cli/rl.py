@@ -38,7 +38,7 @@ def train_cli(
     timesteps: Annotated[int, typer.Option("--timesteps", metavar="N", min=1, max=jobs.MAX_TIMESTEPS, help="Environment steps (trials) to train for.")] = 512,
     budget: Annotated[int, typer.Option("--budget", metavar="N", min=1, max=512, help="Trials per training episode before it is cut off.")] = 50,
     trial_cost: Annotated[float, typer.Option("--trial-cost", metavar="X", min=0.0, max=1.0, help="Reward subtracted per trial (a resolve earns 1).")] = 0.01,
-    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the training (PPO and the episodes' picks).")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Run seed: seeds the training (PPO's network and draws, and which scenario and variant each episode takes).")] = 0,
     out: Annotated[
         Optional[Path],
         typer.Option("--out", metavar="FILE", help="Also write the policy to FILE (.npz: plain arrays, no pickle).", dir_okay=False, show_default=False),
