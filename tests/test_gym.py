@@ -31,7 +31,7 @@ def test_the_environment_passes_gymnasiums_checker(scenario: str, tmp_path: Path
         env.close()
 
 
-def _rollout(db: Path, seed: int, steps: int) -> list[tuple[int, float, bool, tuple[bool, ...]]]:
+def _rollout(db: Path, seed: int, steps: int) -> list[tuple[object, ...]]:
     """A random policy over the unmasked candidates, seeded; what each step did."""
     env = gymnasium.make(llcps.gym.ENV_ID, scenario="scenario2", db=str(db), budget=steps)
     rng = np.random.default_rng(seed)
