@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from llcps.cps.replay import ReplayReport
     from llcps.experiments.scheduler import RunSummary
     from llcps.jobs.experiment import ExperimentReport
+    from llcps.jobs.life import LifeRun
     from llcps.models.persistence import FittedModel
     from llcps.cps.pretraining import PretrainSummary
 
@@ -59,6 +60,32 @@ EPISODE_COLUMNS: Mapping[str, tuple[str, str]] = {
     "learned_operators": ("nullable_int", "operators learned"),
     "started_at": ("timestamp", "start (UTC)"),
     "finished_at": ("timestamp", "end (UTC)"),
+    "variant": ("nullable_int", "the scene variant"),
+    "life_name": ("string", "the life file of a `life run` episode (else empty)"),
+    "life": ("nullable_int", "its life number (the seed of the life's draws)"),
+    "life_condition": ("string", "the condition its life ran under (update, reset, scratch, random)"),
+    "life_episode": ("nullable_int", "its index in the life (empty for a re-solve after the life)"),
+    "first_encounter": ("nullable_bool", "the first episode of its family in the life"),
+}
+
+#: Columns of :meth:`Workbench.lives` (``episodes.csv`` of ``life run``): name -> (kind, meaning).
+LIFE_COLUMNS: Mapping[str, tuple[str, str]] = {
+    "life": ("int", "the life's number (the seed of its draws)"),
+    "condition": ("string", "update, reset, scratch or random"),
+    "episode": ("int", "index in the life; -1 for a re-solve after it"),
+    "family": ("string", "the novelty family (scenario)"),
+    "variant": ("int", "the scene variant"),
+    "first_encounter": ("bool", "the family's first episode in the life"),
+    "probe": ("bool", "a probe family (held back to the last quarter)"),
+    "episode_condition": ("string", "novelty or original"),
+    "exploration_trials": ("int", "exploration trials the episode made"),
+    "solved": ("bool", "the novelty was resolved"),
+    "censored": ("bool", "not solved: its count is censored at tau"),
+    "wall_seconds": ("float", "wall seconds"),
+    "sim_seconds": ("float", "simulated seconds"),
+    "tau": ("int", "the AUC's horizon"),
+    "phase": ("string", "life, or after (the forgetting re-solves)"),
+    "status": ("string", "the episode's status"),
 }
 
 #: Columns of :meth:`Workbench.runs`.
@@ -115,6 +142,20 @@ def _frame(rows: list[dict[str, Any]], columns: Iterable[tuple[str, str, Sequenc
     for name, kind, categories in spec:
         frame[name] = _convert(frame[name], kind, categories)
     return frame
+
+
+def _life_place(place: Any) -> dict[str, Any]:
+    """The life columns of an episode from its summary's ``life`` entry (untrusted)."""
+    if not isinstance(place, Mapping):
+        return {"life_name": None, "life": None, "life_condition": None, "life_episode": None, "first_encounter": None}
+    name, condition, first = place.get("name"), place.get("condition"), place.get("first_encounter")
+    return {
+        "life_name": name if isinstance(name, str) else None,
+        "life": _number(place.get("life")),
+        "life_condition": condition if isinstance(condition, str) else None,
+        "life_episode": _number(place.get("episode")),
+        "first_encounter": first if isinstance(first, bool) else None,
+    }
 
 
 def trial_frame(store: Store, records: Sequence[Any]) -> pd.DataFrame:
@@ -199,9 +240,43 @@ class Workbench:
                     "learned_operators": len(operators) if isinstance(operators, list) else None,
                     "started_at": e.started_at or None,
                     "finished_at": e.finished_at,
+                    "variant": _number(summary.get("variant")),
+                    **_life_place(summary.get("life")),
                 }
             )
         return _frame(rows, ((n, k, ()) for n, (k, _) in EPISODE_COLUMNS.items()))
+
+    def lives(self, life: str = "default") -> pd.DataFrame:
+        """Every stored episode of a life file (a shipped name or a path): one row per
+        (life, condition, episode), the columns of ``episodes.csv`` (:data:`LIFE_COLUMNS`),
+        and the re-solves after each life (``phase`` ``after``)."""
+        from dataclasses import asdict
+
+        from llcps.jobs.life import read_rows, resolve_life
+
+        rows = [asdict(r) for r in read_rows(self.store, resolve_life(life))]
+        return _frame(rows, ((n, k, ()) for n, (k, _) in LIFE_COLUMNS.items()))
+
+    def life(
+        self,
+        life: str = "default",
+        *,
+        lives: int = 1,
+        first_life: int = 0,
+        episodes: int | None = None,
+        conditions: Iterable[str] | None = None,
+        workers: int = 1,
+        out_dir: str | Path | None = None,
+        html: bool = False,
+        progress: Callable[[int, int, str], None] | None = None,
+    ) -> LifeRun:
+        """``llcps life run``: every (life, condition) not stored yet, then the report in ``out_dir``."""
+        from llcps.jobs.life import run_life_job
+
+        return run_life_job(
+            store=self.store, life=life, lives=lives, first_life=first_life, episodes=episodes, conditions=conditions,
+            workers=workers, out_dir=out_dir, html=html, progress=progress,
+        )  # fmt: skip
 
     def runs(self, *, branch: str | None = None) -> pd.DataFrame:
         """Runs with their provenance, oldest first; ``branch`` None means every branch."""
@@ -386,4 +461,4 @@ def open(url_or_path: str | Path = "llcps.db", *, create: bool = False) -> Workb
     return Workbench.open(url_or_path, create=create)
 
 
-__all__ = ["EPISODE_COLUMNS", "OPERATOR_COLUMNS", "RUN_COLUMNS", "Workbench", "open", "trial_frame"]
+__all__ = ["EPISODE_COLUMNS", "LIFE_COLUMNS", "OPERATOR_COLUMNS", "RUN_COLUMNS", "Workbench", "open", "trial_frame"]

@@ -1,10 +1,11 @@
-"""Checking where a command will write, before it does any work.
+"""Where a command writes: checked before it does any work, and written safely.
 
 A solve that runs for minutes and then cannot write its GIF, or an export that
 fails half-way into a file, wastes the work and hides the cause behind a traceback.
 These checks run first: the directory must exist (nothing is created silently), the
 file must be creatable there (a probe file is made and removed), and the extension
-must be one the writer knows.
+must be one the writer knows. Then every file is written by :func:`written_atomically`:
+a temporary file beside the target, renamed over it.
 """
 
 from __future__ import annotations
@@ -44,14 +45,16 @@ def check_output_file(path: str | Path, *, what: str, suffixes: tuple[str, ...] 
     parent = path.absolute().parent
     if not parent.is_dir():
         raise LlcpsError(f"{what}: directory {parent} does not exist", hint=f"create it first or choose another {what}")
-    if path.exists():
+    if _written_directly(path):  # /dev/stdout, /dev/full: written in place
         try:
             with path.open("ab"):
                 pass
         except OSError as exc:
             raise LlcpsError(f"{what}: cannot write {path}: {exc.strerror or exc}", hint=f"choose another {what}") from None
         return path
-    _probe_directory(parent, what)
+    if path.is_file() and not path.is_symlink() and not os.access(path, os.W_OK):
+        raise LlcpsError(f"{what}: cannot write {path}: Permission denied", hint=f"choose another {what}")
+    _probe_directory(parent, what)  # anything else is written beside it and renamed over it
     return path
 
 
@@ -86,29 +89,50 @@ def write_error(path: str | Path, exc: OSError, *, what: str) -> LlcpsError:
     return LlcpsError(f"{what}: writing {path} failed: {exc.strerror or exc}", hint=f"free some space or choose another {what}")
 
 
+#: Directories whose files (``/dev/stdout``, ``/dev/full``, ``/proc/self/fd/1``) a path may
+#: name to be written in place: the system's, where no user can plant a link (``/dev/shm``,
+#: which anyone may write, is not one of them).
+SYSTEM_DIRECTORIES: frozenset[str] = frozenset({"/dev", "/dev/fd", "/proc/self/fd"})
+
+
+def _written_directly(path: Path) -> bool:
+    """Whether ``path`` names a stream or device of the system (written in place, never renamed over)."""
+    return str(path.absolute().parent) in SYSTEM_DIRECTORIES
+
+
 @contextmanager
 def written_atomically(path: str | Path, *, what: str) -> Iterator[Path]:
     """A temporary path to write that becomes ``path`` only when the block succeeds.
 
-    The file is written beside ``path`` and renamed over it at the end, so a failed
-    export leaves no half-written file (and an existing one untouched). A device or
-    pipe (``/dev/stdout``, ``/dev/full``) is yielded as it is and written directly.
+    Every file llcps writes goes through here. The file is written beside ``path`` and
+    renamed over it at the end, so a failed write leaves no half-written file (and an
+    existing one untouched), and a symbolic link at ``path`` is replaced, never written
+    through: a link planted in a shared directory cannot make llcps overwrite its target.
+    Only a stream or device of the system (a path in :data:`SYSTEM_DIRECTORIES`:
+    ``/dev/stdout``, ``/dev/full``) is yielded as it is and written in place.
 
     Raises:
         LlcpsError: writing failed (see :func:`write_error`).
     """
     path = Path(path)
     try:
-        if path.exists() and not stat.S_ISREG(path.stat().st_mode):
+        if _written_directly(path):
             yield path
             return
-        mode = stat.S_IMODE(path.stat().st_mode) if path.exists() else 0o666 & ~_umask()
+        try:
+            st = path.lstat()
+        except FileNotFoundError:
+            st = None
+        if st is not None and stat.S_ISDIR(st.st_mode):
+            raise IsADirectoryError(21, "Is a directory")
+        keep = st is not None and stat.S_ISREG(st.st_mode)  # a regular file keeps its mode; a link's target is never read
+        mode = stat.S_IMODE(st.st_mode) if keep else 0o666 & ~_umask()  # type: ignore[union-attr]
         fd, tmp = tempfile.mkstemp(dir=path.absolute().parent, prefix=f".{path.name}.", suffix=".part")
         os.close(fd)
         try:
             yield Path(tmp)
-            os.chmod(tmp, mode)  # mkstemp's 0600 would make the export private
-            os.replace(tmp, path)
+            os.chmod(tmp, mode)  # mkstemp's 0600 would make the file private
+            os.replace(tmp, path)  # replaces a link at path itself, not its target
         finally:
             if os.path.exists(tmp):
                 os.unlink(tmp)
@@ -121,6 +145,13 @@ def replaced_atomically(path: str | Path, *, what: str) -> Iterator[IO[str]]:
     """A text file that becomes ``path`` only when the block succeeds (see :func:`written_atomically`)."""
     with written_atomically(path, what=what) as target, target.open("w", newline="", encoding="utf-8") as fh:
         yield fh
+
+
+def write_text(path: str | Path, text: str, *, what: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through :func:`written_atomically`; returns ``path``."""
+    with replaced_atomically(path, what=what) as fh:
+        fh.write(text)
+    return Path(path)
 
 
 def _umask() -> int:

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from llcps.cps.exploration import Ranking
 from llcps.cps.orderings import ORDERINGS, get_ordering
 from llcps.cps.orderings.base import Exploration
-from llcps.cps.orderings.hedged import MAX_MODEL_SHARE, Hedged
+from llcps.cps.orderings.hedged import MAX_MODEL_SHARE, RESOLUTION, Hedged
 from llcps.cps.orderings.ranked import Ranked
 from llcps.domain import State
 
@@ -27,6 +27,10 @@ def _synthetic(base, probability: np.ndarray, *, families: np.ndarray | None = N
     family's probabilities (a stand-in for the goal head's episode evidence)."""
 
     class Synthetic(base):  # type: ignore[misc, valid-type]
+        def random_side(self) -> list[int]:
+            n = len(self.exploration.point.candidates)
+            return [int(i) for i in np.random.default_rng(self.exploration.seed).permutation(n)]
+
         def rank(self) -> Ranking:
             p = probability.copy()
             if families is not None:
@@ -89,11 +93,23 @@ def test_the_ranking_inside_the_hedge_learns_from_its_own_trials_only():
     model_side = [index for index, pick in zip(tried, hedge.picks) if pick == "model"]
     assert hedge.taken == model_side
     assert 10 < len(model_side) < len(tried) == 300
-    # Each model pick is the best untried candidate under the evidence of the model's own picks.
+    # Each model pick is the best untried candidate under the evidence of the model's own
+    # picks, by its probability in steps of a factor RESOLUTION, and within a step first in
+    # random order's order.
     for j, index in enumerate(model_side[:40]):
         untried = [i for i in range(300) if i not in tried[: tried.index(index)]]
         halved = p * 0.5 ** np.array([sum(families[t] == families[i] for t in model_side[:j]) for i in range(300)])
-        assert index == max(untried, key=lambda i: (halved[i], -untried.index(i)))
+        level = np.floor(np.log(halved) / np.log(RESOLUTION))
+        assert index == min(untried, key=lambda i: (-level[i], hedge.permutation.index(i)))
+
+
+def test_a_model_that_cannot_tell_candidates_apart_tries_what_random_order_tries():
+    """A flat ranking (every probability within one step of RESOLUTION): the model's side
+    and random order's side are one order, so the hedge is random order itself."""
+    p = 0.3 + 0.01 * np.random.default_rng(3).random(200)
+    hedge = _synthetic(Hedged, p)(_exploration(200, seed=4))
+    tried = _run(hedge, resolving={hedge.permutation[57]})
+    assert tried == hedge.permutation[:58]
 
 
 @settings(max_examples=60, deadline=None)
@@ -110,7 +126,7 @@ def test_the_hedge_reaches_a_resolver_within_its_bound_of_random_order_when_the_
     """The model ranks a family that never resolves first (``wrong`` of the candidates,
     sure of it or not) and the resolving candidates last: the episode still ends by trial
     1 + P / (1 - MAX_MODEL_SHARE), P the first resolver's position in the random order."""
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng([seed, 1])
     resolving = {int(i) for i in rng.choice(n, size=min(resolvers, n), replace=False)}
     p = np.where(rng.random(n) < wrong, 0.9 if confident else 0.02, 0.01)
     p[list(resolving)] = 0.001
@@ -128,8 +144,7 @@ def test_a_model_sure_of_what_fails_loses_its_share_and_the_hedge_costs_about_ra
     n, k = 400, 4
     costs, ranked_costs = [], []
     for seed in range(200):
-        rng = np.random.default_rng(seed)
-        order = rng.permutation(n)
+        order = np.random.default_rng([seed, 1]).permutation(n)  # the layout, apart from the random side's stream
         wrong, resolving = order[:100], {int(i) for i in order[100 : 100 + k]}
         p = np.full(n, 0.01)
         p[wrong] = 0.6

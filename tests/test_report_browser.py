@@ -71,8 +71,8 @@ def real_film(path: Path) -> Path:
         return recorder.save(path)
 
 
-def open_in_chromium(page: Path, profile: Path, screenshot: Path | None = None) -> dict[str, object]:
-    """Load ``page`` in headless Chromium; return its console log, images and Figure-2 table."""
+def open_in_chromium(page: Path, profile: Path, screenshot: Path | None = None, *, table_id: str = "figure2") -> dict[str, object]:
+    """Load ``page`` in headless Chromium; return its console log, images and the table ``table_id`` (Figure 2)."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.common.by import By
@@ -94,7 +94,7 @@ def open_in_chromium(page: Path, profile: Path, screenshot: Path | None = None) 
         images = driver.execute_script(
             "return Array.from(document.images).map(i => ({alt: i.alt, width: i.naturalWidth, complete: i.complete, data: i.src.startsWith('data:')}))"
         )
-        table = driver.find_element(By.ID, "figure2")
+        table = driver.find_element(By.ID, table_id)
         result = {
             "log": driver.get_log("browser"),
             "images": images,
@@ -129,6 +129,32 @@ def test_html_report_renders_in_headless_chromium(tmp_path: Path) -> None:
     header = seen["header"]
     assert "scenario2 ours" in header and "scenario2 paper" in header and "scenario3 paper" in header
     assert seen["rows"] == 4  # 2 models x 2 measures
+    assert shot.stat().st_size > 10_000
+
+
+@pytest.mark.slow
+@needs_chromium
+def test_the_life_report_renders_in_headless_chromium(tmp_path: Path) -> None:
+    """The life report: its two plots load, the metrics table is there, nothing fetched or failing."""
+    pytest.importorskip("selenium", reason="selenium is a dev dependency: pip install -e '.[dev]'")
+    from test_lives import hand_rows
+
+    from llcps.analysis.lives import life_metrics
+    from llcps.report.lives import write_life_report
+
+    rows = hand_rows()
+    paths = write_life_report(rows, life_metrics(rows), tmp_path / "life", life="hand", html=True)
+    assert paths.html is not None
+    text = paths.html.read_text(encoding="utf-8")
+    assert "src=\"http" not in text and "href=\"http" not in text
+    shot = tmp_path / "life.png"
+    seen = open_in_chromium(paths.html, tmp_path / "profile", screenshot=shot, table_id="life-metrics")
+    assert [e for e in seen["log"] if e.get("level") == "SEVERE"] == []  # type: ignore[union-attr]
+    images = seen["images"]
+    assert len(images) == 2 and all(i["complete"] and i["width"] > 0 and i["data"] for i in images), images  # type: ignore[index]
+    assert seen["title"] == "llcps life report: hand"
+    assert "FT first encounters" in seen["header"] and "forgetting" in seen["header"]  # type: ignore[operator]
+    assert seen["rows"] == 2  # update and reset
     assert shot.stat().st_size > 10_000
 
 

@@ -357,6 +357,11 @@ def test_a_step_is_not_planned_where_its_operator_failed_and_the_learned_way_is(
     # a success in the same context lifts the ban: the cost decides again
     worked = kb.with_experience(kb.experience.added(failed.name, kb.context(failed, FAILURE_STATE), True))
     assert worked.allowed(failed, FAILURE_STATE)
+    # without a learned way around it, the ban does not leave K without a plan: the step that
+    # failed is still planned (dearer), so the agent executes it, fails, and explores from there
+    naive = KB.with_experience(Experience.of([(failed.name, KB.context(failed, FAILURE_STATE), False)]))
+    assert not naive.allowed(failed, FAILURE_STATE)
+    assert planned(naive, task) == ["(remove_from_container cube tray)"]
 
 
 def test_stored_refinements_of_earlier_versions_still_load():

@@ -128,3 +128,32 @@ def test_no_ground_learned_operator_binds_one_entity_to_two_distinct_parameters(
     # K' read back from its PDDL (which forgets source_arguments) binds the same way.
     again = KnowledgeBase.from_pddl(kb.to_pddl())
     assert {a.args for a in ground(again, task) if a.name == name} == {a.args for a in steps}
+
+
+# --------------------------------------------------------------------------- experience
+
+
+@st.composite
+def failure_histories(draw: st.DrawFn) -> tuple[KnowledgeBase, Task]:
+    """A task, and K' costed by a random history of plan steps that failed (mostly) or
+    worked, each in the context of a random state over the task's objects: the history
+    a branch has after episodes of other scenarios with entities of the same names."""
+    task = draw(tasks())
+    kb = KNOWLEDGE[draw(st.integers(0, 1))]
+    steps = ground(kb, task)
+    executions = []
+    for _ in range(draw(st.integers(1, 12))):
+        step = draw(st.sampled_from(steps))
+        state = task.init if draw(st.booleans()) else frozenset(draw(st.sets(st.sampled_from(ATOMS), max_size=10)))
+        executions.append((step.name, kb.context(step, state), draw(st.integers(0, 3)) == 0))
+    return kb.with_experience(Experience.of(executions)), task
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(history=failure_histories())
+def test_experience_never_removes_the_last_plan(history: tuple[KnowledgeBase, Task]) -> None:
+    """Costing by experience orders plans and never leaves K without one it had: an agent
+    whose K can solve the task has a plan, executes it, and explores where it fails."""
+    costed, task = history
+    naive = costed.with_experience(Experience())
+    assert (plan(costed, task) is None) == (plan(naive, task) is None)

@@ -11,6 +11,7 @@ field, with one clear error per bad value; writing is the rows' own format.
 from __future__ import annotations
 
 import csv
+import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,11 +20,14 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, TypeVar
 import numpy as np
 
 from llcps.errors import LlcpsError
+from llcps.inputs import read_user_text
+from llcps.limits import MAX_RESULTS_FILE_BYTES
 from llcps.experiments.design import Sequence, parse_branch, scenario_rank
 from llcps.experiments.presets import PRESETS
 from llcps.experiments.rows import (
     COLUMNS,
     METRICS,
+    ColumnError,
     NOVELTY,
     ResultRow,
     row_records,
@@ -33,14 +37,32 @@ from llcps.experiments.rows import (
 
 K = TypeVar("K")
 
-_PARSERS: dict[str, Callable[[str], Any]] = {
-    "pretrain_size": int,
-    "seed": int,
-    "variant": int,
-    "exploration_trials": int,
-    "sim_seconds": float,
-    "wall_seconds": float,
+
+def _integer(raw: Any) -> int:
+    """An integer column: an int or its text (a float, even 3.0, is not a count)."""
+    if isinstance(raw, bool) or isinstance(raw, float):
+        raise ValueError(f"not a whole number: {raw!r}")
+    return int(raw)
+
+
+def _real(raw: Any) -> float:
+    if isinstance(raw, bool):
+        raise ValueError(f"not a number: {raw!r}")
+    return float(raw)
+
+
+_PARSERS: dict[str, Callable[[Any], Any]] = {
+    "pretrain_size": _integer,
+    "seed": _integer,
+    "variant": _integer,
+    "exploration_trials": _integer,
+    "sim_seconds": _real,
+    "wall_seconds": _real,
 }
+
+
+#: The hint of an error reading a results file.
+_READ_HINT = "pass a results directory, or the results.csv or results.json a run wrote"
 
 
 def _parse_bool(text: str) -> bool:
@@ -70,14 +92,27 @@ def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
             if name == "solved":
                 values[name] = raw if isinstance(raw, bool) else _parse_bool(str(raw))
             elif name == "episode_id":
-                values[name] = None if raw in (None, "") else int(raw)
+                values[name] = None if raw in (None, "") else _integer(raw)
             elif name in _PARSERS:
                 values[name] = _PARSERS[name](raw)
             else:
                 values[name] = str(raw)
-        except (TypeError, ValueError):
-            raise LlcpsError(f"{where}: bad value {raw!r} in column {name!r}") from None
-    return ResultRow(**values)
+        except (TypeError, ValueError, OverflowError):
+            raise LlcpsError(f"{where}: column {name!r}: bad value {_shown(raw)}", hint=_ROW_HINT) from None
+    try:
+        return ResultRow(**values)
+    except ColumnError as exc:
+        raise LlcpsError(f"{where}: column {exc.column!r}: {exc.message}", hint=_ROW_HINT) from None
+
+
+#: The hint of an error about a row of a results file.
+_ROW_HINT = "a results file is written by `llcps experiment run`; fix or remove the row named"
+
+
+def _shown(raw: Any) -> str:
+    text = repr(raw)
+    return text if len(text) <= 60 else text[:57] + "..."
+
 
 
 class ResultsTable:
@@ -165,14 +200,12 @@ class ResultsTable:
     @classmethod
     def read_csv(cls, path: str | Path) -> ResultsTable:
         path = Path(path)
+        text = read_user_text(path, what="results file", max_bytes=MAX_RESULTS_FILE_BYTES, hint=_READ_HINT)
         try:
-            with path.open(newline="", encoding="utf-8") as fh:
-                reader = csv.DictReader(fh)
-                return cls(_row_from_mapping(rec, f"{path}:{i + 2}") for i, rec in enumerate(reader))
-        except OSError as exc:
-            raise LlcpsError(
-                f"cannot read results file {path}: {exc.strerror}", hint="pass a results.csv written by a run"
-            ) from None
+            reader = csv.DictReader(io.StringIO(text, newline=""))
+            return cls(_row_from_mapping(rec, f"{path}: row {i + 1} (line {reader.line_num})") for i, rec in enumerate(reader))
+        except csv.Error as exc:
+            raise LlcpsError(f"{path}: not a CSV file: {exc}", hint=_READ_HINT) from None
 
     def write_json(self, path: str | Path) -> Path:
         return write_rows_json(self._rows, path)
@@ -180,16 +213,20 @@ class ResultsTable:
     @classmethod
     def read_json(cls, path: str | Path) -> ResultsTable:
         path = Path(path)
+        text = read_user_text(path, what="results file", max_bytes=MAX_RESULTS_FILE_BYTES, hint=_READ_HINT)
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise LlcpsError(f"cannot read results file {path}: {exc.strerror}") from None
+            data = json.loads(text)
         except json.JSONDecodeError as exc:
-            raise LlcpsError(f"{path} is not valid JSON: {exc}") from None
+            raise LlcpsError(f"{path} is not valid JSON: {exc}", hint=_READ_HINT) from None
+        except RecursionError:
+            raise LlcpsError(f"{path}: JSON nested too deeply to be a results file", hint=_READ_HINT) from None
         rows = data.get("rows") if isinstance(data, dict) else data
         if not isinstance(rows, list):
-            raise LlcpsError(f"{path}: expected a list of rows or an object with 'rows'")
-        return cls(_row_from_mapping(rec, f"{path}: row {i}") for i, rec in enumerate(rows))
+            raise LlcpsError(f"{path}: expected a list of rows or an object with 'rows'", hint=_READ_HINT)
+        for i, rec in enumerate(rows):
+            if not isinstance(rec, dict):
+                raise LlcpsError(f"{path}: row {i + 1}: not an object of columns", hint=_READ_HINT)
+        return cls(_row_from_mapping(rec, f"{path}: row {i + 1}") for i, rec in enumerate(rows))
 
     @classmethod
     def read(cls, path: str | Path) -> ResultsTable:

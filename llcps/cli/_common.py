@@ -7,7 +7,8 @@ document); messages and progress go to stderr. ``--quiet`` silences progress and
 failure), errors or stdout. Every error, argument parsing
 included, becomes ``error: ...`` / ``hint: ...`` on stderr and exit code 2 (130 for
 Ctrl-C), never a traceback (see :class:`LlcpsGroup`). Text from the store (branch
-names, scenarios) is printed literally, never as rich markup.
+names, scenarios) is printed literally (:func:`literal`): never as rich markup, and a
+control character (an ESC sequence, a newline) shows as its escape, ``\\x1b``, ``\\n``.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import signal
 import sys
 from dataclasses import dataclass
 from enum import Enum
@@ -50,6 +52,21 @@ CreateFlag = Annotated[
 ]
 
 
+def terminate_like_interrupt() -> None:
+    """Make SIGTERM (``kill``, a scheduler's stop, a container's shutdown) end a command
+    the way Ctrl-C does: a ``KeyboardInterrupt`` where the command is, so its episode
+    and run are marked ``interrupted``, completed work is kept and the exit code is 130."""
+
+    def on_sigterm(signum: int, _frame: Any) -> None:
+        signal.signal(signum, signal.SIG_DFL)  # a second SIGTERM ends the process at once
+        raise KeyboardInterrupt(f"signal {int(signum)}")
+
+    try:
+        signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # pragma: no cover - not the main thread (an embedding program)
+        pass
+
+
 def report_error(exc: LlcpsError) -> None:
     """Print a project error the one way the CLI does: an ``error:`` and a ``hint:`` line."""
     typer.echo(f"error: {_one_line(exc.message)}", err=True)
@@ -57,7 +74,32 @@ def report_error(exc: LlcpsError) -> None:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
+    return " ".join(printable(str(text), keep="\n\t").split())
+
+
+def printable(text: str, *, keep: str = "") -> str:
+    """``text`` with every character that is not printable (ESC, a newline, a NUL, a
+    bidirectional override; those in ``keep`` excepted) written as its Python escape, so
+    text from a store or a file cannot move the cursor, recolour the terminal or forge a line."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() or c in keep else repr(c)[1:-1] for c in text)
+
+
+#: Longest text a table cell shows (a name from a store may be any length).
+MAX_CELL_CHARS = 240
+
+
+def literal(text: object) -> str:
+    """Text from the store or a file for a rich table: :func:`printable`, cut to
+    :data:`MAX_CELL_CHARS` (ending in ``…``), and its markup escaped (``[bold]`` prints as written)."""
+    shown = str(text)
+    if len(shown) > MAX_CELL_CHARS:
+        shown = shown[: MAX_CELL_CHARS - 1] + "…"
+    shown = printable(shown)
+    if len(shown) > MAX_CELL_CHARS:  # escapes lengthen it
+        shown = shown[: MAX_CELL_CHARS - 1] + "…"
+    return escape(shown)
 
 
 _SUGGESTION = re.compile(r"\s*\(?(?:Did you mean|Possible options:) (.+?)\??\)?\s*$", re.IGNORECASE)
@@ -110,8 +152,8 @@ class LlcpsGroup(ConventionGroup):
         except LlcpsError as exc:
             report_error(exc)
             return exc.exit_code
-        except (typer.Abort, KeyboardInterrupt):
-            typer.echo("error: interrupted", err=True)
+        except (typer.Abort, KeyboardInterrupt) as exc:
+            typer.echo(f"error: interrupted{' by SIGTERM' if str(exc) == f'signal {int(signal.SIGTERM)}' else ''}", err=True)
             typer.echo("hint: completed work is kept; run the same command again to go on", err=True)
             return 130
         except Exception as exc:  # noqa: BLE001 - the contract: never a traceback
@@ -235,13 +277,13 @@ def message(text: str) -> None:
     """A line for people, on stderr, that ``--quiet`` silences: what was written where,
     what changed, what comes next."""
     if not quiet():
-        err_console.print(text, markup=False)
+        err_console.print(printable(text, keep="\n"), markup=False)
 
 
 def notice(text: str) -> None:
     """A line for people, on stderr, that ``--quiet`` keeps: part of a command's result
     (``match``, a failed property), a warning, or a task that failed."""
-    err_console.print(text, markup=False)
+    err_console.print(printable(text, keep="\n"), markup=False)
 
 
 def human_bytes(n: int) -> str:
@@ -254,9 +296,9 @@ def human_bytes(n: int) -> str:
 
 def print_table(title: str | None, columns: Iterable[str], rows: Iterable[Iterable[Any]], *, show_header: bool = True) -> None:
     """A rich table on stdout."""
-    table = Table(title=None if title is None else escape(title), show_header=show_header)
+    table = Table(title=None if title is None else literal(title), show_header=show_header)
     for column in columns:
-        table.add_column(escape(column))
-    for row in rows:  # cells hold names from the store: never markup
-        table.add_row(*("" if v is None else escape(str(v)) for v in row))
+        table.add_column(literal(column))
+    for row in rows:  # cells hold names from the store: never markup, never control characters
+        table.add_row(*("" if v is None else literal(v) for v in row))
     out_console.print(table)

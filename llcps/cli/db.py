@@ -71,6 +71,7 @@ def _print_status(status: StoreStatus, as_json: bool) -> None:
                 if status.changes is not None
                 else []
             ),
+            *[(f"{'live' if w.live else 'stale'} writer on {w.branch}", w.describe()) for w in status.writers],
         ],
         show_header=False,
     )
@@ -80,6 +81,16 @@ def _print_branch(info: BranchInfo, as_json: bool, text: str) -> None:
     if as_json:
         print_json(info.as_json())
     message(text)
+
+
+ForceFlag = Annotated[
+    bool,
+    typer.Option(
+        "--force",
+        help="With --yes: remove even while a live command writes to the branch. That command fails at its next write, "
+        "its run and episode are marked aborted, and what it wrote so far is removed too.",
+    ),
+]
 
 
 def _report_removal(change: BranchChange, as_json: bool) -> None:
@@ -223,11 +234,12 @@ def reset_cli(
             "of pretraining trials); 'empty' removes all it owns."),
     ] = DEFAULT_RESET_TARGET,  # type: ignore[assignment]
     yes: YesFlag = False,
+    force: ForceFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
     """Drop the own experience of --branch (default: the current branch) after a point."""
     target = str(to.value)  # type: ignore[attr-defined]
-    change = jobs.reset_branch(store=db_location(ctx), branch=selected_branch(ctx), to=target, dry_run=not yes)
+    change = jobs.reset_branch(store=db_location(ctx), branch=selected_branch(ctx), to=target, dry_run=not yes, force=force)
     _report_removal(change, as_json)
 
 
@@ -236,11 +248,16 @@ def reset_cli(
     epilog=examples(
         "llcps db delete exp                  # dry run",
         "llcps db delete exp --yes",
+        "llcps db delete exp --yes --force    # even while a solve writes to exp (it fails)",
     ),
 )
-def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, as_json: JsonFlag = False) -> None:
-    """Delete a branch and everything it owns (not main, the current branch, or a parent)."""
-    change = jobs.delete_branch(store=db_location(ctx), name=name, dry_run=not yes)
+def delete_cli(ctx: typer.Context, name: BranchName, yes: YesFlag = False, force: ForceFlag = False, as_json: JsonFlag = False) -> None:
+    """Delete a branch and everything it owns (not main, the current branch, or a parent).
+
+    A branch that a running command (solve, pretrain, experiment) writes to is refused;
+    a run left `running` by a killed process is stale and does not count (`llcps db status`
+    lists both)."""
+    change = jobs.delete_branch(store=db_location(ctx), name=name, dry_run=not yes, force=force)
     _report_removal(change, as_json)
 
 

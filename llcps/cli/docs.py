@@ -18,7 +18,10 @@ The global options `--db`, `--branch` and `--quiet` go before or after the comma
 `llcps --db runs.db inspect trials --branch exp`.
 With `--json` a command prints exactly one JSON document on stdout; messages and progress go to stderr.
 Every error, a mistyped option included, prints `error: ...` and `hint: ...` on stderr and
-exits 2; commands that report a result say what their exit codes 0, 1 and 130 mean.
+exits 2; commands that report a result say what their exit codes 0, 1 and 130 mean
+(130: Ctrl-C or SIGTERM). `LLCPS_DB_TIMEOUT` (seconds, default 30) bounds the wait for a
+database server to answer and for a lock another process holds; `LLCPS_DB_STATEMENT_TIMEOUT`
+(default 3600, 0: none) one PostgreSQL statement (docs/store.md).
 `llcps --version` prints the version; `llcps --install-completion` installs shell completion.
 
 An option name means the same in every command: `--seed` seeds the command's own random

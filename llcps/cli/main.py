@@ -20,8 +20,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, pretrain, replay, rl, scenario, solve  # noqa: F401 - inspect_* add `inspect` subcommands
-from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app
+from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, life, pretrain, replay, rl, scenario, solve  # noqa: F401 - inspect_* add `inspect` subcommands
+from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app, terminate_like_interrupt
 from llcps.cli._conventions import examples
 
 app = new_app(
@@ -105,6 +105,7 @@ app.command("pretrain", epilog=pretrain.EXAMPLES)(pretrain.pretrain_cli)
 app.command("replay", epilog=replay.EXAMPLES)(replay.replay_cli)
 app.command("bench", epilog=bench.EXAMPLES)(bench.bench_cli)
 app.add_typer(experiment.app, name="experiment")
+app.add_typer(life.app, name="life")
 app.add_typer(cache.app, name="cache")
 app.add_typer(scenario.app, name="scenario")
 app.add_typer(rl.app, name="rl")
@@ -112,6 +113,7 @@ app.add_typer(rl.app, name="rl")
 
 def main() -> None:
     """Console-script entry point."""
+    terminate_like_interrupt()
     app(prog_name="llcps")
 
 

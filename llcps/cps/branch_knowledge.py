@@ -43,11 +43,13 @@ class BranchExperience:
     (:meth:`costed`) demotes an operator that failed before the next plan is made.
     """
 
-    def __init__(self, store: Store, branch: str, *, episode_id: int | None = None) -> None:
+    def __init__(self, store: Store, branch: str, *, episode_id: int | None = None, experience: Experience | None = None) -> None:
+        """``experience``: what the branch's executions were when read already (e.g. with
+        its K by :func:`load_knowledge`); None reads them now."""
         self.store = store
         self.branch = branch
         self.episode_id = episode_id
-        self.experience: Experience = load_experience(store, branch)
+        self.experience: Experience = load_experience(store, branch) if experience is None else experience
 
     def costed(self, kb: KnowledgeBase) -> KnowledgeBase:
         """``kb`` costed by the experience the branch has, this episode's included."""

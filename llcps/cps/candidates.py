@@ -17,6 +17,8 @@ from typing import Iterator, Mapping, Sequence
 
 from llcps.cps.discretization import EXPLORATION_ORIENTATIONS, MOVEMENT_MAGNITUDES, RATES
 from llcps.domain import ACTIONS, ControllerParams
+from llcps.errors import LlcpsError
+from llcps.limits import MAX_GRID_POINTS, MAX_GRID_VALUES, MAX_MOVEMENT_MAGNITUDE, MAX_RATE, MIN_RATE
 from llcps.trial_records import TrialSpec
 
 #: Entity kinds an argument slot accepts, per action.
@@ -26,6 +28,10 @@ ARGUMENT_KINDS: Mapping[str, tuple[frozenset[str], ...]] = {
     "remove_from_container": (frozenset({"object"}), frozenset({"container"})),
     "place_in_container": (frozenset({"object"}), frozenset({"container"})),
 }
+
+
+#: The hint of a grid beyond the limits.
+_GRID_HINT = f"list at most {MAX_GRID_VALUES} rates and {MAX_GRID_VALUES} movement magnitudes (see Limits in docs/scenarios.md)"
 
 
 @dataclass(frozen=True)
@@ -41,6 +47,21 @@ class Grid:
             self.orientations, self.movement_magnitudes, self.rates
         ):
             yield ControllerParams(rate=rate, movement_magnitude=magnitude, orientation=orientation)
+
+    def __post_init__(self) -> None:
+        """The bounds of :mod:`llcps.limits` (a scenario file's grid is checked against them
+        when it is read; this holds a grid built in code to them too)."""
+        if not all(isinstance(v, (int, float)) and MIN_RATE <= v <= MAX_RATE for v in self.rates):
+            raise LlcpsError(f"grid rates must lie within [{MIN_RATE:g}, {MAX_RATE:g}] m/s, got {self.rates!r}", hint=_GRID_HINT)
+        if not all(isinstance(v, (int, float)) and 0 <= v <= MAX_MOVEMENT_MAGNITUDE for v in self.movement_magnitudes):
+            raise LlcpsError(
+                f"grid movement magnitudes must lie within [0, {MAX_MOVEMENT_MAGNITUDE:g}] m, got {self.movement_magnitudes!r}", hint=_GRID_HINT
+            )
+        if self.size > MAX_GRID_POINTS:
+            raise LlcpsError(
+                f"a grid of {self.size} points, more than the {MAX_GRID_POINTS} exploration may search",
+                hint=_GRID_HINT,
+            )
 
     @property
     def size(self) -> int:

@@ -226,14 +226,14 @@ def solve(
     # The run starts with the command: reading the trials and fitting the model count.
     started_at = datetime.now(timezone.utc).replace(tzinfo=None)
     # What the store holds is read (and checked) first: a malformed row stops the
-    # episode before it records a run.
+    # episode before it writes anything (a refitted model, its run).
     if progress is not None:
         progress(f"fit world model {config.model}", 0, 0)
     records = list(store.visible_trials(branch_name))
     changes = store.visible_changes(branch_name)
     goal = get_measure(config.measure).uses_goal  # a measure ranking by Omega alone needs no goal head
+    kb = load_knowledge(store, branch_name)  # before the fit, which may store a model
     model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes, goal=goal)
-    kb = load_knowledge(store, branch_name)
     run_id = store.start_run(
         command=command, seed=config.seed, config=_config_json(config), branch=branch_name, started_at=started_at
     )
@@ -265,7 +265,7 @@ def solve(
             cache=cache,
             progress=progress,
         )
-        experience = BranchExperience(store, branch_name, episode_id=episode_id)
+        experience = BranchExperience(store, branch_name, episode_id=episode_id, experience=kb.experience)
         _run(executor, experience, kb, model, config, found)
     except KeyboardInterrupt:
         found.status = "interrupted"

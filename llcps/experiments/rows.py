@@ -11,11 +11,14 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any, Iterable
 
+from llcps.domain import MAX_ID, MAX_PRETRAIN_TRIALS, MAX_SEED
 from llcps.errors import LlcpsError
+from llcps.outputs import replaced_atomically, write_text
 from llcps.experiments.design import Cell, Sequence
 from llcps.tabular import csv_value
 
@@ -23,6 +26,21 @@ from llcps.tabular import csv_value
 METRICS: tuple[str, ...] = ("exploration_trials", "sim_seconds", "wall_seconds")
 #: The scenario condition experiment episodes run in.
 NOVELTY = "novelty"
+
+
+#: Columns that hold a name.
+_TEXT_COLUMNS: tuple[str, ...] = ("preset", "model", "measure", "condition", "scenario", "branch")
+#: Longest name a text column may hold.
+MAX_TEXT_VALUE = 200
+
+
+class ColumnError(ValueError):
+    """A value a result row cannot hold, naming its column."""
+
+    def __init__(self, column: str, message: str) -> None:
+        super().__init__(f"{column}: {message}")
+        self.column = column
+        self.message = message
 
 
 def check_metric(metric: str) -> None:
@@ -50,6 +68,27 @@ class ResultRow:
     branch: str
     #: The scene variant (0: the canonical scene).
     variant: int = 0
+
+    def __post_init__(self) -> None:
+        """Each field of the type and range a run writes: a results file is user input,
+        and a NaN or a negative count would make every statistic built on it nonsense."""
+        for name in _TEXT_COLUMNS:
+            value = getattr(self, name)
+            if not isinstance(value, str) or not value or len(value) > MAX_TEXT_VALUE or not value.isprintable():
+                raise ColumnError(name, f"must be a printable name of at most {MAX_TEXT_VALUE} characters, got {value!r}")
+        for name, high in (("pretrain_size", MAX_PRETRAIN_TRIALS), ("seed", MAX_SEED), ("variant", MAX_SEED), ("exploration_trials", MAX_ID)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= high:
+                raise ColumnError(name, f"must be a whole number from 0 to {high}, got {value!r}")
+        for name in ("sim_seconds", "wall_seconds"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ColumnError(name, f"must be a finite number of seconds, zero or more, got {value!r}")
+        if not isinstance(self.solved, bool):
+            raise ColumnError("solved", f"must be true or false, got {self.solved!r}")
+        episode = self.episode_id
+        if episode is not None and (isinstance(episode, bool) or not isinstance(episode, int) or not 1 <= episode <= MAX_ID):
+            raise ColumnError("episode_id", f"must be empty or an episode id from 1 to {MAX_ID}, got {episode!r}")
 
     @property
     def cell(self) -> Cell:
@@ -87,7 +126,7 @@ def write_rows_csv(rows: Iterable[ResultRow], path: str | Path) -> Path:
     """Write ``results.csv``: floats as ``repr`` (exact), booleans as every export writes them."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with replaced_atomically(path, what="results") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS, lineterminator="\n")
         writer.writeheader()
         for record in row_records(rows):
@@ -102,8 +141,7 @@ def write_rows_json(rows: Iterable[ResultRow], path: str | Path) -> Path:
     """Write ``{"columns": [...], "rows": [...]}``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"columns": list(COLUMNS), "rows": row_records(rows)}, indent=1) + "\n", encoding="utf-8")
-    return path
+    return write_text(path, json.dumps({"columns": list(COLUMNS), "rows": row_records(rows)}, indent=1) + "\n", what="results")
 
 
-__all__ = ["COLUMNS", "METRICS", "NOVELTY", "ResultRow", "check_metric", "row_records", "write_rows_csv", "write_rows_json"]
+__all__ = ["COLUMNS", "ColumnError", "METRICS", "NOVELTY", "ResultRow", "check_metric", "row_records", "write_rows_csv", "write_rows_json"]

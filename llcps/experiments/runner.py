@@ -17,8 +17,19 @@ from llcps.errors import LlcpsError, UnknownNameError
 from llcps.experiments.executors import ENGINES, EngineError, LocalEngine, RayEngine, make_engine
 from llcps.experiments.presets import Preset, get_preset, validate_preset
 from llcps.experiments.scheduler import ProgressCallback, RunSummary, check_partial, check_scenarios, existing_branches, schedule
-from llcps.experiments.tasks import PretrainTask, SequenceTask, Task, TaskOutput, plan_tasks, pretrain_subset, task_seed
-from llcps.experiments.worker import COMMAND, execute_task
+from llcps.experiments.life import Life
+from llcps.experiments.tasks import (
+    LifeTask,
+    PretrainTask,
+    SequenceTask,
+    Task,
+    TaskOutput,
+    plan_life_tasks,
+    plan_tasks,
+    pretrain_subset,
+    task_seed,
+)
+from llcps.experiments.worker import COMMAND, LIFE_COMMAND, execute_task
 from llcps.store import MAIN_BRANCH, Store
 from llcps.store import physics_cache
 
@@ -82,47 +93,65 @@ def run_experiment(
     if with_others:
         grid = grid.with_others()
     validate_preset(grid)
-    if engine not in ENGINES:
-        raise UnknownNameError("engine", engine, ENGINES)
-    if ray_address is not None and engine != "ray":
-        raise LlcpsError("--ray-address needs --engine ray")
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise LlcpsError(f"workers must be at least 1, not {workers!r}", hint="pass --workers 1 or more")
+    check_run_options(engine, workers, ray_address)
     shared = cache_url(store, remote_workers=ray_address is not None) if cache else None
     tasks = plan_tasks(grid, seeds, variants=variants, cache_url=shared)
     seed_list = tuple(dict.fromkeys(task_seed(t) for t in tasks))
     summary = RunSummary(
         preset=grid.name, seeds=seed_list, variants=variants, engine=engine, workers=workers, tasks=len(tasks)
     )
+    config = {
+        "preset": grid.name,
+        "seeds": list(seed_list),
+        "variants": variants,
+        "scenarios": [name for name in grid.scenario_names()],
+        "conditions": list(grid.conditions),
+        "ordering": grid.ordering,
+        "workers": workers,
+        "engine": engine,
+        "cache": cache,
+    }
+    command = (
+        f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else "") + (" --with-others" if with_others else "")
+        + (f" --ordering {grid.ordering}" if ordering else "")
+    )  # fmt: skip
+    return run_tasks(
+        store, tasks, summary, command=command, config=config, engine=engine, ray_address=ray_address, progress=progress, cache=cache
+    )
+
+
+def run_tasks(
+    store: Store,
+    tasks: list[Task],
+    summary: RunSummary,
+    *,
+    command: str,
+    config: dict[str, Any],
+    engine: str,
+    ray_address: str | None,
+    progress: ProgressCallback | None,
+    cache: bool,
+) -> RunSummary:
+    """Run the tasks the store does not hold yet on ``summary.workers`` workers, as one
+    recorded run; the part every kind of run (a preset's grid, lives) shares.
+
+    A task whose branches all exist is skipped (a resume); one with only some of them
+    is an error (a run imports a task's branches together).
+    """
     existing = existing_branches(store)
     check_partial(tasks, existing)
     check_scenarios(store, tasks, existing)
     todo = [t for t in tasks if not all(b in existing for b in t.branches)]
     summary.skipped = len(tasks) - len(todo)
     started = time.perf_counter()
-    summary.run_id = store.start_run(
-        command=f"{COMMAND} --preset {grid.name}" + (" --variants" if variants else "") + (" --with-others" if with_others else "") + (f" --ordering {grid.ordering}" if ordering else ""),
-        seed=None,
-        config={
-            "preset": grid.name,
-            "seeds": list(seed_list),
-            "variants": variants,
-            "scenarios": [name for name in grid.scenario_names()],
-            "conditions": list(grid.conditions),
-            "ordering": grid.ordering,
-            "workers": workers,
-            "engine": engine,
-            "cache": cache,
-        },
-        branch=MAIN_BRANCH,
-    )
+    summary.run_id = store.start_run(command=command, seed=None, config=config, branch=MAIN_BRANCH)
     runner = None
     in_flight: dict[Any, Task] = {}
     try:
         if progress is not None:
             progress(0, len(todo), "")
         if todo:
-            runner = make_engine(engine, workers, ray_address=ray_address)
+            runner = make_engine(engine, summary.workers, ray_address=ray_address)
             schedule(store, runner, todo, existing, summary, in_flight, progress)
         summary.status = "failed" if summary.failed or summary.blocked else "ok"
     except KeyboardInterrupt:
@@ -137,6 +166,84 @@ def run_experiment(
             physics_cache.prune(store)
         store.finish_run(summary.run_id, status=summary.status)
     return summary
+
+
+def run_lives(
+    store: Store,
+    life: Life,
+    *,
+    lives: int | Iterable[int] = 1,
+    workers: int = 1,
+    engine: str = "local",
+    ray_address: str | None = None,
+    progress: ProgressCallback | None = None,
+    cache: bool = True,
+) -> RunSummary:
+    """Run every (life, condition) of ``life`` the store does not hold yet.
+
+    Args:
+        life: a checked life file (:func:`~llcps.experiments.life.load_life`), possibly
+            cut short (:meth:`~llcps.experiments.life.Life.with_episodes`) or under other
+            conditions (:meth:`~llcps.experiments.life.Life.with_conditions`).
+        lives: a count (lives ``0..n-1``) or the lives' numbers (their seeds).
+        workers, engine, ray_address, progress, cache: as for :func:`run_experiment`.
+            One task is one life under one condition: a kill loses the lives in
+            flight, and the same command resumes with the rest.
+    """
+    check_run_options(engine, workers, ray_address)
+    shared = cache_url(store, remote_workers=ray_address is not None) if cache else None
+    tasks = plan_life_tasks(life, lives, cache_url=shared)
+    chosen = tuple(dict.fromkeys(task_seed(t) for t in tasks if isinstance(t, LifeTask)))
+    summary = RunSummary(preset=life.name, seeds=chosen, engine=engine, workers=workers, tasks=len(tasks))
+    check_lives(store, [t for t in tasks if isinstance(t, LifeTask)])
+    config = {
+        "life": life.name,
+        "source": life.source,
+        "lives": list(chosen),
+        "episodes": life.episodes,
+        "conditions": list(life.conditions),
+        "workers": workers,
+        "engine": engine,
+        "cache": cache,
+    }
+    return run_tasks(
+        store, tasks, summary, command=f"{LIFE_COMMAND} {life.name}", config=config, engine=engine, ray_address=ray_address,
+        progress=progress, cache=cache,
+    )  # fmt: skip
+
+
+def check_lives(store: Store, tasks: Iterable[LifeTask]) -> None:
+    """Fail when a stored life solved other episodes than this run would draw.
+
+    Branch names do not encode a life's episodes: a life file edited between two runs
+    (or cut to another ``--episodes``) would pass for the same life.
+    """
+    wanted = {t.label: [(e.family, e.variant, e.condition) for e in t.episodes] for t in tasks}
+    held: dict[str, list[tuple[Any, ...]]] = {}
+    for episode in sorted(store.list_episodes(), key=lambda e: e.id):
+        place = episode.summary.get("life") if isinstance(episode.summary, dict) else None
+        if not isinstance(place, dict) or place.get("phase") != "life":
+            continue
+        label = f"life-{place.get('name')}-{place.get('condition')}-l{place.get('life')}"
+        if label in wanted:
+            held.setdefault(label, []).append((place.get("family"), place.get("variant"), episode.condition))
+    for label, have in held.items():
+        if have != wanted[label]:
+            raise LlcpsError(
+                f"{label} holds {len(have)} other episodes than this run draws ({len(wanted[label])})",
+                hint="a life's name stands for one list of episodes per store: use another --db, or delete its branches "
+                "(`llcps db delete NAME --yes`)",
+            )
+
+
+def check_run_options(engine: str, workers: int, ray_address: str | None) -> None:
+    """The engine, its address and the worker count, checked before anything runs."""
+    if engine not in ENGINES:
+        raise UnknownNameError("engine", engine, ENGINES)
+    if ray_address is not None and engine != "ray":
+        raise LlcpsError("--ray-address needs --engine ray")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise LlcpsError(f"workers must be at least 1, not {workers!r}", hint="pass --workers 1 or more")
 
 
 __all__ = [
@@ -155,4 +262,6 @@ __all__ = [
     "plan_tasks",
     "pretrain_subset",
     "run_experiment",
+    "run_lives",
+    "run_tasks",
 ]

@@ -15,7 +15,7 @@ from typing import Any, Callable, Iterable
 
 from llcps.errors import LlcpsError, StoreError, UnknownNameError
 from llcps.experiments.executors import Engine, EngineError
-from llcps.experiments.tasks import PretrainTask, SequenceTask, Task
+from llcps.experiments.tasks import LifeTask, PretrainTask, SequenceTask, Task
 from llcps.experiments.transfer import Payload, export_branches, import_payload
 from llcps.store import Store
 
@@ -143,7 +143,14 @@ def check_scenarios(store: Store, tasks: Iterable[Task], existing: set[str]) -> 
 
 
 def twin_key(task: Task) -> tuple[object, ...] | None:
-    """What a sequence shares with its other-condition twin: both start scenario 1 alike."""
+    """What a sequence shares with its other-condition twin: both start scenario 1 alike.
+
+    A life's ``update`` and ``reset`` (same model, from the same pretraining) share its first episode.
+    """
+    if isinstance(task, LifeTask):
+        if not task.condition.pretrained:
+            return None
+        return ("life", task.life, task.seed, task.model, task.measure)
     if not isinstance(task, SequenceTask):
         return None
     cell = task.sequence.cell
@@ -171,10 +178,10 @@ def schedule(
     finished = 0
 
     def ready(task: Task) -> bool:
-        return isinstance(task, PretrainTask) or task.pretrain_branch in existing
+        return isinstance(task, PretrainTask) or task.pretrain_branch is None or task.pretrain_branch in existing
 
     def blocked(task: Task) -> bool:
-        return isinstance(task, SequenceTask) and task.pretrain_branch in failed_pretraining
+        return not isinstance(task, PretrainTask) and task.pretrain_branch in failed_pretraining
 
     def refill(*, twins: bool = True) -> None:
         """Start ready tasks on idle workers; a twin of a running task only if ``twins``."""
@@ -194,7 +201,7 @@ def schedule(
             if task is None:
                 return
             pending.remove(task)
-            if isinstance(task, SequenceTask):
+            if not isinstance(task, PretrainTask) and task.pretrain_branch is not None:
                 base = bases.get(task.pretrain_branch)
                 if base is None:
                     base = export_branches(store, [task.pretrain_branch], snapshots=False, provenance=False)

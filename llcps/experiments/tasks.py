@@ -25,6 +25,7 @@ from typing import Any, Iterable
 from llcps.domain import ACTIONS
 from llcps.experiments.design import Sequence, pretrain_branch_name
 from llcps.cps.orderings import PAPER_ORDERING
+from llcps.experiments.life import Life, LifeCondition, LifeEpisode, after_branch, episode_branch, life_branch
 from llcps.experiments.presets import Preset, resolve_scenarios, seed_list
 from llcps.experiments.transfer import Payload
 
@@ -90,7 +91,62 @@ class SequenceTask:
         return self.sequence.pretrain_branch
 
 
-Task = PretrainTask | SequenceTask
+@dataclass(frozen=True)
+class LifeTask:
+    """Solve one life under one condition, then (if asked) re-solve every family met on
+    forks of its end; ``base`` (filled when submitted) holds its pretraining trials.
+
+    Attributes:
+        life: the life's name (its branches' second field).
+        condition: how the episodes are solved (:data:`~llcps.experiments.life.LIFE_CONDITIONS`).
+        seed: the life's number: the seed of its draws and of every episode's solve.
+        episodes: the life's episodes (the same for every condition of the life).
+        after: (family, fresh variant) re-solved after the life, in the novelty and the
+            original condition, each on its own fork of the life's end.
+        sources: family -> what the worker passes to ``get_scenario``.
+        pretrain: the pretraining branch (None: the life starts from nothing).
+    """
+
+    life: str
+    condition: LifeCondition
+    seed: int
+    episodes: tuple[LifeEpisode, ...]
+    sources: tuple[tuple[str, str], ...]
+    model: str
+    measure: str
+    budget: int
+    pretrain: str | None
+    after: tuple[tuple[str, int], ...] = ()
+    refit_every: int = 1
+    ordering: str = PAPER_ORDERING
+    base: Payload | None = None
+    cache_url: str | None = None
+
+    def source(self, family: str) -> str:
+        return dict(self.sources)[family]
+
+    def episode_branch(self, index: int) -> str:
+        return episode_branch(self.life, self.condition, self.seed, index)
+
+    def after_branch(self, family: str, condition: str) -> str:
+        return after_branch(self.life, self.condition.name, self.seed, family, condition)
+
+    @property
+    def branches(self) -> tuple[str, ...]:
+        names = [self.episode_branch(e.index) for e in self.episodes]
+        names += [self.after_branch(family, c) for family, _ in self.after for c in ("novelty", "original")]
+        return tuple(dict.fromkeys(names))
+
+    @property
+    def label(self) -> str:
+        return life_branch(self.life, self.condition.name, self.seed)
+
+    @property
+    def pretrain_branch(self) -> str | None:
+        return self.pretrain
+
+
+Task = PretrainTask | SequenceTask | LifeTask
 
 
 @dataclass(frozen=True)
@@ -110,7 +166,7 @@ class TaskOutput:
 
 def task_seed(task: Task) -> int:
     """The seed a task belongs to."""
-    return task.seed if isinstance(task, PretrainTask) else task.sequence.seed
+    return task.sequence.seed if isinstance(task, SequenceTask) else task.seed
 
 
 def plan_tasks(
@@ -132,6 +188,45 @@ def plan_tasks(
             for s in sequences
             if s.seed == seed
         )
+    return tasks
+
+
+def plan_life_tasks(life: Life, seeds: Iterable[int], *, cache_url: str | None = None) -> list[Task]:
+    """Every task of a life run, life by life: its pretraining (unless no condition
+    pretrains or another life shares it), then one task per condition.
+
+    Every condition of life N gets the same draw (:func:`~llcps.experiments.life.draw_life`).
+    """
+    from llcps.experiments.life import draw_life, life_condition, pretrain_branch, pretrain_preset, pretrain_seed
+
+    conditions = [life_condition(name) for name in life.conditions]
+    budget = life.solve_budget()
+    tasks: list[Task] = []
+    planned: set[str] = set()
+    for seed in seed_list(seeds):
+        draw = draw_life(life, seed)
+        pretrain = pretrain_branch(life, seed)
+        if any(c.pretrained for c in conditions) and pretrain not in planned:
+            planned.add(pretrain)
+            tasks.append(PretrainTask(pretrain_preset(life), pretrain_seed(life, seed), life.pretrain_count, (life.pretrain_count,)))
+        for condition in conditions:
+            tasks.append(
+                LifeTask(
+                    life=life.name,
+                    condition=condition,
+                    seed=seed,
+                    episodes=draw.episodes,
+                    sources=life.families,
+                    model=life.model_for(condition),
+                    measure=life.measure_name(),
+                    budget=budget,
+                    pretrain=pretrain if condition.pretrained else None,
+                    after=draw.after if condition.forgets else (),
+                    refit_every=life.refit_every,
+                    ordering=life.ordering_for(condition),
+                    cache_url=cache_url,
+                )
+            )
     return tasks
 
 
@@ -159,4 +254,4 @@ def pretrain_subset(pool: Iterable[Any], size: int, *, seed: int) -> list[Any]:
     return sorted(chosen, key=lambda t: order[id(t)])
 
 
-__all__ = ["PretrainTask", "SequenceTask", "Task", "TaskOutput", "plan_tasks", "pretrain_subset", "task_seed"]
+__all__ = ["LifeTask", "PretrainTask", "plan_life_tasks", "SequenceTask", "Task", "TaskOutput", "plan_tasks", "pretrain_subset", "task_seed"]

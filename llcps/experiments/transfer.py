@@ -128,8 +128,9 @@ def export_branches(
             runs.update((r.id, r) for r in store.list_runs(branch=name))
     trials.sort(key=lambda t: t.id)
     own = {t.id for t in trials}
-    changes = [c for name in names for i, c in store.visible_changes(name).items() if i in own]
-    changes.sort(key=lambda c: c.trial_id)  # type: ignore[arg-type, return-value]
+    # A child branch sees its parent's trials too: each change once, by its trial.
+    by_trial = {i: c for name in names for i, c in store.visible_changes(name).items() if i in own}
+    changes = [by_trial[i] for i in sorted(by_trial)]
     episodes.sort(key=lambda e: e.id)
     if provenance:
         wanted = {t.run_id for t in trials} | {e.run_id for e in episodes}

@@ -30,7 +30,7 @@ from typing import Any
 
 from llcps.errors import LlcpsError
 from llcps.cps.episode import SolveConfig
-from llcps.experiments.tasks import PretrainTask, SequenceTask, Task, TaskOutput, pretrain_subset
+from llcps.experiments.tasks import LifeTask, PretrainTask, SequenceTask, Task, TaskOutput, pretrain_subset
 from llcps.experiments.transfer import Payload, export_branches, import_payload, inverse
 from llcps.store import MAIN_BRANCH, PRETRAIN, Store
 
@@ -41,6 +41,8 @@ THREAD_VARIABLES: tuple[str, ...] = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPEN
 POOL_BRANCH = "pool"
 #: The command recorded with every experiment run and episode.
 COMMAND = "experiment run"
+#: The command recorded with every episode of a life.
+LIFE_COMMAND = "life run"
 
 _limited = False
 _scratch: str | None = None  # the private store's directory of the task in progress
@@ -142,6 +144,8 @@ def execute_task(task: Task) -> TaskOutput:
             with Store.open(str(Path(tmp) / "task.db"), create=True) as store:
                 if isinstance(task, PretrainTask):
                     payload, statuses, cache = _run_pretrain(store, task), (), None
+                elif isinstance(task, LifeTask):
+                    payload, statuses, cache = _run_life(store, task)
                 else:
                     payload, statuses, cache = _run_sequence(store, task)
         finally:
@@ -198,7 +202,73 @@ def _solve(store: Store, task: SequenceTask, branch: str, source: str) -> str:
     return result.status
 
 
-def _cache(task: SequenceTask) -> Any:
+def _solve_life_episode(
+    store: Store, task: LifeTask, branch: str, family: str, variant: int, condition: str, life: dict[str, Any]
+) -> str:
+    """Solve one episode of a life on ``branch`` and record where in the life it is.
+
+    The episode's place in the life (life, condition, index, first encounter) goes into
+    its stored summary under ``life``, so results are rebuilt from the store alone.
+    """
+    from llcps.cps.episode import solve  # the simulator: not loaded where the CLI starts
+
+    config = SolveConfig(
+        scenario=task.source(family),
+        condition=condition,
+        model=task.model,
+        measure=task.measure,
+        ordering=task.ordering,
+        seed=task.seed,
+        variant=variant,
+        budget=task.budget,
+        refit_every=task.refit_every,
+    )
+    result = solve(store, branch=branch, config=config, command=f"{LIFE_COMMAND} {task.life}", cache=_cache(task))
+    if result.status == "interrupted" or result.episode_id is None:
+        raise RuntimeError(f"{task.label}: {family} (variant {variant}) was interrupted")
+    summary = {**store.get_episode(result.episode_id).summary, "life": {"name": task.life, "condition": task.condition.name,
+                                                                       "life": task.seed, **life}}  # fmt: skip
+    store.finish_episode(result.episode_id, status=result.status, summary=summary)
+    return result.status
+
+
+def _run_life(store: Store, task: LifeTask) -> tuple[Payload, tuple[str, ...], dict[str, Any] | None]:
+    """Solve a life's episodes under its condition, then re-solve each family met on forks of its end."""
+    seeded = import_payload(store, task.base) if task.base is not None else None
+    cache = _cache(task)
+    counted = None if cache is None else dict(cache.counts.as_json())
+    statuses: list[str] = []
+    start = task.pretrain if task.pretrain is not None else MAIN_BRANCH
+    at: int | str = PRETRAIN if task.pretrain is not None else 0
+    created: set[str] = set()
+    for episode in task.episodes:
+        branch = task.episode_branch(episode.index)
+        if branch not in created:
+            store.create_branch(branch, from_branch=start, at=at)
+            created.add(branch)
+        place = {"episode": episode.index, "family": episode.family, "variant": episode.variant,
+                 "first_encounter": episode.first_encounter, "probe": episode.probe, "phase": "life"}  # fmt: skip
+        statuses.append(_solve_life_episode(store, task, branch, episode.family, episode.variant, episode.condition, place))
+        if episode.index == 0:
+            report(FIRST_SCENARIO, task.label)
+    end = task.episode_branch(task.episodes[-1].index) if task.episodes else start
+    for family, variant in task.after:
+        for condition in ("novelty", "original"):
+            branch = task.after_branch(family, condition)
+            store.create_branch(branch, from_branch=end, at=None)
+            place = {"episode": None, "family": family, "variant": variant, "first_encounter": False, "probe": False,
+                     "phase": "after"}  # fmt: skip
+            _solve_life_episode(store, task, branch, family, variant, condition, place)
+    counts = None
+    if cache is not None and counted is not None:
+        after = cache.counts.as_json()
+        counts = {k: after[k] - counted[k] for k in ("hits", "misses", "rejected", "stored")}
+    external = inverse(seeded.trials) if seeded is not None else {}
+    payload = export_branches(store, task.branches, external=external)
+    return payload, tuple(statuses), counts
+
+
+def _cache(task: SequenceTask | LifeTask) -> Any:
     return worker_cache(task.cache_url) if task.cache_url is not None else None
 
 
@@ -207,7 +277,7 @@ def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str,
         raise LlcpsError(f"task {task.label} was sent without its pretraining trials")
     seeded = import_payload(store, task.base)
     seq = task.sequence
-    cache = worker_cache(task.cache_url) if task.cache_url is not None else None
+    cache = _cache(task)
     counted = None if cache is None else dict(cache.counts.as_json())
     statuses: list[str] = []
     scenarios = task.scenarios
@@ -234,6 +304,7 @@ def _run_sequence(store: Store, task: SequenceTask) -> tuple[Payload, tuple[str,
 
 __all__ = [
     "COMMAND",
+    "LIFE_COMMAND",
     "FIRST_SCENARIO",
     "PID",
     "POOL_BRANCH",

@@ -91,18 +91,20 @@ def checkout_branch(*, store: StoreRef, name: str) -> BranchInfo:
         return s.checkout(name)
 
 
-def reset_branch(*, store: StoreRef, branch: str | None = None, to: str = PRETRAIN, dry_run: bool = True) -> BranchChange:
+def reset_branch(*, store: StoreRef, branch: str | None = None, to: str = PRETRAIN, dry_run: bool = True, force: bool = False) -> BranchChange:
     """Drop the own experience of ``branch`` (None: the current branch) after ``to``
-    (``pretrain`` or ``empty``); with ``dry_run``, only say what would go."""
+    (``pretrain`` or ``empty``); with ``dry_run``, only say what would go. Refused while
+    a live process writes to the branch, unless ``force`` (that process then fails)."""
     with opened(store) as s:
         name = s.resolve_branch(branch).name
-        return s.reset_branch(name, to=to, dry_run=dry_run)
+        return s.reset_branch(name, to=to, dry_run=dry_run, force=force)
 
 
-def delete_branch(*, store: StoreRef, name: str, dry_run: bool = True) -> BranchChange:
-    """Delete branch ``name`` and everything it owns; with ``dry_run``, only say what would go."""
+def delete_branch(*, store: StoreRef, name: str, dry_run: bool = True, force: bool = False) -> BranchChange:
+    """Delete branch ``name`` and everything it owns; with ``dry_run``, only say what would go.
+    Refused while a live process writes to the branch, unless ``force`` (that process then fails)."""
     with opened(store) as s:
-        return s.delete_branch(name, dry_run=dry_run)
+        return s.delete_branch(name, dry_run=dry_run, force=force)
 
 
 def upgrade_store(*, store: StoreRef, replay_changes: bool = True, progress: Progress | None = None) -> UpgradeResult:

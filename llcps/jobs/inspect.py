@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 from llcps.errors import LlcpsError
+from llcps.outputs import write_text
 from llcps.jobs._common import Progress, StoreRef, opened
 
 if TYPE_CHECKING:
@@ -275,7 +276,7 @@ def export_pddl(
         assert spec is not None
         text = export_problem(kb, perceived_task(spec, condition=condition, variant=variant), costs=costs)
     if path is not None:
-        path.write_text(text, encoding="utf-8")
+        write_text(path, text, what="--out")
     return PddlExport(
         branch=name,
         part=part,

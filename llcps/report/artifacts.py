@@ -15,6 +15,10 @@ from llcps.analysis.results import ResultsTable
 from llcps.cps.film import episode_shots, reenact
 from llcps.experiments.design import scenario_rank
 from llcps.experiments.rows import ResultRow
+from llcps.outputs import write_text
+from llcps.errors import LlcpsError
+from llcps.inputs import read_user_text
+from llcps.limits import MAX_RESULTS_FILE_BYTES
 from llcps.provenance import Provenance
 from llcps.store import Store
 
@@ -35,16 +39,17 @@ def table_provenance(store: Store, table: ResultsTable) -> list[dict[str, Any]]:
 
 def write_provenance(out_dir: Path, provenance: Sequence[Mapping[str, Any]]) -> Path:
     path = out_dir / PROVENANCE_FILE
-    path.write_text(json.dumps(list(provenance), indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    return path
+    return write_text(path, json.dumps(list(provenance), indent=1, sort_keys=True) + "\n", what="report")
 
 
 def read_provenance(out_dir: Path) -> list[dict[str, Any]]:
     """The provenance a report directory holds; empty when it has none or it is unreadable."""
     path = out_dir / PROVENANCE_FILE
+    if not path.exists():
+        return []
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        data = json.loads(read_user_text(path, what="provenance file", max_bytes=MAX_RESULTS_FILE_BYTES, hint=""))
+    except (LlcpsError, ValueError, RecursionError):
         return []
     known = set(Provenance.__dataclass_fields__) | {"runs"}
     return [{k: v for k, v in item.items() if k in known} for item in data if isinstance(item, dict)] if isinstance(data, list) else []

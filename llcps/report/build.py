@@ -24,6 +24,7 @@ from llcps.analysis.survival import SurvivalComparison
 from llcps.analysis.versus_random import RandomComparison
 from llcps.errors import LlcpsError
 from llcps.experiments.design import scenario_rank
+from llcps.outputs import replaced_atomically, write_text
 from llcps.report import artifacts, plots
 from llcps.report.html import render_html
 from llcps.report.markdown import render_markdown
@@ -72,7 +73,7 @@ class ReportPaths:
 
 def _write_rows_csv(path: Path, rows: Iterable[Any], columns: Iterable[str]) -> Path:
     columns = list(columns)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with replaced_atomically(path, what="report") as fh:
         writer = csv.DictWriter(fh, fieldnames=columns, lineterminator="\n")
         writer.writeheader()
         for row in rows:
@@ -116,7 +117,7 @@ def build_report(
     results_csv = table.write_csv(out / "results.csv")
     figure2_csv = _write_rows_csv(out / "figure2.csv", analysis.figure2, (f.name for f in fields(Figure2Row)))
     figure2_json = out / "figure2.json"
-    figure2_json.write_text(json.dumps(analysis_json(analysis), indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    write_text(figure2_json, json.dumps(analysis_json(analysis), indent=1, allow_nan=False) + "\n", what="report")
     random_csv = None
     if analysis.random:
         random_csv = _write_rows_csv(
@@ -141,16 +142,12 @@ def build_report(
             out / "generalization.csv", analysis.generalization, (f.name for f in fields(FamilyResult))
         )
         generalization_json = out / "generalization.json"
-        generalization_json.write_text(
-            json.dumps(analysis_json(analysis)["generalization"], indent=1, allow_nan=False) + "\n", encoding="utf-8"
-        )
+        write_text(generalization_json, json.dumps(analysis_json(analysis)["generalization"], indent=1, allow_nan=False) + "\n", what="report")
     survival_csv = None
     if analysis.survival:
         survival_csv = _write_rows_csv(out / "survival.csv", analysis.survival, (f.name for f in fields(SurvivalComparison)))
     report_md = out / "report.md"
-    report_md.write_text(
-        render_markdown(analysis, plot_paths, out, provenance=environments, films=film_paths), encoding="utf-8"
-    )
+    write_text(report_md, render_markdown(analysis, plot_paths, out, provenance=environments, films=film_paths), what="report")
     report_html = None
     if html:
         report_html = out / "report.html"
@@ -159,7 +156,8 @@ def build_report(
             for name, paths in plot_paths.items()
             if any(p.suffix == ".png" for p in paths)
         }
-        report_html.write_text(
+        write_text(
+            report_html,
             render_html(
                 analysis,
                 overview=overview_text(analysis),
@@ -176,7 +174,7 @@ def build_report(
                     else []
                 ),
             ),
-            encoding="utf-8",
+            what="report",
         )
     return ReportPaths(
         out,

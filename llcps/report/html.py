@@ -16,6 +16,8 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from llcps.analysis.analyse import Analysis
+from llcps.inputs import read_user_file
+from llcps.limits import MAX_EMBEDDED_BYTES
 from llcps.report.tables import TableBlock
 
 _MIME = {".png": "image/png", ".gif": "image/gif", ".svg": "image/svg+xml", ".jpg": "image/jpeg"}
@@ -37,7 +39,8 @@ ul.provenance li { font-family: ui-monospace, monospace; font-size: .8rem; }
 def data_uri(path: Path) -> str:
     """A file as a ``data:`` URI (its type from the suffix)."""
     mime = _MIME.get(path.suffix.lower(), "application/octet-stream")
-    return f"data:{mime};base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+    data = read_user_file(path, what="report file", max_bytes=MAX_EMBEDDED_BYTES, hint="remove it from the report directory, or report without --html")
+    return f"data:{mime};base64," + base64.b64encode(data).decode("ascii")
 
 
 def _e(text: Any) -> str:
@@ -124,4 +127,10 @@ def render_html(
     return "\n".join(parts) + "\n"
 
 
-__all__ = ["data_uri", "render_html"]
+#: Public names of the page's parts, for other pages of the report (the lives' report).
+STYLE = _STYLE
+escape = _e
+table_html = _table
+figure_html = _figure
+
+__all__ = ["STYLE", "data_uri", "escape", "figure_html", "render_html", "table_html"]

@@ -30,6 +30,7 @@ from llcps.analysis.generalization import FamilyResult
 from llcps.analysis.survival import SurvivalCurve
 from llcps.experiments.design import cell_title, condition_rank, scenario_rank
 from llcps.experiments.presets import measure_rank, model_rank
+from llcps.outputs import written_atomically
 from llcps.report.formatting import format_pct
 
 #: What the stars of Figure 2 mean, printed under the heatmap.
@@ -60,7 +61,8 @@ def save(fig: Figure, stem: str | Path) -> tuple[Path, ...]:
         for fmt in FORMATS:
             path = stem.with_suffix(f".{fmt}")
             metadata = {"Date": None} if fmt == "svg" else {"Software": None}
-            fig.savefig(path, format=fmt, dpi=120, bbox_inches="tight", metadata=metadata)
+            with written_atomically(path, what="plot") as target:
+                fig.savefig(target, format=fmt, dpi=120, bbox_inches="tight", metadata=metadata)
             paths.append(path)
     return tuple(paths)
 

@@ -12,6 +12,7 @@ and become one :class:`~llcps.errors.LlcpsError` (exit code 2).
 
 from __future__ import annotations
 
+import math
 import re
 from typing import Annotated, Any, Literal, Union
 
@@ -20,7 +21,21 @@ from pydantic import BaseModel, ConfigDict, Field, PlainValidator, ValidationErr
 from llcps.domain import COLORS, ORIENTATIONS
 from llcps.errors import LlcpsError
 from llcps.domain import CONDITIONS as CONDITION_NAMES
-from llcps.sim.specs import MAX_FRICTION, MAX_GRIP_FORCE
+from llcps.limits import (
+    MAX_DISTANCE,
+    MAX_ENTITIES,
+    MAX_EXTENT,
+    MAX_FRICTION,
+    MAX_GOAL_ATOMS,
+    MAX_GRID_VALUES,
+    MAX_GRIP_FORCE,
+    MAX_MASS,
+    MAX_MOVEMENT_MAGNITUDE,
+    MAX_RATE,
+    MAX_SCENE_BODIES,
+    MAX_TEXT,
+    MIN_RATE,
+)
 
 #: What an entity, fixture, scenario or alias name may look like (a PDDL object name).
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -36,15 +51,22 @@ Range = tuple[float, float]
 Scalar = Union[float, Range]
 
 
-def _number(value: Any) -> float | None:
+def _number(value: Any, bound: float = MAX_DISTANCE) -> float | None:
+    """A finite number within +-``bound`` (None: not a number at all)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return None
-    return float(value)
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"must be a finite number, got {number}")
+    if abs(number) > bound:
+        raise ValueError(f"must be within +-{bound:g}, got {number:g}")
+    return number
 
 
-def _scalar(value: Any, *, positive: bool = False, what: str = "a number") -> Scalar:
-    """A number or a ``[low, high]`` range (a variant draws from it); ``positive`` bounds both."""
-    number = _number(value)
+def _scalar(value: Any, *, positive: bool = False, what: str = "a number", bound: float = MAX_DISTANCE) -> Scalar:
+    """A number or a ``[low, high]`` range (a variant draws from it), finite and within
+    +-``bound`` (:mod:`llcps.limits`); ``positive`` bounds both from below."""
+    number = _number(value, bound)
     if number is not None:
         if positive and not number > 0:
             raise ValueError(f"must be positive, got {number}")
@@ -52,7 +74,7 @@ def _scalar(value: Any, *, positive: bool = False, what: str = "a number") -> Sc
     if isinstance(value, list):
         if not value:
             raise ValueError("an empty range: write a number or [low, high]")
-        bounds = [_number(v) for v in value]
+        bounds = [_number(v, bound) for v in value]
         if len(value) != 2 or None in bounds:
             raise ValueError(f"must be {what} or a range [low, high] of numbers, got {value!r}")
         low, high = bounds  # type: ignore[misc]
@@ -66,6 +88,12 @@ def _scalar(value: Any, *, positive: bool = False, what: str = "a number") -> Sc
 
 AnyScalar = Annotated[Scalar, PlainValidator(lambda v: _scalar(v))]
 PositiveScalar = Annotated[Scalar, PlainValidator(lambda v: _scalar(v, positive=True, what="a positive number"))]
+#: A positive length of a body (m), at most :data:`~llcps.limits.MAX_EXTENT`.
+Extent = Annotated[Scalar, PlainValidator(lambda v: _scalar(v, positive=True, what="a positive number", bound=MAX_EXTENT))]
+#: A positive force (N), finite: its bound is checked where it is declared.
+Force = Annotated[Scalar, PlainValidator(lambda v: _scalar(v, positive=True, what="a positive number", bound=math.inf))]
+#: A positive mass (kg), at most :data:`~llcps.limits.MAX_MASS`.
+Mass = Annotated[Scalar, PlainValidator(lambda v: _scalar(v, positive=True, what="a positive number", bound=MAX_MASS))]
 
 
 def _colors(value: Any) -> str | tuple[str, ...]:
@@ -89,7 +117,7 @@ def _size(value: Any) -> tuple[Scalar, ...]:
     items = value if isinstance(value, list) else [value]
     if not items or len(items) > 3:
         raise ValueError(f"must list one to three positive numbers or ranges, got {value!r}")
-    return tuple(_scalar(v, positive=True, what="a positive number") for v in items)
+    return tuple(_scalar(v, positive=True, what="a positive number", bound=MAX_EXTENT) for v in items)
 
 
 Size = Annotated[tuple[Scalar, ...], PlainValidator(_size)]
@@ -132,8 +160,8 @@ class TableModel(_Model):
 
     x_min: AnyScalar | None = None
     x_max: AnyScalar | None = None
-    y_half: PositiveScalar | None = None
-    height: PositiveScalar | None = None
+    y_half: Extent | None = None
+    height: Extent | None = None
     friction: PositiveScalar | None = None
 
     @field_validator("friction")
@@ -145,7 +173,7 @@ class TableModel(_Model):
 class RobotModel(_Model):
     """What the scene changes about the robot (omitted: the Panda as built)."""
 
-    grip_force: PositiveScalar | None = None
+    grip_force: Force | None = None
 
     @field_validator("grip_force")
     @classmethod
@@ -164,7 +192,7 @@ class EntityModel(_Model):
     shape: Literal["sphere", "box", "cylinder"]
     color: Color
     size: Size
-    mass: PositiveScalar | None = None
+    mass: Mass | None = None
     x: AnyScalar | None = None
     y: AnyScalar | None = None
     yaw: AnyScalar = 0.0
@@ -172,7 +200,7 @@ class EntityModel(_Model):
     inside: Name | None = None
     on_top_of: Name | None = None
     offset: Offset = (0.0, 0.0)
-    wall: PositiveScalar | None = None
+    wall: Extent | None = None
     friction: PositiveScalar | None = None
     reachable: bool | None = None
 
@@ -228,8 +256,8 @@ class LipModel(_Model):
     type: Literal["lip"]
     name: Name = "lip"
     side: Literal["front", "left", "right"]
-    height: PositiveScalar = 0.06
-    thickness: PositiveScalar = 0.02
+    height: Extent = 0.06
+    thickness: Extent = 0.02
 
 
 class WallModel(_Model):
@@ -259,7 +287,7 @@ class ShelfModel(_Model):
     name: Name = "shelf"
     x: AnyScalar
     y: AnyScalar
-    clearance: PositiveScalar
+    clearance: Extent
     size: Size = (0.3, 0.3, 0.02)
     post: bool = True
 
@@ -280,13 +308,14 @@ class ConditionModel(_Model):
     """What one condition changes: fields of named entities, extra fixtures, the table."""
 
     entities: dict[str, dict[str, Any]] = {}
-    fixtures: list[FixtureModel] = []
+    fixtures: list[FixtureModel] = Field([], max_length=MAX_SCENE_BODIES)
     table: TableModel | None = None
     robot: RobotModel | None = None
 
 
 class GridModel(_Model):
-    """The candidate grid exploration searches (omitted fields: the default grid)."""
+    """The candidate grid exploration searches (omitted fields: the default grid), within
+    the bounds of :mod:`llcps.limits`."""
 
     rates: tuple[float, ...] | None = None
     movement_magnitudes: tuple[float, ...] | None = None
@@ -299,12 +328,17 @@ class GridModel(_Model):
             return None
         if not values:
             raise ValueError("an empty list: omit the field for the default grid")
+        if len(values) > MAX_GRID_VALUES:
+            raise ValueError(f"{len(values)} values, more than the {MAX_GRID_VALUES} a grid axis may list")
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f"must be finite numbers, got {list(values)!r}")
         if len(set(values)) != len(values):
             raise ValueError("a value is listed twice")
-        if info.field_name == "rates" and not all(v > 0 for v in values):
-            raise ValueError("rates must be positive (m/s)")
-        if not all(v >= 0 for v in values):
-            raise ValueError("movement magnitudes must be zero or more (m)")
+        if info.field_name == "rates":
+            if not all(MIN_RATE <= v <= MAX_RATE for v in values):
+                raise ValueError(f"rates must lie within [{MIN_RATE:g}, {MAX_RATE:g}] m/s")
+        elif not all(0 <= v <= MAX_MOVEMENT_MAGNITUDE for v in values):
+            raise ValueError(f"movement magnitudes must lie within [0, {MAX_MOVEMENT_MAGNITUDE:g}] m")
         return values
 
     @field_validator("orientations")
@@ -320,13 +354,13 @@ class ScenarioModel(_Model):
 
     name: Name
     alias: Name | None = None
-    title: str = ""
-    story: str = ""
-    goal: list[str] = Field(min_length=1)
+    title: str = Field("", max_length=MAX_TEXT)
+    story: str = Field("", max_length=MAX_TEXT)
+    goal: list[str] = Field(min_length=1, max_length=MAX_GOAL_ATOMS)
     table: TableModel = TableModel()
     robot: RobotModel = RobotModel()
-    entities: list[EntityModel] = Field(min_length=1)
-    fixtures: list[FixtureModel] = []
+    entities: list[EntityModel] = Field(min_length=1, max_length=MAX_ENTITIES)
+    fixtures: list[FixtureModel] = Field([], max_length=MAX_SCENE_BODIES)
     conditions: dict[Literal["original", "novelty"], ConditionModel] = {}
     grid: GridModel = GridModel()
 
@@ -357,6 +391,9 @@ def _reason(error: dict[str, Any]) -> tuple[tuple[Any, ...], str]:
         return loc, "unknown key"
     if kind == "missing":
         return loc, "missing"
+    if kind == "too_long":
+        what = "characters" if "string" in error["msg"].lower() else "items"
+        return loc, f"{ctx.get('actual_length', 'too many')} {what}, more than the {ctx.get('max_length')} allowed"
     if kind == "union_tag_invalid":
         return (*loc, "type"), f"unknown fixture type {ctx.get('tag')!r}: choose from {', '.join(FIXTURE_TYPES)}"
     if kind == "union_tag_not_found":
@@ -365,11 +402,23 @@ def _reason(error: dict[str, Any]) -> tuple[tuple[Any, ...], str]:
     return loc, message[0].lower() + message[1:] if message else message
 
 
+#: The hint of an error about a limit of :mod:`llcps.limits`.
+LIMITS_HINT = "see Limits in docs/scenarios.md: a scenario file stays within them"
+
+
+def _hint(error: dict[str, Any]) -> str | None:
+    """The limits hint for an error about a limit (too many items, a number out of bounds)."""
+    exc = (error.get("ctx") or {}).get("error")
+    if error["type"] == "too_long" or (isinstance(exc, ValueError) and any(w in str(exc) for w in ("within", "more than", "finite"))):
+        return LIMITS_HINT
+    return None
+
+
 def validation_error(where: str, exc: ValidationError, *, prefix: tuple[Any, ...] = ()) -> LlcpsError:
     """The first error of a pydantic validation as one project error naming file and field."""
     first = exc.errors(include_url=False)[0]
     loc, message = _reason(first)
-    return file_error(where, (*prefix, *loc), message)
+    return file_error(where, (*prefix, *loc), message, hint=_hint(first))
 
 
 def file_error(where: str, loc: tuple[Any, ...] | str, message: str, *, hint: str | None = None) -> LlcpsError:
@@ -399,7 +448,7 @@ def validate_entity(where: str, data: dict[str, Any], blame: dict[str, tuple[Any
         field = loc[0] if loc else ""
         origin = blame.get(str(field), ())
         return_loc = (*origin, *loc[1:]) if origin else loc
-        raise file_error(where, return_loc, message) from None
+        raise file_error(where, return_loc, message, hint=_hint(first)) from None
 
 
 __all__ = [

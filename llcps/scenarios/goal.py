@@ -52,12 +52,18 @@ def parse_atom(text: str, names: Iterable[str]) -> tuple[bool, Fluent]:
 
 
 def parse_goal(atoms: Iterable[str], names: Iterable[str]) -> tuple[frozenset[Fluent], frozenset[Fluent]]:
-    """Goal atoms as (fluents that must hold, fluents that must not)."""
+    """Goal atoms as (fluents that must hold, fluents that must not).
+
+    Raises:
+        ValueError: an atom is malformed, or contradicts another (it and its negation).
+    """
     known = tuple(names)
     positive: set[Fluent] = set()
     negative: set[Fluent] = set()
     for text in atoms:
         holds, atom = parse_atom(text, known)
+        if atom in (negative if holds else positive):
+            raise ValueError(f"{text!r} contradicts another atom of the goal: an atom and its negation cannot both hold")
         (positive if holds else negative).add(atom)
     return frozenset(positive), frozenset(negative)
 

@@ -11,17 +11,21 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import re
 import tomllib
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 from llcps.domain import Fluent
 from llcps.errors import LlcpsError
+from llcps.inputs import read_user_text
+from llcps.limits import MAX_FILE_DEPTH, MAX_FILE_ITEMS, MAX_SCENARIO_FILE_BYTES, MAX_TEXT
 from llcps.scenarios import file_format, layout
 from llcps.scenarios.goal import parse_atom
-from llcps.scenarios.file_format import CONDITION_NAMES, EntityModel, ScenarioModel, file_error
+from llcps.scenarios.file_format import CONDITION_NAMES, LIMITS_HINT, EntityModel, ScenarioModel, file_error
 from llcps.scenarios.variants import MAX_ATTEMPTS, Draws, check_variant
 from llcps.sim.builders import bucket, edge_lip, inside, open_box, shelf, solid, stacked
 from llcps.sim.specs import EntitySpec, FixtureSpec, RobotSpec, SceneSpec, TableSpec
@@ -133,27 +137,40 @@ class ScenarioSource:
                 return f"entities[{index}] ({name})"
         return name
 
+    @contextmanager
+    def _blamed(self, where: str, condition: str) -> Iterator[None]:
+        """A value the scene's own checks refuse (a wall too thick for its container) as an
+        error naming the file and the part of it."""
+        try:
+            yield
+        except ValueError as exc:
+            raise file_error(self.where, where, f"{exc} (in the {condition} condition)") from None
+
     def _build(self, condition: str, draws: Draws) -> tuple[Any, dict[str, layout.Declared]]:
         table_fields = dict(self.model.table.model_dump(exclude_none=True))
         changes = self.model.conditions.get(condition)
         if changes is not None and changes.table is not None:
             table_fields.update(changes.table.model_dump(exclude_none=True))
-        table = TableSpec(**{k: draws.number(v, f"table.{k}") for k, v in table_fields.items()})
+        with self._blamed("table", condition):
+            table = TableSpec(**{k: draws.number(v, f"table.{k}") for k, v in table_fields.items()})
         robot_fields = dict(self.model.robot.model_dump(exclude_none=True))
         if changes is not None and changes.robot is not None:
             robot_fields.update(changes.robot.model_dump(exclude_none=True))
-        robot = RobotSpec(**{k: draws.number(v, f"robot.{k}") for k, v in robot_fields.items()})
+        with self._blamed("robot", condition):
+            robot = RobotSpec(**{k: draws.number(v, f"robot.{k}") for k, v in robot_fields.items()})
         entities = self.entities(condition)
         built: dict[str, Any] = {}
         pending = list(entities)
         while pending:  # containers and supports before what rests on them (no cycles: checked at load)
             ready = [e for e in pending if (e.inside or e.on_top_of) is None or (e.inside or e.on_top_of) in built]
             for entity in ready:
-                built[entity.name] = _entity_spec(entity, draws, built, table.floor_z)
+                with self._blamed(self._entity_path(entity.name), condition):
+                    built[entity.name] = _entity_spec(entity, draws, built, table.floor_z)
                 pending.remove(entity)
         fixtures: list[Any] = []
         for fixture in (*self.model.fixtures, *(changes.fixtures if changes is not None else ())):
-            fixtures.extend(_fixture_specs(fixture, draws, table))
+            with self._blamed(f"fixtures ({fixture.name})", condition):
+                fixtures.extend(_fixture_specs(fixture, draws, table))
         suffix = "" if draws.variant == 0 else f"/v{draws.variant}"
         try:
             scene = SceneSpec(
@@ -283,6 +300,9 @@ def read_text(text: str, *, where: str, path: Path | None = None, reserved: Mapp
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise file_error(where, "", f"not valid TOML: {exc}", hint="check the line named above against docs/scenarios.md") from None
+    except RecursionError:  # tomllib parses nested arrays and inline tables recursively
+        raise file_error(where, "", f"arrays or tables nested deeper than the {MAX_FILE_DEPTH} levels allowed", hint=LIMITS_HINT) from None
+    _check_bounds(where, data)
     named = "name" in data
     if not named:
         data = {"name": _stem_name(where, path), **data}
@@ -307,6 +327,13 @@ def read_text(text: str, *, where: str, path: Path | None = None, reserved: Mapp
             holds, atom_ = parse_atom(atom, names)
         except ValueError as exc:
             raise file_error(where, ("goal", index), str(exc)) from None
+        if atom_ in (negative if holds else positive):
+            raise file_error(
+                where,
+                ("goal", index),
+                f"{atom!r} contradicts another atom of the goal: an atom and its negation cannot both hold",
+                hint="remove one of the two atoms",
+            )
         (positive if holds else negative).add(atom_)
     source = ScenarioSource(
         where=where,
@@ -320,6 +347,27 @@ def read_text(text: str, *, where: str, path: Path | None = None, reserved: Mapp
     )
     source.attempt(0)  # the canonical layout must be valid
     return source
+
+
+def _check_bounds(where: str, data: Mapping[str, Any]) -> None:
+    """The document's shape within :mod:`llcps.limits`, before any field is validated:
+    nesting depth, items per array or table, text length, finite numbers. Iterative, so
+    that no document can exhaust the stack."""
+    stack: list[tuple[Any, tuple[Any, ...]]] = [(data, ())]
+    while stack:
+        value, loc = stack.pop()
+        if isinstance(value, (dict, list)):
+            if len(loc) >= MAX_FILE_DEPTH:
+                raise file_error(where, loc, f"nested deeper than the {MAX_FILE_DEPTH} levels allowed", hint=LIMITS_HINT)
+            if len(value) > MAX_FILE_ITEMS:
+                raise file_error(where, loc, f"{len(value)} items, more than the {MAX_FILE_ITEMS} allowed", hint=LIMITS_HINT)
+            items = value.items() if isinstance(value, dict) else enumerate(value)
+            stack.extend((item, (*loc, key)) for key, item in reversed(list(items)))
+        elif isinstance(value, str):
+            if len(value) > MAX_TEXT:
+                raise file_error(where, loc, f"{len(value):,} characters, more than the {MAX_TEXT:,} allowed", hint=LIMITS_HINT)
+        elif isinstance(value, float) and not math.isfinite(value):
+            raise file_error(where, loc, f"must be a finite number, got {value}", hint="write a number (nan and inf are not one)")
 
 
 def _stem_name(where: str, path: Path | None) -> str:
@@ -362,12 +410,12 @@ def without_shipped_names(text: str) -> str:
 def read_file(path: str | Path, *, reserved: Mapping[str, str] | None = None) -> ScenarioSource:
     """Read and check a scenario file (see :func:`read_text`)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise LlcpsError(f"no scenario file {path}", hint="give the path of a .toml file, or a scenario name (`llcps scenario list`)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise LlcpsError(f"cannot read scenario file {path}: {exc}", hint="a scenario file is UTF-8 TOML text") from None
+    text = read_user_text(
+        path,
+        what="scenario file",
+        max_bytes=MAX_SCENARIO_FILE_BYTES,
+        hint="give the path of a UTF-8 .toml file, or a scenario name (`llcps scenario list`)",
+    )
     return read_text(text, where=str(path), path=path, reserved=reserved)
 
 
@@ -395,11 +443,11 @@ def _merged_entities(where: str, data: Mapping[str, Any], model: ScenarioModel, 
 
 def _check_names(where: str, model: ScenarioModel, entities: Mapping[str, tuple[EntityModel, ...]]) -> set[str]:
     """Names are unique and every reference names what it must; returns every name a goal may use."""
-    seen_names: list[str] = []
+    seen_names: set[str] = set()
     for index, entity in enumerate(model.entities):
         if entity.name in seen_names:
             raise file_error(where, ("entities", index, "name"), f"{entity.name!r} names two entities", hint="give every entity its own name")
-        seen_names.append(entity.name)
+        seen_names.add(entity.name)
     names: set[str] = {"table"}
     for condition in CONDITION_NAMES:
         changes = model.conditions.get(condition)

@@ -24,6 +24,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
 
+from llcps import bounded_json
 from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, EntityFeatures
 from llcps.trial_records import Body, Outcome, TrialSpec
 from llcps.sim.result import TrialResult
@@ -151,8 +152,8 @@ def decode_result(data: bytes) -> TrialResult:
     """
     _expect(isinstance(data, (bytes, bytearray)) and len(data) <= MAX_RESULT_BYTES, "a result is at most 1 MiB")
     try:
-        raw = json.loads(bytes(data))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raw = bounded_json.loads(bytes(data))
+    except ValueError as exc:
         raise ValueError(f"not JSON: {exc}") from None
     _expect(isinstance(raw, dict), "a result is an object")
     spec_raw, params = raw.get("spec"), (raw.get("spec") or {}).get("params") if isinstance(raw.get("spec"), dict) else None

@@ -17,7 +17,7 @@ import numpy as np
 from llcps.sim.bullet import pybullet as p
 from PIL import Image, ImageDraw, ImageFont
 
-from llcps.outputs import write_error
+from llcps.outputs import written_atomically
 
 if TYPE_CHECKING:
     from llcps.sim.world import World
@@ -92,7 +92,9 @@ def render_png(world: "World", path: str | Path, *, width: int = 320, height: in
     """Save the current scene as a PNG; returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(capture(world, width=width, height=height, camera=camera)).save(path)
+    image = Image.fromarray(capture(world, width=width, height=height, camera=camera))
+    with written_atomically(path, what="picture") as target:
+        image.save(target, format="PNG")
     return path
 
 
@@ -215,10 +217,8 @@ class GifRecorder:
             images = [Image.fromarray(f) for f in self.frames]
         images += [images[-1]] * hold_last
         pal = [f.quantize(colors=128, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) for f in images]
-        try:
-            pal[0].save(path, format="GIF", save_all=True, append_images=pal[1:], duration=ms, loop=0, optimize=True)
-        except OSError as exc:
-            raise write_error(path, exc, what="GIF") from None
+        with written_atomically(path, what="GIF") as target:
+            pal[0].save(target, format="GIF", save_all=True, append_images=pal[1:], duration=ms, loop=0, optimize=True)
         return path
 
 

@@ -18,11 +18,24 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping, Self, Sequence
 
 from llcps.domain import COLORS, SHAPES
 from llcps.errors import LlcpsError, UnknownNameError
+# Bounds of what a scene may describe (m, kg; see llcps.limits): a stored scene is untrusted
+# input, and a kilometre-wide box or a million-kilogram cube would stall the engine.
+from llcps.limits import (
+    MAX_DISTANCE,
+    MAX_ENTITIES,
+    MAX_EXTENT,
+    MAX_FRICTION,
+    MAX_GRIP_FORCE,
+    MAX_MASS,
+    MAX_NAME,
+    MAX_SCENE_BODIES,
+)
 
 #: Names reserved for the built-in fixtures.
 TABLE = "table"
@@ -53,17 +66,6 @@ FIXTURE_RGBA: Mapping[str, tuple[float, float, float, float]] = {
 DEFAULT_WALL = 0.01
 
 
-#: Bounds of what a scene may describe (m, kg): a stored scene is untrusted input, and
-#: a kilometre-wide box or a million-kilogram cube would stall the engine.
-MAX_EXTENT = 10.0
-MAX_DISTANCE = 100.0
-MAX_MASS = 1000.0
-MAX_NAME = 64
-#: Largest Coulomb friction coefficient a scene may give a body or the table.
-MAX_FRICTION = 10.0
-#: Largest grip (N) a scene may give the robot.
-MAX_GRIP_FORCE = 1000.0
-
 #: Horizontal distances from the base (m) at which the tool reaches top-down onto things
 #: 5-20 cm above the table (measured with :meth:`llcps.sim.robot.Robot.reach_error` in every direction);
 #: beyond ``BEYOND_REACH`` it reaches nothing. Scenario files check declared reach with these.
@@ -71,9 +73,6 @@ TOP_DOWN_REACH: tuple[float, float] = (0.3, 0.78)
 BEYOND_REACH = 0.82
 #: Half width of the square the robot's base stands on (m): nothing may be placed there.
 BASE_HALF = 0.12
-
-#: Most entities and fixtures a scene may hold.
-MAX_SCENE_BODIES = 64
 
 
 def _triple(values: Sequence[float], what: str, bound: float) -> tuple[float, float, float]:
@@ -313,8 +312,12 @@ class SceneSpec:
     def __post_init__(self) -> None:
         object.__setattr__(self, "entities", tuple(self.entities))
         object.__setattr__(self, "fixtures", tuple(self.fixtures))
+        if len(self.entities) > MAX_ENTITIES:
+            raise ValueError(f"{len(self.entities)} entities, more than the {MAX_ENTITIES} a scene may hold")
+        if len(self.entities) + len(self.fixtures) > MAX_SCENE_BODIES:
+            raise ValueError(f"{len(self.entities) + len(self.fixtures)} entities and fixtures, more than the {MAX_SCENE_BODIES} a scene may hold")
         names = [e.name for e in self.entities] + [f.name for f in self.fixtures] + [TABLE, FLOOR]
-        dupes = sorted({n for n in names if names.count(n) > 1})
+        dupes = sorted(name for name, count in Counter(names).items() if count > 1)
         if dupes:
             raise ValueError(f"scene names must be unique (table and floor are reserved): {dupes}")
 
@@ -348,8 +351,7 @@ class SceneSpec:
         """Rebuild a scene from :meth:`to_dict` output, checking it (it may come from a database).
 
         Raises:
-            LlcpsError: not a scene description, or one beyond :data:`MAX_SCENE_BODIES` bodies
-                or the bounds above.
+            LlcpsError: not a scene description, or one beyond the bounds of :mod:`llcps.limits`.
         """
         try:
             if not isinstance(data, Mapping):
@@ -357,8 +359,8 @@ class SceneSpec:
             entities, fixtures = data.get("entities", ()), data.get("fixtures", ())
             if not isinstance(entities, list | tuple) or not isinstance(fixtures, list | tuple):
                 raise TypeError("entities and fixtures must be lists")
-            if len(entities) + len(fixtures) > MAX_SCENE_BODIES:
-                raise ValueError(f"more than {MAX_SCENE_BODIES} entities and fixtures")
+            if len(entities) > MAX_ENTITIES or len(entities) + len(fixtures) > MAX_SCENE_BODIES:
+                raise ValueError(f"more than {MAX_ENTITIES} entities or {MAX_SCENE_BODIES} entities and fixtures")
             return cls(
                 entities=tuple(EntitySpec.from_dict(_object(e)) for e in entities),
                 fixtures=tuple(FixtureSpec.from_dict(_object(f)) for f in fixtures),

@@ -11,7 +11,7 @@ a half-made file (a creator killed by ``kill -9`` leaves at most a hidden
 ``.NAME.*.new`` beside it), and of several creators at once one wins and the others
 open its store.
 
-SQLite connections get WAL journaling, a 30 s busy timeout, foreign keys and
+SQLite connections get WAL journaling, a busy timeout (30 s, ``LLCPS_DB_TIMEOUT``), foreign keys and
 ``synchronous=NORMAL``: a committed transaction is in the WAL file before the
 commit returns, so it survives a killed process (an OS crash or power cut can
 lose the last commits, never consistency). Write transactions start with
@@ -21,12 +21,16 @@ failing with "database is locked" when a read would have to upgrade to a write.
 On PostgreSQL a write transaction first takes a transaction-level advisory lock
 (:data:`WRITER_LOCK`), the counterpart of ``BEGIN IMMEDIATE``: writers queue, so
 trial ids commit in the order they were drawn, which branch visibility relies on
-(see :mod:`llcps.store.visibility`). Readers never wait.
+(see :mod:`llcps.store.visibility`). Readers never wait. A server that does not
+answer a connection within ``LLCPS_DB_TIMEOUT`` seconds (30), a lock held longer
+than that (``lock_timeout``) and a statement running longer than
+``LLCPS_DB_STATEMENT_TIMEOUT`` seconds (3600; ``statement_timeout``) end with an error.
 Everything backend-specific lives in this module.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import sqlite3
 import tempfile
@@ -38,13 +42,33 @@ from sqlalchemy import URL, Engine, create_engine, event, make_url
 from sqlalchemy.exc import ArgumentError, IntegrityError, NoSuchModuleError
 from sqlalchemy.pool import NullPool, StaticPool
 
+from llcps import bounded_json
 from llcps.errors import StoreError
+from llcps.inputs import check_regular_file
 from llcps.store.tables import SQLITE_APPLICATION_ID
 
-#: How long a SQLite writer waits for another writer's lock, in milliseconds.
+#: How long a SQLite writer waits for another writer's lock, in milliseconds (the default of
+#: :data:`TIMEOUT_VARIABLE`).
 BUSY_TIMEOUT_MS = 30_000
 
+#: Environment variable: seconds to wait for a database server to answer a connection, and
+#: for a lock another process holds (SQLite's busy timeout, PostgreSQL's ``lock_timeout``).
+TIMEOUT_VARIABLE = "LLCPS_DB_TIMEOUT"
+
+#: Environment variable: seconds a PostgreSQL statement may run (``statement_timeout``; 0: no limit).
+STATEMENT_TIMEOUT_VARIABLE = "LLCPS_DB_STATEMENT_TIMEOUT"
+
+#: Default of :data:`STATEMENT_TIMEOUT_VARIABLE`: longer than any query llcps makes (a
+#: compaction of a large store included).
+STATEMENT_TIMEOUT_S = 3600.0
+
+#: Largest timeout either variable takes (a day).
+MAX_TIMEOUT_S = 86_400.0
+
 SQLITE_MAGIC = b"SQLite format 3\x00"
+
+#: Hint of a row that does not decode: it was not written by llcps.
+CHANGED_HINT = "the row was changed outside llcps; restore the database from a copy (or delete the row)"
 
 #: Execution option that marks a connection's transaction as a write.
 WRITE_OPTION = "llcps_write"
@@ -97,6 +121,7 @@ def check_sqlite_file(path: Path, *, create: bool) -> bool:
                 raise StoreError(f"cannot create {path}: directory {path.parent} is not writable", hint="choose another --db path")
             return False
         raise StoreError(f"no llcps database at {path}", hint=f"create one with `llcps --db {path} db init` (or pass --create)")
+    check_regular_file(path, what="--db", hint="pass the path of an llcps store (a regular file), or a new path with `db init`")
     try:
         with path.open("rb") as fh:
             header = fh.read(100)
@@ -117,7 +142,7 @@ def check_sqlite_file(path: Path, *, create: bool) -> bool:
 def _read_application_id(path: Path) -> int:
     """The application id SQLite reports, reading the file (and its WAL) only."""
     try:
-        with closing(sqlite3.connect(f"{path.as_uri()}?mode=ro", uri=True, timeout=BUSY_TIMEOUT_MS / 1000)) as conn:
+        with closing(sqlite3.connect(f"{path.as_uri()}?mode=ro", uri=True, timeout=timeout_seconds_or_default())) as conn:
             return int(conn.execute("PRAGMA application_id").fetchone()[0])
     except sqlite3.Error as exc:
         raise StoreError(f"cannot read {path}: {exc}", hint="check the file and its permissions; the file was left untouched") from exc
@@ -152,13 +177,13 @@ def create_sqlite_file(path: Path) -> None:
             os.unlink(tmp)
 
 
-def _on_sqlite_connect(foreign_keys: bool, file_backed: bool):  # noqa: ANN202 - event hook factory
+def _on_sqlite_connect(foreign_keys: bool, file_backed: bool, busy_timeout_ms: int):  # noqa: ANN202 - event hook factory
     def on_connect(dbapi_connection: Any, _record: Any) -> None:
         # Let SQLAlchemy's "begin" event issue BEGIN so we choose its kind.
         dbapi_connection.isolation_level = None
         cursor = dbapi_connection.cursor()
         try:
-            cursor.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+            cursor.execute(f"PRAGMA busy_timeout = {busy_timeout_ms}")
             if file_backed:
                 cursor.execute("PRAGMA journal_mode = WAL")
             cursor.execute("PRAGMA synchronous = NORMAL")
@@ -179,6 +204,81 @@ def _on_postgresql_begin(conn: Any) -> None:
         conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({WRITER_LOCK})")
 
 
+def timeout_seconds(variable: str = TIMEOUT_VARIABLE, default: float = BUSY_TIMEOUT_MS / 1000) -> float:
+    """A timeout from the environment (:data:`TIMEOUT_VARIABLE` or :data:`STATEMENT_TIMEOUT_VARIABLE`), checked.
+
+    Raises:
+        StoreError: the value is not a number of seconds from 0 to :data:`MAX_TIMEOUT_S`
+            (0 only for the statement timeout: no limit).
+    """
+    text = os.environ.get(variable, "").strip()
+    if not text:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    lowest = 0.0 if variable == STATEMENT_TIMEOUT_VARIABLE else 0.001
+    if not lowest <= value <= MAX_TIMEOUT_S:
+        raise StoreError(
+            f"{variable}={text[:20]!r} is not a number of seconds from {lowest:g} to {MAX_TIMEOUT_S:g}",
+            hint=f"e.g. {variable}=30 (unset it for the default, {default:g} s)",
+        )
+    return value
+
+
+def timeout_seconds_or_default() -> float:
+    """:func:`timeout_seconds`, or its default when the variable is not valid (for messages)."""
+    try:
+        return timeout_seconds()
+    except StoreError:
+        return BUSY_TIMEOUT_MS / 1000
+
+
+def _postgresql_options(url: URL, lock_s: float, statement_s: float) -> str:
+    """libpq's ``options`` for a session: the URL's own, then the lock and statement timeouts."""
+    own = url.query.get("options", "")
+    own = " ".join(own) if isinstance(own, tuple) else own
+    timeouts = f"-c lock_timeout={round(lock_s * 1000)} -c statement_timeout={round(statement_s * 1000)}"
+    return f"{own} {timeouts}".strip()
+
+
+def stored_json(text: str | bytes) -> Any:
+    """Decode a JSON column's text: every JSON column an engine of :func:`make_engine`
+    reads comes here, bounded in size and nesting (:mod:`llcps.bounded_json`).
+
+    Raises:
+        StoreError: the text is not JSON, or larger or deeper than the bounds.
+    """
+    try:
+        return bounded_json.loads(text)
+    except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError, JsonLimitError
+        raise StoreError(f"a stored JSON value is malformed ({exc})", hint=CHANGED_HINT) from None
+
+
+def read_only(path: Path) -> bool:
+    """Whether this process cannot write the SQLite file at ``path`` or its directory
+    (where SQLite keeps the write-ahead log): a read-only file, directory or mount."""
+    return not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK))
+
+
+def _read_only_connector(path: Path, timeout_s: float):  # noqa: ANN202 - a DBAPI connect function
+    """Connections that only read ``path``: ``mode=ro`` while SQLite can share the
+    write-ahead log's index with writers, else ``immutable=1`` (a read-only directory or
+    mount, where that index cannot be made; nothing writes there anyway)."""
+
+    def connect() -> sqlite3.Connection:
+        conn = sqlite3.connect(f"{path.as_uri()}?mode=ro", uri=True, timeout=timeout_s, check_same_thread=False)
+        try:
+            conn.execute("PRAGMA schema_version").fetchone()
+            return conn
+        except sqlite3.Error:
+            conn.close()
+        return sqlite3.connect(f"{path.as_uri()}?immutable=1", uri=True, timeout=timeout_s, check_same_thread=False)
+
+    return connect
+
+
 def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, plain: bool = False) -> Engine:
     """Create the engine for an already checked URL.
 
@@ -189,17 +289,29 @@ def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, pla
         plain: SQLite files only: no pragmas at all, for looking at a file that may
             not be ours without changing a byte of it.
     """
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = {"json_deserializer": stored_json}
     is_sqlite = url.get_backend_name() == "sqlite"
     file_backed = is_sqlite and sqlite_path(url) is not None
+    path = sqlite_path(url) if file_backed else None
+    wait_s = timeout_seconds()
+    only_reads = path is not None and path.exists() and read_only(path)
+    if only_reads:
+        assert path is not None
+        kwargs["creator"] = _read_only_connector(path, wait_s)
     if plain and file_backed:
-        return create_engine(url, poolclass=NullPool)
+        return create_engine(url, poolclass=NullPool, **kwargs)
     if is_sqlite and not file_backed:
         # One shared connection, or every checkout would see a fresh empty DB.
         kwargs["poolclass"] = StaticPool
         kwargs["connect_args"] = {"check_same_thread": False}
     elif not pooled:
         kwargs["poolclass"] = NullPool
+    if is_sqlite and not only_reads:
+        kwargs.setdefault("connect_args", {})["timeout"] = wait_s
+    elif url.get_backend_name() == "postgresql":
+        statement_s = timeout_seconds(STATEMENT_TIMEOUT_VARIABLE, STATEMENT_TIMEOUT_S)
+        # libpq counts connect_timeout in whole seconds, and takes less than 2 as 2.
+        kwargs["connect_args"] = {"connect_timeout": max(2, math.ceil(wait_s)), "options": _postgresql_options(url, wait_s, statement_s)}
     try:
         engine = create_engine(url, **kwargs)
     except (NoSuchModuleError, ModuleNotFoundError, ImportError) as exc:
@@ -208,7 +320,7 @@ def make_engine(url: URL, *, foreign_keys: bool = True, pooled: bool = True, pla
             hint="for PostgreSQL install the extra: pip install 'llcps[postgres]' and use postgresql+psycopg://...",
         ) from exc
     if is_sqlite:
-        event.listen(engine, "connect", _on_sqlite_connect(foreign_keys, file_backed))
+        event.listen(engine, "connect", _on_sqlite_connect(foreign_keys, file_backed and not only_reads, round(wait_s * 1000)))
         event.listen(engine, "begin", _on_sqlite_begin)
     elif url.get_backend_name() == "postgresql":
         event.listen(engine, "begin", _on_postgresql_begin)

@@ -9,17 +9,18 @@ executions, world models) and is refused while a child branch still sees any of 
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from typing import Any, Callable, Mapping, Sequence
 
-from sqlalchemy import URL, ColumnElement, Connection, Engine, and_, delete, func, insert, or_, select
+from sqlalchemy import URL, ColumnElement, Connection, Engine, and_, delete, func, insert, or_, select, update
 
 from llcps.domain import check_id
 from llcps.errors import LlcpsError, StoreError
-from llcps.store import visibility
+from llcps.store import visibility, writers
 from llcps.store.records import BranchChange, BranchInfo
 from llcps.store.settings import SettingQueries
-from llcps.store.tables import MAX_BRANCH_NAME, Branch, Episode, Operator, OperatorExecution, Trial, TrialChangeRow, WorldModel
+from llcps.store.tables import MAX_BRANCH_NAME, Branch, Episode, Operator, OperatorExecution, Run, Trial, TrialChangeRow, WorldModel
 from llcps.store.transactions import CHANGED_HINT, utc_now
 from llcps.store.trials import iso_timestamp
 from llcps.store.visibility import Link
@@ -67,6 +68,7 @@ class BranchQueries(SettingQueries):
     def __init__(self, engine: Engine, url: URL) -> None:
         super().__init__(engine, url)
         self._branch_ids: dict[str, int] = {}  # name -> id, for writing trials; dropped when a branch goes
+        self._forks_checked: set[tuple[int, int, int]] = set()  # (branch id, parent id, fork point) within the parent's head
 
     def _branches(self, conn: Connection) -> list[Any]:
         rows = list(conn.execute(select(Branch.id, Branch.name, Branch.parent_id, Branch.fork_point, Branch.created_at).order_by(Branch.id)))
@@ -76,7 +78,30 @@ class BranchQueries(SettingQueries):
         return rows
 
     def _chain(self, conn: Connection, name: str, rows: list[Any] | None = None) -> list[Link]:
-        return visibility.Tree(self._branches(conn) if rows is None else rows).chain(name)
+        tree = visibility.Tree(self._branches(conn) if rows is None else rows)
+        links = tree.chain(name)
+        for link in links:
+            self._check_fork(conn, tree, tree.by_id[link.branch_id])
+        return links
+
+    def _check_fork(self, conn: Connection, tree: visibility.Tree, row: Any) -> None:
+        """Refuse a branch whose fork point lies beyond its parent's last visible trial:
+        every fork llcps makes is at a trial the parent sees (or 0), so a later one is
+        a changed row, and the branch would see the parent's trials still to come.
+        Checked once per row and :class:`Store`."""
+        if row.parent_id is None or row.fork_point == 0:
+            return
+        key = (row.id, row.parent_id, row.fork_point)
+        if key in self._forks_checked:
+            return
+        parent = tree.by_id[row.parent_id]
+        head = self._max_visible(conn, tree.chain(parent.name))
+        if row.fork_point > head:
+            raise StoreError(
+                f"branch {row.name!r} forks from {parent.name!r} at trial {row.fork_point}, beyond {parent.name!r}'s last trial ({head})",
+                hint=CHANGED_HINT,
+            )
+        self._forks_checked.add(key)
 
     def _name(self, conn: Connection, name: str | None) -> str:
         if name is not None:
@@ -289,6 +314,7 @@ class BranchQueries(SettingQueries):
             world_models=conn.scalar(select(func.count()).select_from(WorldModel).where(model_clause)) or 0,
             episodes=conn.scalar(select(func.count()).select_from(Episode).where(episode_clause)) or 0,
             kept_until=keep if action == "reset" else None,
+            writers=tuple(writers.writers(conn, name)),
         )
         clauses = {"trial": trial_clause, "operator": op_clause, "execution": execution_clause, "model": model_clause, "episode": episode_clause, "branch_id": bid}
         return change, clauses
@@ -311,10 +337,11 @@ class BranchQueries(SettingQueries):
         conn.execute(delete(Trial).where(clauses["trial"]))
         conn.execute(delete(Episode).where(clauses["episode"]))
 
-    def delete_branch(self, name: str, *, dry_run: bool) -> BranchChange:
+    def delete_branch(self, name: str, *, dry_run: bool, force: bool = False) -> BranchChange:
         """Remove a branch and everything it owns.
 
-        Refused for ``main``, the current branch and branches with children.
+        Refused for ``main``, the current branch, branches with children and (without
+        ``force``) a branch a live process writes to (:mod:`llcps.store.writers`).
         With ``dry_run`` only counts what would go.
         """
         with self._write() as conn:
@@ -326,12 +353,34 @@ class BranchQueries(SettingQueries):
             change, clauses = self._removal(conn, name, "delete", None)
             if dry_run:
                 return change
+            self._stop_writers(conn, change, force=force)
             self._apply_removal(conn, clauses)
             conn.execute(delete(Branch).where(Branch.id == clauses["branch_id"]))
         self._branch_ids.pop(name, None)
         return _applied(change)
 
-    def reset_branch(self, name: str | None, *, to: str = PRETRAIN, dry_run: bool) -> BranchChange:
+    @staticmethod
+    def _stop_writers(conn: Connection, change: BranchChange, *, force: bool) -> None:
+        """Refuse a removal from a branch a live process writes to; with ``force``, mark
+        those runs (and their running episodes) ``aborted``: their process fails at its
+        next write, and what it wrote so far goes with the removal."""
+        live = [w for w in change.writers if w.live and not w.this_process]  # this process knows what it does
+        stale = [w.run_id for w in change.writers if not w.live]
+        if stale:  # left running by a process that is gone: it ended, unrecorded
+            conn.execute(update(Run).where(Run.id.in_(stale), Run.status == "running").values(status="abandoned"))
+        if not live:
+            return
+        if not force:
+            raise StoreError(
+                f"branch {change.branch!r} is being written to: {'; '.join(w.describe() for w in live)}",
+                hint="wait for it to finish (or stop it), then run this again; --force does it now: that command fails at "
+                f"its next write, and what it wrote so far goes too ({change.summary.split(' from branch')[0].replace('would remove ', '')})",
+            )
+        ids = [w.run_id for w in live]
+        conn.execute(update(Run).where(Run.id.in_(ids), Run.status == "running").values(status="aborted", finished_at=utc_now()))
+        conn.execute(update(Episode).where(Episode.run_id.in_(ids), Episode.status == "running").values(status="aborted", finished_at=utc_now()))
+
+    def reset_branch(self, name: str | None, *, to: str = PRETRAIN, dry_run: bool, force: bool = False) -> BranchChange:
         """Drop a branch's own experience after a point.
 
         Args:
@@ -341,6 +390,7 @@ class BranchQueries(SettingQueries):
                 and operators/models with a watermark up to it;
                 ``"empty"`` removes all it owns.
             dry_run: only count what would go.
+            force: reset even while a live process writes to the branch (see :meth:`delete_branch`).
         """
         if to not in RESET_TARGETS:
             raise LlcpsError(f"unknown reset target {to!r}", hint=f"use one of: {', '.join(RESET_TARGETS)}")
@@ -348,6 +398,7 @@ class BranchQueries(SettingQueries):
             name = self._name(conn, name)
             change, clauses = self._removal(conn, name, "reset", to)
             if not dry_run:
+                self._stop_writers(conn, change, force=force)
                 self._apply_removal(conn, clauses)
         return change if dry_run else _applied(change)
 
@@ -360,4 +411,4 @@ class BranchQueries(SettingQueries):
 
 
 def _applied(change: BranchChange) -> BranchChange:
-    return BranchChange(**{**change.as_json(), "dry_run": False})
+    return dataclasses.replace(change, dry_run=False)

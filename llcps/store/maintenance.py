@@ -9,6 +9,7 @@ from sqlalchemy import func, inspect, select, text
 
 from llcps.errors import StoreError
 from llcps.store import backends, migrations, visibility
+from llcps.store import writers
 from llcps.store.records import CompactResult, StoreStatus
 from llcps.store.tables import Base, Trial, TrialChangeRow
 from llcps.store.training_set import TrialQueries
@@ -44,6 +45,7 @@ class MaintenanceQueries(TrialQueries):
                 visible_trials=sum(by_source.values()),
                 visible_by_source=by_source,
                 changes=self.change_counts() if inspect(conn).has_table(TrialChangeRow.__tablename__) else None,
+                writers=tuple(writers.writers(conn)) if revision == head else (),
             )
 
     def _size(self) -> int | None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 from typing import Any, Mapping
 
-from sqlalchemy import insert, select
+from sqlalchemy import func, insert, select
 
 from llcps.errors import LlcpsError, StoreError
 from llcps.store import visibility
@@ -20,6 +20,11 @@ from llcps.store.records import ModelArtifact
 from llcps.store.tables import WorldModel
 from llcps.store.transactions import CHANGED_HINT, utc_now
 from llcps.store.trials import iso_timestamp
+
+
+#: Largest world model artifact stored or read back (bytes); a larger row is refused
+#: unread, as a physics state larger than :data:`llcps.store.snapshots.MAX_SNAPSHOT_BYTES` is.
+MAX_MODEL_BYTES = 64 * 2**20
 
 
 class ModelArtifactQueries(BranchQueries):
@@ -36,6 +41,9 @@ class ModelArtifactQueries(BranchQueries):
         if not isinstance(artifact, (bytes, bytearray, memoryview)):
             raise LlcpsError("a world model artifact must be bytes", hint="serialise it as npz, a torch state_dict or JSON")
         data = bytes(artifact)
+        if len(data) > MAX_MODEL_BYTES:
+            raise LlcpsError(f"a world model artifact of {len(data):,} bytes is larger than the {MAX_MODEL_BYTES:,} a store keeps",
+                             hint="fit a smaller model")
         with self._write() as conn:
             chain = self._chain(conn, branch)
             return conn.execute(
@@ -56,12 +64,19 @@ class ModelArtifactQueries(BranchQueries):
         with self._read() as conn:
             chain = self._chain(conn, self._name(conn, branch))
             names = {link.branch_id: link.name for link in chain}
-            row = conn.execute(
-                select(WorldModel)
+            found = conn.execute(
+                select(WorldModel.id, func.length(WorldModel.artifact))
                 .where(visibility.clause(chain, WorldModel.branch_id, WorldModel.watermark), WorldModel.name == name, WorldModel.seed == seed)
                 .order_by(WorldModel.watermark.desc(), WorldModel.id.desc())
                 .limit(1)
             ).first()
+            if found is None:
+                return None
+            model_id, size = found
+            # The size first, without the bytes: an oversized row is never read into memory.
+            if not isinstance(size, int) or not 0 <= size <= MAX_MODEL_BYTES:
+                raise StoreError(f"stored world model {model_id} holds {size} bytes, more than the {MAX_MODEL_BYTES:,} a world model may", hint=CHANGED_HINT)
+            row = conn.execute(select(WorldModel).where(WorldModel.id == model_id)).first()
         if row is None:
             return None
         if not isinstance(row.artifact, (bytes, bytearray, memoryview)) or not isinstance(row.meta, dict):

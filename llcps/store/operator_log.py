@@ -7,11 +7,11 @@ branch and by branches forked from it later, like the trials they followed.
 
 from __future__ import annotations
 
-import json
 from typing import Any, Mapping, Sequence
 
 from sqlalchemy import insert, select
 
+from llcps import bounded_json
 from llcps.errors import StoreError
 from llcps.store import visibility
 from llcps.store.branches import BranchQueries
@@ -23,16 +23,17 @@ from llcps.store.trials import iso_timestamp
 
 def _context_atoms(row_id: int, context: Any) -> tuple[tuple[str, ...], ...]:
     """A stored execution context, checked: a list of atoms, each a list of 2 to 4 strings."""
+    problem = "a malformed context"
     if isinstance(context, str):
         try:
-            context = json.loads(context)
-        except ValueError:
-            context = None
+            context = bounded_json.loads(context)
+        except ValueError as exc:
+            context, problem = None, f"a malformed context ({exc})"
     if not isinstance(context, list) or not all(
         isinstance(atom, list) and 2 <= len(atom) <= 4 and all(isinstance(t, str) for t in atom) for atom in context
     ):
         raise StoreError(
-            f"operator execution {row_id} has a malformed context",
+            f"operator execution {row_id} has {problem}",
             hint="the row was not written by llcps; delete it or restore the store from a backup",
         )
     return tuple(sorted(tuple(atom) for atom in context))

@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import platformdirs
-from sqlalchemy import delete, func, insert, select, update
+from sqlalchemy import String, delete, func, insert, or_, select, type_coerce, update
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 
 from llcps.errors import LlcpsError, StoreError
@@ -365,46 +365,94 @@ def _write(store: Any):  # noqa: ANN202 - a connection context
     return store._write()
 
 
+#: Largest size an entry can have: its result and its compressed end state at their caps.
+MAX_ENTRY_BYTES = MAX_RESULT_BYTES + MAX_STATE_BYTES
+
+#: Largest bound the cache setting may hold (1 PiB).
+MAX_LIMIT_BYTES = 2**50
+
+_CACHE_CHANGED_HINT = "the row was changed outside llcps; `llcps cache prune --to 0` empties the cache (it holds no experience)"
+
+
 def max_bytes(store: Any) -> int:
-    """The store's bound on the cache size (its setting, else :data:`DEFAULT_MAX_BYTES`)."""
+    """The store's bound on the cache size (its setting, else :data:`DEFAULT_MAX_BYTES`).
+
+    Raises:
+        StoreError: the setting is not a whole number of bytes from 0 to :data:`MAX_LIMIT_BYTES`.
+    """
     with store._read() as conn:
         value = store._get_setting(conn, MAX_BYTES_SETTING)
-    try:
-        return int(value) if value is not None else DEFAULT_MAX_BYTES
-    except ValueError:
+    if value is None:
         return DEFAULT_MAX_BYTES
+    text = value.strip() if isinstance(value, str) else ""
+    if not text.isascii() or not text.isdigit() or len(text) > 16 or int(text) > MAX_LIMIT_BYTES:
+        raise StoreError(
+            f"the store's physics cache bound (setting {MAX_BYTES_SETTING}) is {str(value)[:40]!r}, not a number of bytes",
+            hint="set it again with `llcps cache limit 2GB`",
+        )
+    return int(text)
 
 
 def set_max_bytes(store: Any, limit: int) -> None:
     """Make ``limit`` the store's bound on the cache size."""
-    if limit < 0:
-        raise LlcpsError(f"a cache size cannot be negative ({limit})", hint="pass a size such as 500MB or 2GB")
+    if not 0 <= limit <= MAX_LIMIT_BYTES:
+        raise LlcpsError(f"a cache size must be from 0 to 1 PiB ({limit})", hint="pass a size such as 500MB or 2GB")
     with _write(store) as conn:
         store._set_setting(conn, MAX_BYTES_SETTING, str(int(limit)))
 
 
 def status(store: Any) -> CacheStatus:
-    """How many entries and bytes the cache holds."""
+    """How many entries and bytes the cache holds.
+
+    Raises:
+        StoreError: an entry's size, hits or time of use is not what llcps writes.
+    """
+    used = type_coerce(PhysicsCacheEntry.last_used, String)  # checked below, not parsed by the driver
     with store._read() as conn:
+        bad = conn.execute(
+            select(PhysicsCacheEntry.key).where(
+                or_(
+                    PhysicsCacheEntry.size.is_(None),
+                    PhysicsCacheEntry.size < 0,
+                    PhysicsCacheEntry.size > MAX_ENTRY_BYTES,
+                    PhysicsCacheEntry.hits < 0,
+                )
+            ).limit(1)
+        ).first()
         n, sealed, size, hits, oldest, newest = conn.execute(
             select(
                 func.count(),
                 func.count(PhysicsCacheEntry.seal),
                 func.coalesce(func.sum(PhysicsCacheEntry.size), 0),
                 func.coalesce(func.sum(PhysicsCacheEntry.hits), 0),
-                func.min(PhysicsCacheEntry.last_used),
-                func.max(PhysicsCacheEntry.last_used),
+                func.min(used),
+                func.max(used),
             )
         ).one()
+    if bad is not None:
+        raise StoreError(f"physics cache entry {str(bad[0])[:16]!r} is malformed: its size or hits are out of range", hint=_CACHE_CHANGED_HINT)
+    oldest, newest = (_use_time(value) for value in (oldest, newest))
     return CacheStatus(
         entries=int(n),
         sealed=int(sealed),
         bytes=int(size),
         hits=int(hits),
         max_bytes=max_bytes(store),
-        oldest_use=None if oldest is None else str(oldest),
-        newest_use=None if newest is None else str(newest),
+        oldest_use=oldest,
+        newest_use=newest,
     )
+
+
+def _use_time(value: Any) -> str | None:
+    """A stored ``last_used`` as ISO text, checked (SQLite keeps it as text; PostgreSQL as a timestamp)."""
+    if value is None:
+        return None
+    text = value.isoformat(sep=" ") if isinstance(value, datetime) else str(value)[:64]
+    try:
+        datetime.fromisoformat(text)
+    except ValueError:
+        raise StoreError(f"the physics cache holds a time of use that is not a time ({text[:32]!r})", hint=_CACHE_CHANGED_HINT) from None
+    return text
 
 
 def prune(store: Any, *, limit: int | None = None, dry_run: bool = False) -> PruneResult:
@@ -426,6 +474,9 @@ def prune(store: Any, *, limit: int | None = None, dry_run: bool = False) -> Pru
         ).all()
     kept_bytes, kept, doomed, doomed_bytes = 0, 0, [], 0
     for key, size in rows:
+        if not isinstance(size, int) or not 0 <= size <= MAX_ENTRY_BYTES:  # a changed row: it goes, counted as nothing
+            doomed.append(key)
+            continue
         if kept_bytes + size <= keep and not doomed:
             kept_bytes += size
             kept += 1

@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping
 
 from llcps.provenance import Provenance
+from llcps.store.writers import Writer
 
 
 @dataclass(frozen=True)
@@ -49,15 +50,22 @@ class BranchChange:
     world_models: int
     episodes: int
     kept_until: int | None = None
+    #: Runs writing to the branch at the time (:mod:`llcps.store.writers`), live or stale.
+    writers: tuple[Writer, ...] = ()
 
     @property
     def summary(self) -> str:
         verb = "would remove" if self.dry_run else "removed"
-        return (
+        text = (
             f"{verb} {self.trials} trial(s), {self.operators} operator(s), "
             f"{self.world_models} world model(s) and {self.episodes} episode(s) "
             f"from branch {self.branch!r}"
         )
+        live = [w for w in self.writers if w.live and not w.this_process]
+        if live:
+            text += "; " + ("live writer(s), refused without --force: " if self.dry_run else "aborted live writer(s): ")
+            text += "; ".join(w.describe() for w in live)
+        return text
 
     def as_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -202,6 +210,8 @@ class StoreStatus:
     #: Trials of the store by how their symbolic change is known (recorded, replayed,
     #: unknown, missing); None for a store whose schema predates trial changes.
     changes: Mapping[str, int] | None = None
+    #: Runs marked running, live or stale (:mod:`llcps.store.writers`); empty on an outdated store.
+    writers: tuple[Writer, ...] = ()
 
     def as_json(self) -> dict[str, Any]:
         return asdict(self)

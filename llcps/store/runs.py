@@ -10,6 +10,7 @@ Python API.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any, Mapping, Sequence
@@ -24,6 +25,7 @@ from llcps.store.branches import BranchQueries
 from llcps.store.records import EpisodeRecord, RunRecord
 from llcps.store.tables import Branch, Episode, Run, Trial
 from llcps.store.transactions import CHANGED_HINT, utc_now
+from llcps.store.writers import Heartbeats
 from llcps.store.trials import iso_timestamp
 
 
@@ -109,7 +111,7 @@ class RunQueries(BranchQueries):
         env = provenance_of_process() if provenance is None else provenance
         with self._write() as conn:
             self._chain(conn, branch)
-            return conn.execute(
+            run_id = conn.execute(
                 insert(Run).values(
                     command=command,
                     seed=seed,
@@ -117,15 +119,33 @@ class RunQueries(BranchQueries):
                     branch=branch,
                     status="running",
                     started_at=utc_now() if started_at is None else started_at,
+                    # The live-writer marker (llcps.store.writers): this process, alive now.
+                    pid=os.getpid() if provenance is None else None,
+                    heartbeat_at=utc_now(),
                     **run_provenance_values(env),
                 )
             ).inserted_primary_key[0]
+        if provenance is None:
+            self._heartbeats().start(run_id)
+        return run_id
 
     def finish_run(self, run_id: int, *, status: str) -> None:
         """Record how a run ended (e.g. ``ok``, ``failed``, ``interrupted``)."""
+        self._heartbeats().finish(run_id)
         with self._write() as conn:
             if conn.execute(update(Run).where(Run.id == run_id).values(status=status, finished_at=utc_now())).rowcount == 0:
                 raise LlcpsError(f"unknown run {run_id}", hint="see `llcps inspect runs`")
+
+    def _heartbeats(self) -> Heartbeats:
+        """This store's heartbeat thread for the runs this process writes (made on first use)."""
+        beats = self.__dict__.get("_run_heartbeats")
+        if beats is None:
+            beats = self.__dict__.setdefault("_run_heartbeats", Heartbeats(self._beat))
+        return beats
+
+    def _beat(self, run_ids: list[int]) -> None:
+        with self._write() as conn:
+            conn.execute(update(Run).where(Run.id.in_(run_ids), Run.status == "running").values(heartbeat_at=utc_now()))
 
     def start_episode(
         self,

@@ -56,7 +56,7 @@ class SnapshotQueries(Transactions):
                 raise
             return found
         except SQLAlchemyError as exc:
-            raise db_error(exc) from exc
+            raise db_error(exc, self._url) from exc
 
     def _snapshot_id(self, sha: str) -> int | None:
         with self._read() as conn:

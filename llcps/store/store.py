@@ -68,7 +68,7 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
             store._check_schema(create=create, allow_outdated=allow_outdated)
         except SQLAlchemyError as exc:
             engine.dispose()
-            raise db_error(exc) from exc
+            raise db_error(exc, url) from exc
         except BaseException:
             engine.dispose()
             raise
@@ -84,7 +84,7 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
                 revision = migrations.current_revision(conn)
                 tables = inspect(conn).get_table_names() if revision is None else []
         except SQLAlchemyError as exc:
-            raise db_error(exc) from exc
+            raise db_error(exc, self._url) from exc
         finally:
             if probe is not self._engine:
                 probe.dispose()
@@ -111,7 +111,10 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
             )
 
     def close(self) -> None:
-        """Release pooled connections."""
+        """Stop renewing heartbeats and release pooled connections."""
+        beats = self.__dict__.get("_run_heartbeats")
+        if beats is not None:
+            beats.close()
         self._engine.dispose()
 
     def __enter__(self) -> Store:
@@ -163,7 +166,7 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
                             progress(revision, done, len(pending))
                         migrations.upgrade(conn, revision)
         except SQLAlchemyError as exc:
-            raise db_error(exc) from exc
+            raise db_error(exc, self._url) from exc
         finally:
             if engine is not self._engine:
                 engine.dispose()

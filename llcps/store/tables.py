@@ -104,6 +104,10 @@ class Run(Base):
     numpy_version: Mapped[str | None] = mapped_column(String(32))
     host: Mapped[str | None] = mapped_column(String(255))
     cpu_count: Mapped[int | None] = mapped_column(Integer)
+    # The live-writer marker (llcps.store.writers): the process writing a running run and
+    # when it last said it was alive; NULL for runs stored before revision 0009.
+    pid: Mapped[int | None] = mapped_column(Integer)
+    heartbeat_at: Mapped[datetime | None] = mapped_column(DateTime)
 
 
 class Episode(Base):

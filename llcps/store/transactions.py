@@ -13,6 +13,7 @@ order, as :mod:`llcps.store.visibility` needs. Both turn a database error into a
 from __future__ import annotations
 
 import json
+import os
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from typing import Iterator
@@ -22,9 +23,10 @@ from sqlalchemy.exc import SQLAlchemyError
 
 from llcps.errors import StoreError
 from llcps.store import backends
+from llcps.store.backends import CHANGED_HINT
 
-#: Hint of a row that does not decode: it was not written by llcps.
-CHANGED_HINT = "the row was changed outside llcps; restore the database from a copy (or delete the row)"
+__all__ = ["CHANGED_HINT", "Transactions", "db_error", "utc_now"]
+
 
 
 def utc_now() -> datetime:
@@ -32,19 +34,58 @@ def utc_now() -> datetime:
     return datetime.now(timezone.utc).replace(tzinfo=None)
 
 
-def db_error(exc: SQLAlchemyError) -> StoreError:
-    """A database error as a :class:`StoreError`, with a hint at the likely cause."""
-    detail = str(getattr(exc, "orig", None) or exc).splitlines()[0]
+def db_error(exc: SQLAlchemyError, url: URL | None = None) -> StoreError:
+    """A database error as a :class:`StoreError`, with a hint at the likely cause.
+
+    Args:
+        url: the store's URL: for a SQLite file, an I/O error on a file system with
+            (almost) no space left is reported as a full disk, which is what it is.
+    """
+    detail = (str(getattr(exc, "orig", None) or exc).splitlines() or ["?"])[0]
     lowered = detail.lower()
-    if "locked" in lowered or "busy" in lowered:
-        hint = "another process held the database for longer than the busy timeout; retry when it is done"
-    elif "readonly" in lowered or "read-only" in lowered or "permission" in lowered:
-        hint = "the database file or its directory is not writable"
+    wait = f"{backends.TIMEOUT_VARIABLE} (now {backends.timeout_seconds_or_default():g} s)"
+    if "locked" in lowered or "busy" in lowered or "lock timeout" in lowered:
+        message = f"the database stayed locked by another process for longer than {wait}: {detail}"
+        hint = f"retry when the other process is done, or wait longer: {backends.TIMEOUT_VARIABLE}=SECONDS"
+    elif "statement timeout" in lowered:
+        message = f"a database statement ran longer than {backends.STATEMENT_TIMEOUT_VARIABLE} allows: {detail}"
+        hint = f"check the server's load, or allow more: {backends.STATEMENT_TIMEOUT_VARIABLE}=SECONDS (0: no limit)"
+    elif "timeout expired" in lowered or "timed out" in lowered:
+        message = f"the database server did not answer within {wait}: {detail}"
+        hint = f"check the --db URL's host and port and that the server is running; {backends.TIMEOUT_VARIABLE}=SECONDS waits longer"
+    elif "readonly" in lowered or "read-only" in lowered:
+        message = f"the store is read-only: {detail}"
+        hint = "the database file, its directory or its file system is not writable: check permissions and mounts (reading works: `llcps db status`)"
+    elif "disk is full" in lowered or "no space" in lowered or ("i/o error" in lowered and _disk_full(url)):
+        message = f"the disk holding the store is full: {detail}"
+        hint = "free space on that file system (or move the store), then run the command again; what was committed is kept"
+    elif "permission" in lowered or "unable to open" in lowered:
+        message = f"database error: {detail}"
+        hint = "the database file or its directory cannot be opened for writing: check permissions, or whether the file system is read-only"
     elif "connect" in lowered:
+        message = f"database error: {detail}"
         hint = "check the --db URL and that the database server is running"
     else:
+        message = f"database error: {detail}"
         hint = "check `llcps db status`"
-    return StoreError(f"database error: {detail}", hint=hint)
+    return StoreError(message, hint=hint)
+
+
+def _disk_full(url: URL | None) -> bool:
+    """Whether the file system of the SQLite store at ``url`` has (almost) no space left."""
+    path = backends.sqlite_path(url) if url is not None else None
+    if path is None:
+        return False
+    try:
+        stats = os.statvfs(path.parent)
+    except OSError:
+        return False
+    return stats.f_bavail * stats.f_frsize < FULL_BELOW_BYTES
+
+
+#: Free space under which a SQLite I/O error is taken for a full disk (SQLite needs a
+#: few pages for its write-ahead log and index; under 1 MiB it often cannot get them).
+FULL_BELOW_BYTES = 2**20
 
 
 class Transactions:
@@ -70,9 +111,11 @@ class Transactions:
             with self._engine.connect() as conn:
                 yield conn
         except SQLAlchemyError as exc:
-            raise db_error(exc) from exc
+            raise db_error(exc, self._url) from exc
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:  # a JSON column's text, decoded as rows are read
             raise StoreError(f"a stored JSON value is malformed ({exc})", hint=CHANGED_HINT) from None
+        except (ValueError, TypeError, OverflowError) as exc:  # a value the driver cannot convert (a time that is not one)
+            raise StoreError(f"a stored value is malformed ({type(exc).__name__}: {str(exc)[:120]})", hint=CHANGED_HINT) from None
 
     @contextmanager
     def _write(self) -> Iterator[Connection]:
@@ -86,4 +129,6 @@ class Transactions:
                 with conn.begin():
                     yield conn
         except SQLAlchemyError as exc:
-            raise db_error(exc) from exc
+            raise db_error(exc, self._url) from exc
+        except (ValueError, TypeError, OverflowError) as exc:  # a stored value read on the way, as in _read
+            raise StoreError(f"a stored value is malformed ({type(exc).__name__}: {str(exc)[:120]})", hint=CHANGED_HINT) from None

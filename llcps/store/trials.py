@@ -30,6 +30,7 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 from sqlalchemy import Integer, String, Text, and_, case, cast, type_coerce
 
+from llcps import bounded_json
 from llcps.domain import ACTIONS, COLORS, ENTITY_NUMBERS, OUTCOME_NAMES, SHAPES, TRIAL_SOURCES, ControllerParams, EntityFeatures
 from llcps.trial_records import Outcome, StoredFeatures, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError, StoreError
@@ -189,7 +190,7 @@ TRIAL_COLUMNS = (
 
 def _json(value: Any) -> Any:
     """Decode a JSON column read as text (drivers that decode JSON themselves pass through)."""
-    return json.loads(value) if isinstance(value, str) else value
+    return bounded_json.loads(value) if isinstance(value, str) else value
 
 
 class _Malformed(ValueError):

@@ -10,7 +10,11 @@ K' as :mod:`llcps.symbolic.export` writes it.
 
 Steps are costed by K's experience in the context they would run in, and a step is
 left out where its operator has failed in that context and never worked there
-(:meth:`KnowledgeBase.step_cost`, :meth:`KnowledgeBase.allowed`).
+(:meth:`KnowledgeBase.step_cost`, :meth:`KnowledgeBase.allowed`). Experience only
+orders plans, it never removes the last one: when every plan uses a step experience
+left out, the search runs again with those steps allowed (at their experience cost).
+A task K can solve has a plan under any experience, so the agent always reaches a
+step to fail at, and explores from there.
 
 Ties between plans of equal cost are broken deterministically: fewer steps first, then
 the order in which operators and their arguments sort.
@@ -20,9 +24,11 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from typing import Collection
 
 from llcps.errors import LlcpsError
+from llcps.limits import MAX_GROUND_ACTIONS, MAX_PLANNER_STATES
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
 from llcps.symbolic.lifted import GroundAction
@@ -35,21 +41,32 @@ MAX_EXPANSIONS = 200_000
 
 
 class PlanningLimitError(LlcpsError):
-    """The search ran out of its expansion budget before it could decide the task."""
+    """The search ran out of its budget (expansions, states held, ground actions) before
+    it could decide the task."""
 
     exit_code = 1
 
 
-def ground(kb: KnowledgeBase, task: Task) -> list[GroundAction]:
+def ground(kb: KnowledgeBase, task: Task, *, max_actions: int = MAX_GROUND_ACTIONS) -> list[GroundAction]:
     """Every ground action of K over the task's objects, in a deterministic order.
 
     A parameter of type t takes every object whose type is t or a subtype of t.
+
+    Raises:
+        PlanningLimitError: more than ``max_actions`` argument tuples to try.
     """
     objects = task.all_objects(kb)
     names = sorted(objects)
     actions: list[GroundAction] = []
+    tried = 0
     for op in sorted(kb.operators(), key=lambda o: o.name):
         domains = [[o for o in names if kb.is_subtype(objects[o], kind)] for _, kind in op.parameters]
+        tried += math.prod(len(d) for d in domains)
+        if tried > max_actions:
+            raise PlanningLimitError(
+                f"the task grounds more than {max_actions:,} actions ({len(objects)} objects)",
+                hint="give the task fewer objects (see Limits in docs/scenarios.md)",
+            )
         for args in itertools.product(*domains):
             step = op.ground(args)
             if step is not None:
@@ -63,6 +80,7 @@ def plan(
     *,
     exclude: Collection[tuple[str, tuple[str, ...]]] = (),
     max_expansions: int = MAX_EXPANSIONS,
+    max_states: int = MAX_PLANNER_STATES,
 ) -> Plan | None:
     """The cheapest plan from the task's initial state to its goal.
 
@@ -72,10 +90,12 @@ def plan(
         exclude: ground actions ``(operator name, args)`` the plan may not use, e.g.
             a step that just failed (plan repair).
         max_expansions: how many states the search may expand before giving up.
+        max_states: how many states it may hold (reached, with cost and parent): this,
+            not the expansions, bounds its memory.
 
     Returns:
         A cheapest plan (empty when s0 already satisfies the goal), or None when no plan
-        exists with K.
+        exists with K (whatever its experience: see the module docstring).
 
     Raises:
         LlcpsError: the task does not fit K (unknown objects, predicates, types).
@@ -84,6 +104,18 @@ def plan(
     task.check(kb)
     banned = {(name.lower(), tuple(args)) for name, args in exclude}
     actions = [a for a in ground(kb, task) if (a.name.lower(), a.args) not in banned]
+    found = _search(kb, task, actions, max_expansions=max_expansions, max_states=max_states, by_experience=True)
+    if found is None and kb.experience.entries:
+        # Experience left out every plan: it may make a step dear, never impossible.
+        found = _search(kb, task, actions, max_expansions=max_expansions, max_states=max_states, by_experience=False)
+    return found
+
+
+def _search(
+    kb: KnowledgeBase, task: Task, actions: list[GroundAction], *, max_expansions: int, max_states: int, by_experience: bool
+) -> Plan | None:
+    """Uniform-cost search over ``actions``; ``by_experience`` leaves out the steps
+    experience does not allow (:meth:`KnowledgeBase.allowed`)."""
     start = task.init
     # (cost, steps, insertion order, state); the insertion order makes ties deterministic.
     counter = itertools.count()
@@ -106,13 +138,18 @@ def plan(
                 hint="raise max_expansions or give the task fewer objects",
             )
         for action in actions:
-            if not action.applicable(state) or not kb.allowed(action, state):
+            if not action.applicable(state) or (by_experience and not kb.allowed(action, state)):
                 continue
             successor = action.apply(state)
             if successor in closed:
                 continue
             key = (cost + kb.step_cost(action, state), steps + 1)
             if key < best.get(successor, (float("inf"), 0)):
+                if successor not in best and len(best) >= max_states:
+                    raise PlanningLimitError(
+                        f"planning gave up holding {max_states:,} states",
+                        hint="give the task fewer objects (see Limits in docs/scenarios.md)",
+                    )
                 best[successor] = key
                 parent[successor] = (state, action)
                 heapq.heappush(frontier, (*key, next(counter), successor))

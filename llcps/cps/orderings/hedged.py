@@ -7,9 +7,19 @@ it. Random order knows nothing, but it is never misled. This ordering interleave
 two:
 
 - *the ranking*: the best untried candidate under the model and measure
-  (:class:`~llcps.cps.orderings.ranked.Ranked`, updated after every failed trial);
-- *random order*: the next untried candidate of one seeded random permutation of all
-  candidates, drawn once per episode.
+  (:class:`~llcps.cps.orderings.ranked.Ranked`, updated after every failed trial), by
+  the model's probability of resolving the novelty in steps of a factor
+  :data:`RESOLUTION` and, within a step, in random order's order: what the model cannot
+  tell apart, it tries as random order would. A model with a flat ranking is then
+  random order itself, not a second, independent order beside it (two independent
+  orders interleaved need a third more trials than one, for a single resolving
+  candidate);
+- *random order*: the next untried candidate of the order the random-order baseline
+  (the ``random`` world model, which scores each candidate by a hash of the seed and
+  the candidate) gives the same candidates under the same measure and seed, ranked
+  once. So the hedge's random side tries what the baseline it is compared with tries,
+  in the same order, and a run beside that baseline finds those trials in the physics
+  cache.
 
 **The share.** The model gets the first trial; after each trial it is credited its
 share ``min(w, MAX_MODEL_SHARE)`` and takes the next trial whenever its credit reaches
@@ -17,7 +27,8 @@ one (random order takes the others). ``w`` is the posterior probability that the
 points the right way in this scene, starting from :data:`MODEL_PRIOR`. Each failed
 trial of a candidate the model gave probability ``p`` of resolving the novelty, whichever
 side chose it, multiplies the odds of that by ``(1 - p) / (1 - p_mean)``, ``p_mean``
-being the model's mean over the untried candidates: the chance of that failure if the
+being the model's mean over the untried candidates (both at most
+:data:`MAX_EVIDENCE_PROBABILITY`, so one failure at most halves the odds): the chance of that failure if the
 model is right, over its chance if the candidate were one of the others at random. A
 model that was sure of candidates that then failed loses its share quickly; one that
 expected the failures keeps it. Comparing with the model's own mean judges how well it
@@ -48,20 +59,47 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
+from llcps.cps.exploration import FailurePoint, Ranking, rank_candidates
+from llcps.models.measures import GOAL_FLOOR
 from llcps.cps.orderings.base import Exploration
 from llcps.cps.orderings.ranked import Ranked
 
 if TYPE_CHECKING:
     from llcps.domain import State
 
+#: The world model whose ranking is random order.
+RANDOM_ORDER = "random"
+#: The model's side tells candidates apart by their probability of resolving in steps of
+#: this factor; within a step it follows random order's order. A model that cannot tell
+#: candidates apart (a flat ranking) then tries what random order tries, in its order.
+RESOLUTION = 2.0
 #: Most of the trials the model's ranking may take (the rest follow random order).
 MAX_MODEL_SHARE = 0.5
 #: Belief, before any trial, that the resolving candidate lies where the model says.
 MODEL_PRIOR = 0.5
-#: Stream of the seed's random permutation, apart from the tie-breaking key's.
-_PERMUTATION_STREAM = 0x4E0D6E
-#: Largest probability a failed candidate may have had (keeps the odds finite).
-_MAX_PROBABILITY = 1.0 - 1e-9
+#: Largest probability of resolving a failed trial is counted with: no single failure
+#: more than halves the odds. In a novel scene the model's probabilities are not
+#: calibrated: one sure of a candidate K claims (p near 1) would otherwise lose every
+#: trial to random order after one failure, whatever it knows of the rest.
+MAX_EVIDENCE_PROBABILITY = 0.5
+
+
+def resolve_probabilities(ranking: Ranking, point: FailurePoint) -> np.ndarray | None:
+    """The model's probability that each ranked candidate resolves the novelty (what
+    ``goal-directed`` ranks by), or None when the measure gives none."""
+    if ranking.resolve is not None and point.subgoals:
+        return ranking.resolve
+    if ranking.goal is not None:
+        return np.prod(np.clip(ranking.goal, 0.0, 1.0), axis=1)
+    return None
+
+
+def random_order(exploration: Exploration) -> list[int]:
+    """Every candidate, in the order the random-order baseline ranks them first."""
+    from llcps.models.registry import WORLD_MODELS
+
+    x = exploration
+    return list(rank_candidates(WORLD_MODELS[RANDOM_ORDER](x.seed), x.point, measure=x.measure, seed=x.seed).order)
 
 
 class Hedged(Ranked):
@@ -75,15 +113,30 @@ class Hedged(Ranked):
     name: ClassVar[str] = "hedged"
 
     def __init__(self, exploration: Exploration) -> None:
+        self.exploration = exploration
+        #: Random order's side: every candidate, in the order it tries them.
+        self.permutation = self.random_side()
+        self._position = {index: k for k, index in enumerate(self.permutation)}
         super().__init__(exploration)
-        n = len(exploration.point.candidates)
-        rng = np.random.default_rng([int(exploration.seed), _PERMUTATION_STREAM])
-        self.permutation = [int(i) for i in rng.permutation(n)]
         self._cursor = 0
         self.log_odds = math.log(MODEL_PRIOR / (1.0 - MODEL_PRIOR))
         self.credit = 1.0
         self.picks: list[str] = []
         self.beliefs: list[float] = []
+
+    def ordered(self, ranking: Ranking) -> list[int]:
+        """The model's side: best first by the model's probability of resolving, in
+        steps of a factor :data:`RESOLUTION`; within a step, random order's order."""
+        probability = resolve_probabilities(ranking, self.exploration.point)
+        if probability is None:
+            return list(ranking.order)
+        level = np.floor(np.log(np.maximum(probability, GOAL_FLOOR)) / math.log(RESOLUTION))
+        key = {i: (-float(v), self._position[i]) for i, v in zip(ranking.indices, level)}
+        return sorted(ranking.order, key=key.__getitem__)
+
+    def random_side(self) -> list[int]:
+        """Every candidate in random order's order (:func:`random_order`)."""
+        return random_order(self.exploration)
 
     @property
     def belief(self) -> float:
@@ -115,15 +168,13 @@ class Hedged(Ranked):
         """The log factor a failed trial of ``index`` applies to the odds that the model
         points the right way (0 without probabilities of resolving)."""
         ranking = self.ranking
-        probability = ranking.resolve if ranking.resolve is not None and self.exploration.point.subgoals else None
-        if probability is None and ranking.goal is not None:
-            probability = np.prod(np.clip(ranking.goal, 0.0, 1.0), axis=1)
+        probability = resolve_probabilities(ranking, self.exploration.point)
         if probability is None:
             return 0.0
         untried = set(self.remaining) | {index}
         given = {i: float(p) for i, p in zip(ranking.indices, probability) if i in untried}
         if index not in given or len(given) < 2:
             return 0.0
-        p = min(given[index], _MAX_PROBABILITY)
-        mean = min(sum(given.values()) / len(given), _MAX_PROBABILITY)
+        p = min(given[index], MAX_EVIDENCE_PROBABILITY)
+        mean = min(sum(given.values()) / len(given), MAX_EVIDENCE_PROBABILITY)
         return math.log1p(-p) - math.log1p(-mean)

@@ -29,7 +29,11 @@ class Ranked(Ordering):
         #: The failed trials (candidate indices) the ranking took in, in order.
         self.taken: list[int] = []
         self.ranking = self.rank()
-        self.order = list(self.ranking.order)
+        self.order = self.ordered(self.ranking)
+
+    def ordered(self, ranking: Ranking) -> list[int]:
+        """The order the untried candidates are tried in, from a ranking of them: the ranking's."""
+        return list(ranking.order)
 
     def rank(self) -> Ranking:
         """The untried candidates ranked by the model and measure as they are now."""
@@ -60,4 +64,4 @@ class Ranked(Ordering):
         if self.tried % self.exploration.refit_every == 0 and self.remaining:
             self.exploration.update(self.taken)
             self.ranking = self.rank()
-            self.order = list(self.ranking.order)
+            self.order = self.ordered(self.ranking)
