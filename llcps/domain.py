@@ -78,8 +78,8 @@ def check_id(value: int, what: str = "id") -> int:
     return value
 
 
-#: Where a trial came from.
-TRIAL_SOURCES: tuple[str, ...] = ("pretrain", "plan", "exploration", "replay")
+#: Where a trial came from (``gym``: an action taken through the Gymnasium environment, :mod:`llcps.gym`).
+TRIAL_SOURCES: tuple[str, ...] = ("pretrain", "plan", "exploration", "replay", "gym")
 
 #: The six bits of Omega (Table 2), in order.
 OUTCOME_NAMES: tuple[str, ...] = (

@@ -276,8 +276,11 @@ def test_bad_input_is_one_error_line_and_changes_nothing(sqlite_db: Path, tmp_pa
 def test_loading_the_commands_leaves_the_heavy_libraries_alone() -> None:
     """Every command module loads at start: the simulator, the runner, numpy and the scenario
     files load inside the commands that need them, so light commands start fast."""
-    heavy = ("pybullet", "scipy", "numpy", "torch", "sklearn", "pydantic", "lark", "llcps.sim", "llcps.experiments.runner")
-    code = f"import sys, llcps.cli.main, llcps.scenarios as s; print(sorted(m for m in {heavy!r} if m in sys.modules), 'llcps.scenarios.loader' in sys.modules)"
+    heavy = (
+        *("pybullet", "scipy", "numpy", "torch", "sklearn", "pydantic", "lark", "llcps.sim", "llcps.experiments.runner"),
+        *("gymnasium", "stable_baselines3", "sb3_contrib", "llcps.gym"),
+    )
+    code = f"import sys, llcps, llcps.cli.main, llcps.scenarios as s; print(sorted(m for m in {heavy!r} if m in sys.modules), 'llcps.scenarios.loader' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env={**os.environ})
     assert out.stdout.strip() == "[] False"
 

@@ -20,7 +20,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, life, pretrain, replay, scenario, solve  # noqa: F401 - inspect_* add `inspect` subcommands
+from llcps.cli import bench, cache, db, experiment, inspect, inspect_model, inspect_runs, life, pretrain, replay, rl, scenario, solve  # noqa: F401 - inspect_* add `inspect` subcommands
 from llcps.cli._common import DEFAULT_DB, CliContext, LlcpsGroup, new_app, terminate_like_interrupt
 from llcps.cli._conventions import examples
 
@@ -108,6 +108,7 @@ app.add_typer(experiment.app, name="experiment")
 app.add_typer(life.app, name="life")
 app.add_typer(cache.app, name="cache")
 app.add_typer(scenario.app, name="scenario")
+app.add_typer(rl.app, name="rl")
 
 
 def main() -> None:

@@ -48,7 +48,9 @@ def solve_cli(
         typer.Option(
             "--ordering",
             help="Order of the exploration trials: the ranking hedged with a random order (hedged), "
-            "or the ranking alone (ranked, the paper's); see docs/world_models.md.",
+            "or the ranking alone (ranked, the paper's); baselines: past solutions first (case-based), "
+            "Thompson sampling with the model as prior (trial-and-error), an ensemble's disagreement (uncertainty), "
+            "the policy of `llcps rl train` (rl); see docs/world_models.md.",
         ),
     ] = ORDERINGS.default,  # type: ignore[assignment]
     variant: Annotated[
@@ -136,6 +138,7 @@ EXAMPLES = examples(
     "llcps solve scenario1 --gif scenario1.gif              # then film it",
     "llcps solve scenario2 --variant 3                      # another layout, drawn from the file's ranges",
     "llcps solve scenario2 --ordering ranked                # the ranking alone, as the paper's agent",
+    "llcps solve scenario2 --ordering case-based            # what resolved similar failures first",
     "llcps solve my_scenario.toml                           # a scenario straight from a file",
 )
 

@@ -314,13 +314,9 @@ def solve(
 
 def _run(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, model: WorldModel, config: SolveConfig, found: _Progress) -> None:
     """Plan with K and repair the plan; only if no plan reaches the goal, explore."""
-    from llcps.cps.plan_execution import plan_and_repair
+    from llcps.cps.plan_execution import find_failure
 
-    state = executor.perceive()
-    if executor.scenario.goal_reached(state):
-        found.status = "solved"
-        return
-    failure = plan_and_repair(executor, experience, kb, state, found.plan)
+    failure = find_failure(executor, experience, kb, found.plan)
     if found.plan.solved:
         found.status = "solved"
         return
@@ -340,7 +336,7 @@ def _explore(
     found: _Progress,
 ) -> None:
     """Try candidates from the failure snapshot, in the config's ordering, until one resolves the novelty."""
-    from llcps.cps.exploration import failure_point
+    from llcps.cps.exploration import start_exploration
     from llcps.cps.learning import learn
     from llcps.cps.orderings import get_ordering
     from llcps.cps.orderings.base import Exploration
@@ -348,10 +344,7 @@ def _explore(
 
     snapshot = failure.snapshot
     assert snapshot is not None  # the episode stores its plan
-    executor.restore(snapshot)
-    point = failure_point(
-        executor, failure.monitor, failure.state, kb, grid=config.candidate_grid(executor.scenario), known=experience.costed(kb)
-    )
+    point = start_exploration(executor, experience, kb, failure, grid=config.candidate_grid(executor.scenario))
     candidates = point.candidates
     found.candidates = len(candidates)
     trial_ids: dict[int, int | None] = {}  # candidate index -> the id of its stored trial
@@ -363,6 +356,9 @@ def _explore(
             seed=config.seed,
             refit_every=config.refit_every,
             update=lambda only: model.update(_taken(executor.records, trial_ids, only), executor.changes, start=snapshot),
+            store=executor.store,
+            branch=executor.branch,
+            episode_id=executor.episode_id,
         )
     )
     executor.report("explore", total=min(config.budget, len(candidates)))

@@ -44,6 +44,8 @@ from llcps.symbolic.monitor import StepFailure
 from llcps.symbolic.planner import GroundAction, ground
 
 if TYPE_CHECKING:
+    from llcps.cps.branch_knowledge import BranchExperience
+    from llcps.cps.plan_execution import Failure
     from llcps.scenarios.base import Scenario
     from llcps.sim.world import World
 
@@ -231,6 +233,28 @@ def failure_point(
     )
 
 
+class ExplorationSite(FailureSite, Protocol):
+    """A :class:`FailureSite` that can return its world to a stored snapshot."""
+
+    def restore(self, snapshot_id: int) -> None: ...
+
+
+def start_exploration(
+    site: ExplorationSite, experience: BranchExperience, kb: KnowledgeBase, failure: Failure, *, grid: Grid
+) -> FailurePoint:
+    """Return the world to the stored state a_f was executed from and describe the
+    failure point there (subgoals from K costed by the branch's experience now).
+
+    What an episode (:mod:`llcps.cps.episode`) and the Gymnasium environment
+    (:mod:`llcps.gym`) both do once K's plan failed; every candidate starts from
+    ``failure.snapshot``.
+    """
+    if failure.snapshot is None:
+        raise ValueError("exploration starts from a stored snapshot: run the plan with store=True")
+    site.restore(failure.snapshot)
+    return failure_point(site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb))
+
+
 @dataclass(frozen=True)
 class Ranking:
     """Candidates in a measure's order, with what they were ranked by.
@@ -293,3 +317,18 @@ def rank_candidates(
     return Ranking(
         order=[chosen[i] for i in order], indices=chosen, score=score, outcome=outcome, goal=goal, subgoals=subgoal, resolve=resolve
     )
+
+
+def candidate_probability(point: FailurePoint, ranking: Ranking) -> np.ndarray:
+    """Per candidate of ``point`` (n,): the world model's probability that it resolves the
+    failure, as ``ranking`` holds it (:func:`resolve_probability` when the point has
+    subgoals, else the missing atoms' joint probability); 0.5 for a measure without
+    the goal-aware head, and for the candidates ``ranking`` left out."""
+    probability = np.full(len(point.candidates), 0.5)
+    resolve = ranking.resolve if ranking.resolve is not None and point.subgoals else None
+    if resolve is None and ranking.goal is not None:
+        resolve = joint_probability(ranking.goal)
+    if resolve is not None and ranking.indices:
+        probability[np.asarray(ranking.indices)] = resolve
+    return probability
+

@@ -178,6 +178,21 @@ def plan_and_repair(
     return first
 
 
+def find_failure(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, log: PlanLog) -> Failure | None:
+    """Perceive; unless the goal holds already, execute K's plan with its repairs
+    (:func:`plan_and_repair`, every step stored).
+
+    Returns:
+        The first failure, a_f, where exploration starts; None when no step failed
+        (``log.solved`` then says whether the goal was reached).
+    """
+    state = executor.perceive()
+    if executor.scenario.goal_reached(state):
+        log.solved = True
+        return None
+    return plan_and_repair(executor, experience, kb, state, log)
+
+
 def resolves(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
     """Did this trial resolve the novelty?
 

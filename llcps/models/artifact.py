@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import re
 import zipfile
+import zlib
 from typing import Mapping
 
 import numpy as np
@@ -61,11 +62,13 @@ def unpack_arrays(data: bytes) -> dict[str, np.ndarray]:
             key = info.filename[: -len(".npy")]
             if not info.filename.endswith(".npy") or not _ARRAY_NAME.match(key):
                 raise LlcpsError(f"unexpected member {info.filename!r} in array archive")
-            with archive.open(info) as member:
-                try:
+            try:
+                with archive.open(info) as member:
                     arrays[key] = np.lib.format.read_array(member, allow_pickle=False)
-                except ValueError as exc:
-                    raise LlcpsError(f"array {key!r} cannot be read safely: {exc}") from None
+            except ValueError as exc:
+                raise LlcpsError(f"array {key!r} cannot be read safely: {exc}") from None
+            except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:  # a damaged member (CRC, deflate stream)
+                raise LlcpsError(f"array {key!r} is damaged: {exc}") from None
     return arrays
 
 

@@ -76,7 +76,7 @@ BASE_COLUMNS: tuple[Column, ...] = (
     Column("run_id", "nullable_int", "the run that wrote it"),
     Column("episode_id", "nullable_int", "the episode it belongs to (none for pretraining)"),
     Column("scenario", "string", "the scenario it ran in (none for pretraining)"),
-    Column("source", "category", "pretrain, plan, exploration or replay", TRIAL_SOURCES),
+    Column("source", "category", "pretrain, plan, exploration, replay or gym", TRIAL_SOURCES),
     Column("action", "category", "Table-1 action", ACTIONS),
     Column("rate", "float", "Table-1 rate, m/s"),
     Column("movement_magnitude", "float", "Table-1 movement magnitude, m"),

@@ -13,6 +13,11 @@ episode runs, learning from each failed trial as it goes:
   :data:`~llcps.cps.orderings.hedged.MAX_MODEL_SHARE`. A model that is wrong in a novel
   scene costs at most a bounded multiple of random order (docs/world_models.md).
 
+- ``case-based``, ``trial-and-error``, ``uncertainty`` and ``rl``: the baselines a claim
+  about model-guided exploration is measured against (docs/world_models.md): reuse of
+  past solutions, Thompson sampling with the model as the prior, an ensemble's
+  disagreement, and a policy trained in the Gymnasium environment (:mod:`llcps.gym`).
+
 Entries import their module on first use, so the CLI lists the names without loading
 numpy or a world model.
 """
@@ -64,6 +69,30 @@ ORDERINGS: Registry[OrderingEntry] = Registry(
             "llcps.cps.orderings.hedged",
             "Hedged",
             "the ranking interleaved with a random order, by the belief that the model is right here",
+        ),
+        OrderingEntry(
+            "case-based",
+            "llcps.cps.orderings.case_based",
+            "CaseBased",
+            "the resolving trials of the most similar past failures first, then the default",
+        ),
+        OrderingEntry(
+            "trial-and-error",
+            "llcps.cps.orderings.trial_and_error",
+            "TrialAndError",
+            "Thompson sampling over candidate families, the world model's prediction as the prior mean",
+        ),
+        OrderingEntry(
+            "uncertainty",
+            "llcps.cps.orderings.uncertainty",
+            "Uncertainty",
+            "the model's probability plus the disagreement of a bootstrap ensemble",
+        ),
+        OrderingEntry(
+            "rl",
+            "llcps.cps.orderings.learned",
+            "Learned",
+            "the policy trained with MaskablePPO (llcps rl train), most probable first",
         ),
     ),
     default="hedged",

@@ -10,6 +10,7 @@ if TYPE_CHECKING:
     from llcps.cps.exploration import FailurePoint
     from llcps.domain import State
     from llcps.models.base import WorldModel
+    from llcps.store import Store
 
 
 @dataclass(frozen=True)
@@ -24,6 +25,10 @@ class Exploration:
         refit_every: take the trials in and rank again after this many failed trials.
         update: takes the trials of some tried candidates (indices; None: every trial
             so far) into ``model`` as episode evidence.
+        store: the experience store, for orderings that read the branch's past
+            (None: they see no past).
+        branch: the episode's branch in ``store``.
+        episode_id: the episode's id in ``store`` (its own trials are no past).
     """
 
     model: WorldModel
@@ -32,6 +37,9 @@ class Exploration:
     seed: int
     refit_every: int = 1
     update: Callable[[Collection[int] | None], None] = lambda only: None
+    store: Store | None = None
+    branch: str | None = None
+    episode_id: int | None = None
 
 
 class Ordering(ABC):
@@ -65,3 +73,9 @@ class Ordering(ABC):
 
     def learn(self, index: int, after: State) -> None:
         """Take a failed trial in (after it left :attr:`remaining`); nothing by default."""
+
+    def exclude(self, indices: Collection[int]) -> None:
+        """Candidates tried before this ordering took over (another ordering chose them):
+        they leave :attr:`remaining` without being learned from."""
+        gone = set(indices)
+        self.remaining = [i for i in self.remaining if i not in gone]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Collection
 
 from llcps.cps.exploration import Ranking, rank_candidates
 from llcps.cps.orderings.base import Exploration, Ordering
@@ -44,6 +44,11 @@ class Ranked(Ordering):
 
     def choose(self) -> int:
         return self.order[0]
+
+    def exclude(self, indices: Collection[int]) -> None:
+        super().exclude(indices)
+        gone = set(indices)
+        self.order = [i for i in self.order if i not in gone]
 
     def learn(self, index: int, after: State) -> None:
         self.order.remove(index)
