@@ -49,7 +49,7 @@ permutation's first resolving candidate stands at position ``P``, the episode en
 trial ``1 + P / (1 - MAX_MODEL_SHARE)``: with the default share of one half, at most
 ``2 P + 1`` trials, where random order with that permutation needs ``P``. While the
 model keeps its full share (``w`` at least one half) the model's side loses at most the
-same factor: ``ranked``'s ``k``-th trial is tried by trial ``2 k - 1``.
+same factor: the ``k``-th candidate of its side is tried by trial ``2 k - 1``.
 """
 
 from __future__ import annotations
