@@ -295,6 +295,7 @@ def _ray_cluster_run(store: Store, *, kill: bool, seeds: list[int] | None = None
     import threading
 
     import ray
+    from ray._private import ray_constants
     from ray.cluster_utils import Cluster
 
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
@@ -304,15 +305,26 @@ def _ray_cluster_run(store: Store, *, kill: bool, seeds: list[int] | None = None
     events: list[str] = []
     done = threading.Event()
 
-    def killer() -> None:
-        from ray._private.state import available_resources_per_node
+    def running_a_task() -> bool:
+        """Whether a worker process of the worker node runs a task (Ray titles it ``ray::<function>``)."""
+        raylet = worker.all_processes[ray_constants.PROCESS_TYPE_RAYLET][0].process.pid
+        for pid in _children(raylet):
+            try:
+                title = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
+            except OSError:
+                continue
+            if title.startswith(b"ray::execute_task"):
+                return True
+        return False
 
+    def killer() -> None:
         while not done.is_set():
-            free = available_resources_per_node().get(worker.node_id)
-            if free is not None and free.get("CPU", 0.0) < 1.0:  # a task holds the worker node's CPU (the key goes when none is free)
-                cluster.remove_node(worker, allow_graceful=False)
-                events.append("killed the worker node with a task in flight")
-                return
+            if running_a_task():
+                time.sleep(1.0)  # well into the task
+                if running_a_task():
+                    cluster.remove_node(worker, allow_graceful=False)
+                    events.append("killed the worker node with a task in flight")
+                    return
             time.sleep(0.05)
 
     thread = threading.Thread(target=killer, daemon=True)
