@@ -11,7 +11,9 @@ A life grows linearly; the target is an overhead at episode 1,000 within 1.2 tim
 that at episode 10 (a cost that stays flat as experience grows).
 
 The store is filled with batched inserts, not episode by episode, so a point far into
-the life costs one fit before it, not a thousand.
+the life costs one fit before it, not a thousand. The group also measures the store of
+a long life: 1,000,000 trials on a branch, the load of its visible set (target ≤ 2 s)
+and durable single-trial commits on it (target ≥ 1,000/s).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from functools import partial
 from pathlib import Path
 
 from llcps.bench.core import Clock, Figure, Progress, figure, say
+from llcps.bench.store import TrialPool
 from llcps.cps.candidates import enumerate_candidates
 from llcps.models import fit_or_load
 from llcps.models.measures import rank
@@ -43,6 +46,9 @@ TRIALS_PER_EPISODE = 10
 #: The world model and measure of the life (the paper's goal-directed agent's).
 MODEL = "nb"
 MEASURE = "goal-directed"
+#: Trials of the store measured at scale, and with ``--quick``.
+STORE_TRIALS = 1_000_000
+STORE_TRIALS_QUICK = 100_000
 #: Most trials per transaction when the store is filled.
 BATCH = 5000
 #: The toy failure every episode ranks candidates for: an object that must go in a container.
@@ -137,9 +143,44 @@ def live(episodes: Sequence[int], progress: Progress | None = None, *, path: Pat
     return costs
 
 
+@dataclass(frozen=True)
+class StoreAtScale:
+    """The store of a long life: how long filling it took, reading what a branch sees, and
+    durable commits on it."""
+
+    trials: int
+    fill_seconds: float
+    visible_load: Clock
+    commits_per_s: float
+
+
+def store_at_scale(n: int, progress: Progress | None = None, *, commits: int = 300) -> StoreAtScale:
+    """A store of ``n`` trials on one branch, each with features of its own (as pretraining
+    writes them), filled with batched inserts; then its visible set loaded once and
+    ``commits`` single-trial durable commits."""
+    pool = TrialPool()
+    with tempfile.TemporaryDirectory(prefix="llcps-life-") as tmp:
+        with Store.open(str(Path(tmp) / "scale.db"), create=True) as store:
+            say(progress, f"life: filling a store with {n:,} trials")
+            with Clock() as fill:
+                for start in range(0, n, BATCH):
+                    store.add_trials(list(pool.trials(min(BATCH, n - start), "main", start=start)))
+            say(progress, f"life: loading the {n:,} visible trials")
+            with Clock() as load:
+                seen = len(store.visible_trials("main"))
+            say(progress, f"life: {commits} durable commits on {seen:,} trials")
+            one_by_one = list(pool.trials(commits, "main", start=n))
+            with Clock() as single:
+                for trial in one_by_one:
+                    store.add_trial(trial)
+    return StoreAtScale(seen, fill.wall, load, commits / single.wall)
+
+
 def run(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
-    """The overhead outside physics of episodes 10, 100 and 1,000 of a synthetic life."""
+    """The overhead outside physics of episodes 10, 100 and 1,000 of a synthetic life, and
+    the store at 1,000,000 trials (100,000 with ``quick``)."""
     costs = live(EPISODES_QUICK if quick else EPISODES, progress)
+    scale = store_at_scale(STORE_TRIALS_QUICK if quick else STORE_TRIALS, progress)
     figures = []
     for cost in costs:
         subject = f"episode{cost.episode}"
@@ -157,7 +198,17 @@ def run(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
             note=f"overhead at episode {last.episode} over that at episode {first.episode}",
         )
     )
+    subject = f"store{scale.trials}"
+    figures += [
+        _figure("fill", scale.fill_seconds, "s wall", subject=subject, note=f"{BATCH:,} trials per transaction"),
+        _figure(
+            "visible_load", scale.visible_load.wall, "s wall", subject=subject,
+            at_most=2.0 if scale.trials >= STORE_TRIALS else None, note="every trial's features distinct",
+        ),
+        _figure("visible_load_cpu", scale.visible_load.cpu, "s cpu", subject=subject),
+        _figure("commits_per_s", scale.commits_per_s, "trials/s wall", subject=subject, at_least=1000, note="add_trial one at a time, each durable on return"),
+    ]
     return figures
 
 
-__all__ = ["EPISODES", "GROUP", "EpisodeCost", "episode_cost", "live", "run"]
+__all__ = ["EPISODES", "GROUP", "STORE_TRIALS", "EpisodeCost", "StoreAtScale", "episode_cost", "live", "run", "store_at_scale"]
