@@ -24,6 +24,8 @@ from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
 
+from threadpoolctl import threadpool_limits
+
 from llcps.bench.core import Clock, Figure, Progress, figure, say
 from llcps.bench.store import TrialPool
 from llcps.cps.candidates import enumerate_candidates
@@ -130,7 +132,11 @@ def live(episodes: Sequence[int], progress: Progress | None = None, *, path: Pat
     """Run a synthetic life to each of ``episodes`` (ascending) and measure each of them."""
     query, inputs = _query()
     costs = []
-    with tempfile.TemporaryDirectory(prefix="llcps-life-") as tmp:
+    import sklearn.linear_model  # noqa: F401 - loads the BLAS libraries the limit below must reach
+
+    # One BLAS thread, as in an experiment's workers: on a busy machine a threaded BLAS
+    # spins in the goal head's small logistic fits (ten times the CPU at 100 trials).
+    with threadpool_limits(1), tempfile.TemporaryDirectory(prefix="llcps-life-") as tmp:
         with Store.open(f"sqlite:///{path or Path(tmp) / 'life.db'}", create=True) as store:
             done = 1
             for episode in episodes:
