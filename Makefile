@@ -20,7 +20,7 @@ setup: $(BIN)/llcps
 # cannot solve exits 1; the sequence goes on and the table shows it.
 run: setup
 	$(BIN)/llcps --db $(DB) db init
-	$(BIN)/llcps --db $(DB) pretrain --trials 200 --seed 1
+	$(BIN)/llcps --db $(DB) pretrain --trials 200 --seed 1 --workers 2
 	-$(BIN)/llcps --db $(DB) solve scenario1
 	-$(BIN)/llcps --db $(DB) solve scenario2
 	-$(BIN)/llcps --db $(DB) solve scenario3

@@ -288,6 +288,99 @@ def test_ray_engine_gives_the_local_engine_results(reference: tuple[Store, Any],
         assert store_signature(store) == store_signature(ref_store)
 
 
+def _ray_cluster_run(store: Store, *, kill: bool, seeds: list[int] | None = None) -> tuple[Any, list[str]]:
+    """The smoke grid on a local two-node Ray cluster (a head and a worker node, one CPU
+    each); with ``kill``, the worker node is killed as soon as a task runs on it, and the
+    head runs the rest. Returns the summary and what happened to the nodes."""
+    import threading
+
+    import ray
+    from ray._private import ray_constants
+    from ray.cluster_utils import Cluster
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    worker = cluster.add_node(num_cpus=1)
+    cluster.wait_for_nodes()
+    ray.init(address=cluster.address, logging_level="WARNING")
+    events: list[str] = []
+    done = threading.Event()
+
+    def running_a_task() -> bool:
+        """Whether a worker process of the worker node runs a task (Ray titles it ``ray::<function>``)."""
+        raylet = worker.all_processes[ray_constants.PROCESS_TYPE_RAYLET][0].process.pid
+        for pid in _children(raylet):
+            try:
+                title = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[0]
+            except OSError:
+                continue
+            if title.startswith(b"ray::execute_task"):
+                return True
+        return False
+
+    def killer() -> None:
+        while not done.is_set():
+            if running_a_task():
+                time.sleep(1.0)  # well into the task
+                if running_a_task():
+                    cluster.remove_node(worker, allow_graceful=False)
+                    events.append("killed the worker node with a task in flight")
+                    return
+            time.sleep(0.05)
+
+    thread = threading.Thread(target=killer, daemon=True)
+    try:
+        if kill:
+            thread.start()
+        summary = run_experiment(store, preset="smoke", seeds=seeds, workers=2, engine="ray")
+        if kill:
+            events.append("the run finished")
+        return summary, events
+    finally:
+        done.set()
+        if kill:
+            thread.join(timeout=60)
+        ray.shutdown()
+        cluster.shutdown()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kill", [False, True], ids=["steady", "killed-node"])
+def test_a_multi_node_ray_cluster_gives_the_local_engine_results(
+    reference: tuple[Store, Any], tmp_path: Path, kill: bool
+) -> None:
+    """A head and a second node with its own CPU, on SQLite; a node killed mid-run loses
+    only its task in flight, which Ray runs again elsewhere."""
+    pytest.importorskip("ray", reason="Ray is not installed (pip install 'llcps[ray]')")
+    ref_store, _ = reference
+    ray_db = tmp_path / "cluster.db"
+    with Store.open(str(ray_db), create=True):
+        pass
+    with closing(sqlite3.connect(ray_db)) as conn, conn:  # replay the reference's physics (see above)
+        conn.execute("ATTACH DATABASE ? AS ref", (ref_store.url.split("///", 1)[1],))
+        conn.execute("INSERT INTO physics_cache SELECT * FROM ref.physics_cache")
+    with Store.open(str(ray_db)) as store:
+        summary, events = _ray_cluster_run(store, kill=kill)
+        assert summary.status == "ok" and summary.engine == "ray" and summary.done == summary.tasks
+        if kill:  # the task in flight on the dead node ran again on the head
+            assert events == ["killed the worker node with a task in flight", "the run finished"]
+        assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke"))
+        assert store_signature(store) == store_signature(ref_store)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(POSTGRES_SKIP is not None, reason=POSTGRES_SKIP or "")
+def test_a_multi_node_ray_cluster_with_a_killed_node_fills_a_postgresql_store(reference: tuple[Store, Any]) -> None:
+    """One seed of the smoke grid on the two-node cluster into PostgreSQL, a node killed mid-run."""
+    pytest.importorskip("ray", reason="Ray is not installed (pip install 'llcps[ray]')")
+    ref_store, _ = reference
+    with Store.open(fresh_postgres_url(), create=True) as store:
+        summary, events = _ray_cluster_run(store, kill=True, seeds=[0])
+        assert summary.status == "ok" and events == ["killed the worker node with a task in flight", "the run finished"]
+        expected = {k: v for k, v in store_signature(ref_store).items() if k.endswith("-s0") or "-s0-" in k}
+        assert store_signature(store) == expected
+        assert table_key(results_table(store, "smoke")) == table_key(results_table(ref_store, "smoke", [0]))
+
+
 def _children(pid: int) -> list[int]:
     found = []
     for entry in Path("/proc").iterdir():

@@ -47,6 +47,17 @@ def test_the_same_seed_writes_the_same_trials(tmp_path) -> None:
     assert out[0] == out[1]
 
 
+def test_two_workers_write_the_same_trials_as_one(tmp_path) -> None:
+    out = []
+    for workers in (1, 2):
+        with Store.open(str(tmp_path / f"w{workers}.db"), create=True) as store:
+            summary = pretrain(store, branch=None, n=5, seed=4, control_loop_every=0, workers=workers)
+            snapshots = [store.get_snapshot(t.snapshot_id) for t in store.visible_trials(None)]
+            changes = store.visible_changes(None)
+            out.append((rows(store), [(s.scene, s.state) for s in snapshots], sorted(changes.items()), summary.outcome_counts))
+    assert out[0] == out[1]
+
+
 def test_a_negative_count_is_refused(sqlite_store) -> None:
     store = sqlite_store
     with pytest.raises(LlcpsError):

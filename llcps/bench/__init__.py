@@ -18,6 +18,8 @@ The groups against the paper (``GROUPS``; one module each):
   predictions, 1,000 candidates ordered under every measure.
 - ``store`` (:mod:`llcps.bench.store`): the experience store's throughput, durable
   commits, batched inserts and the visible set of a branch three levels deep.
+- ``life`` (:mod:`llcps.bench.life`): the per-episode overhead outside physics (fit,
+  rank, store) at episodes 10, 100 and 1,000 of a synthetic life.
 - ``scaling`` (:mod:`llcps.bench.scaling`): the experiment grid on 1 and 2 worker
   processes, with and without the physics cache.
 

@@ -17,9 +17,10 @@ from llcps.errors import UnknownNameError
 
 #: The groups, in the order they run. Each is the module ``llcps.bench.<name>``, whose
 #: ``run(quick, progress)`` returns its figures.
-GROUPS: tuple[str, ...] = ("physics", "exploration", "models", "ranking", "store", "scaling")
-#: Groups left out of ``--quick``: the experiment grid alone takes more than a minute.
-SLOW_GROUPS: tuple[str, ...] = ("scaling",)
+GROUPS: tuple[str, ...] = ("physics", "exploration", "models", "ranking", "store", "life", "scaling")
+#: Groups left out of ``--quick``: the experiment grid alone takes more than a minute, and
+#: so does a life's fit at episode 1,000.
+SLOW_GROUPS: tuple[str, ...] = ("life", "scaling")
 #: A drift of the bound beyond this (after / before the episodes) marks a machine whose
 #: speed changed during the group.
 DRIFT_WARNING = 0.05

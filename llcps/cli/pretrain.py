@@ -10,7 +10,7 @@ from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, db_location, me
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_PRETRAIN_TRIALS, MAX_SEED, OUTCOME_NAMES
-from llcps.jobs.pretrain import pretrain
+from llcps.jobs.pretrain import MAX_WORKERS, pretrain
 from llcps.models import PAPER_MODELS, WORLD_MODELS
 
 if TYPE_CHECKING:
@@ -48,6 +48,13 @@ def pretrain_cli(
             "(it adds the same trials once more).",
         ),
     ] = False,
+    workers: Annotated[
+        int,
+        typer.Option(
+            "--workers", metavar="N", min=1, max=MAX_WORKERS,
+            help="Processes that run the interactions side by side (the stored trials are the same for any number).",
+        ),
+    ] = 1,
     create: CreateFlag = False,
     as_json: JsonFlag = False,
 ) -> None:
@@ -69,6 +76,7 @@ def pretrain_cli(
             model_seed=model_seed,
             again=again,
             create=create,
+            workers=workers,
             progress=progress,
         )
     summary, fitted = result.summary, result.models
@@ -87,6 +95,7 @@ def pretrain_cli(
 EXAMPLES = examples(
     "llcps pretrain                                 # 200 random interactions, nb and nn fitted",
     "llcps pretrain --trials 50 --seed 3 --model nb",
+    "llcps pretrain --trials 200 --seed 1 --workers 2      # on two cores: the same trials",
     "llcps pretrain --trials 200 --seed 1 --again          # the same 200 trials once more",
     "llcps --branch exp pretrain --trials 200 --model-seed 1 --json",
 )

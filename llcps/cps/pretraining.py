@@ -9,6 +9,8 @@ re-runs it). A run with the same seed writes the same rows, bit for bit.
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable, Iterator, Mapping
@@ -54,6 +56,12 @@ class PretrainTrial:
     scene: SceneSpec
     state: bytes
     result: TrialResult
+
+
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and of its ended worker processes."""
+    times = os.times()
+    return time.process_time() + times.children_user + times.children_system
 
 
 def random_trial(world: World, seed: int) -> PretrainTrial:
@@ -139,22 +147,46 @@ class PretrainSummary:
         }
 
 
+#: Trials a worker process runs per task: small enough to keep both cores busy to the end.
+WORKER_CHUNK = 2
+#: The simulator of this worker process (:func:`_worker_trial`), made on its first trial.
+_worker_world: World | None = None
+
+
+def _worker_trial(job: tuple[int, bool]) -> tuple[PretrainTrial, float | None, tuple[float, float]]:
+    """One trial in a worker process, in that process's own simulator."""
+    global _worker_world
+    if _worker_world is None:
+        _worker_world = World()
+    seed, measure = job
+    return _run(_worker_world, seed, measure=measure)
+
+
 def random_trials(
-    *, seed: int, n: int, world: World | None = None, control_loop_every: int = 0
+    *, seed: int, n: int, world: World | None = None, control_loop_every: int = 0, workers: int = 1
 ) -> Iterator[tuple[PretrainTrial, float | None, tuple[float, float]]]:
     """The ``n`` random interactions of a run seeded with ``seed``, in order.
+
+    Each trial is a function of its own seed alone (its scene is drawn and settled
+    afresh), so ``workers`` processes run them side by side, each in its own simulator,
+    and they are yielded in index order: the same trials as one process, bit for bit.
 
     Yields:
         Each executed trial; the control-loop rate measured on its scene when it is
         a measured one (every ``control_loop_every``-th), else None; and the wall
         and CPU seconds the measurement took.
     """
+    jobs = [(trial_seed(seed, index), bool(control_loop_every) and index % control_loop_every == 0) for index in range(n)]
+    if workers > 1 and n > 1:
+        context = multiprocessing.get_context("spawn")  # a fresh interpreter: no forked simulator state
+        with context.Pool(min(workers, n)) as pool:
+            yield from pool.imap(_worker_trial, jobs, chunksize=WORKER_CHUNK)
+        return
     own = world is None
     w = world if world is not None else World()
     try:
-        for index in range(n):
-            measure = bool(control_loop_every) and index % control_loop_every == 0
-            yield _run(w, trial_seed(seed, index), measure=measure)
+        for trial_seed_, measure in jobs:
+            yield _run(w, trial_seed_, measure=measure)
     finally:
         if own:
             w.close()
@@ -199,6 +231,7 @@ def pretrain(
     seed: int,
     progress: ProgressCallback | None = None,
     control_loop_every: int = CONTROL_LOOP_EVERY,
+    workers: int = 1,
 ) -> PretrainSummary:
     """Run ``n`` random interactions and store each as a ``pretrain`` trial.
 
@@ -212,7 +245,11 @@ def pretrain(
         seed: run seed; trial i uses ``trial_seed(seed, i)``.
         progress: called after every stored trial.
         control_loop_every: measure the raw control-loop rate on every k-th scene (0: never).
+        workers: processes that run the trials side by side (the stored trials are the
+            same for any number; the CPU seconds are then this process's and not the workers').
     """
+    if workers < 1:
+        raise LlcpsError(f"the number of workers must be at least 1, got {workers}", hint="pass --workers 2, say")
     if not 0 <= n <= MAX_PRETRAIN_TRIALS:
         raise LlcpsError(f"the number of trials must be from 0 to {MAX_PRETRAIN_TRIALS}, got {n}", hint="pass --trials 200, say")
     check_seed(seed)
@@ -223,9 +260,9 @@ def pretrain(
     rate_steps = 0
     rate_seconds = 0.0
     measuring_wall = measuring_cpu = 0.0
-    t0, c0 = time.perf_counter(), time.process_time()
+    t0, c0 = time.perf_counter(), _cpu_seconds()
     try:
-        trials = random_trials(seed=seed, n=n, control_loop_every=control_loop_every)
+        trials = random_trials(seed=seed, n=n, control_loop_every=control_loop_every, workers=workers)
         for index, (trial, rate, spent) in enumerate(trials):
             r = trial.result
             snapshot_id = store.put_snapshot(scene=trial.scene.to_dict(), state=trial.state)
@@ -251,9 +288,10 @@ def pretrain(
                 measuring_cpu += spent[1]
             # the measurement's own time is not pretraining time
             summary.wall_seconds = time.perf_counter() - t0 - measuring_wall
-            summary.cpu_seconds = time.process_time() - c0 - measuring_cpu
+            summary.cpu_seconds = _cpu_seconds() - c0 - measuring_cpu
             if progress is not None:
                 progress(index + 1, n)
+        summary.cpu_seconds = _cpu_seconds() - c0 - measuring_cpu  # with the workers', now they have ended
         status = "ok"
     except KeyboardInterrupt:
         status = "interrupted"

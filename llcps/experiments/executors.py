@@ -111,6 +111,10 @@ class LocalEngine:
         self._events.close()
 
 
+#: How often Ray runs a task again whose worker process or node died under it.
+TASK_RETRIES = 3
+
+
 class RayEngine:
     """The same task function as a Ray task, on a local Ray instance or a cluster."""
 
@@ -142,7 +146,9 @@ class RayEngine:
                     f"cannot start or reach Ray{f' at {address}' if address else ''}: {str(exc).splitlines()[0]}",
                     hint="check --ray-address (e.g. ray://host:10001 or auto), or drop it for a local instance",
                 ) from None
-        self._remote = ray.remote(num_cpus=1, max_retries=0)(execute_task)
+        # A task runs against a private scratch store and returns its rows, so one whose
+        # worker or node died is run again from the start (a task that raised is not).
+        self._remote = ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(execute_task)
 
     def submit(self, task: Task) -> Any:
         return self._remote.remote(task)

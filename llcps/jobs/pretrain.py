@@ -11,6 +11,8 @@ if TYPE_CHECKING:
     from llcps.models.persistence import FittedModel
     from llcps.cps.pretraining import PretrainSummary
 
+#: Most worker processes of one pretraining.
+MAX_WORKERS = 64
 #: The phase in which the random interactions run (counted trial by trial).
 INTERACTIONS = "random interactions"
 
@@ -39,6 +41,7 @@ def pretrain(
     model_seed: int = 0,
     again: bool = False,
     create: bool = False,
+    workers: int = 1,
     progress: Progress | None = None,
 ) -> PretrainResult:
     """Run ``trials`` random interactions on ``branch`` (None: the current branch), store each
@@ -48,7 +51,8 @@ def pretrain(
     When a finished pretraining run with the same ``trials`` and ``seed`` is already on the
     branch (its trials all visible), it would write the same trials again: nothing is run
     (``skipped``) unless ``again``; the models are fitted (or loaded) all the same.
-    ``create`` makes the store when ``store`` names none yet.
+    ``create`` makes the store when ``store`` names none yet. ``workers`` processes run the
+    interactions side by side; the stored trials are the same for any number of them.
     """
     from llcps.models import PAPER_MODELS
     from llcps.cps.pretraining import finished_pretraining
@@ -62,7 +66,12 @@ def pretrain(
             summary = earlier
         else:
             summary = run_pretrain(
-                s, branch=branch, n=trials, seed=seed, progress=lambda done, total: report(INTERACTIONS, done, total)
+                s,
+                branch=branch,
+                n=trials,
+                seed=seed,
+                workers=workers,
+                progress=lambda done, total: report(INTERACTIONS, done, total),
             )
         from llcps.models.persistence import fit_models  # torch / sklearn load only here
 

@@ -310,14 +310,14 @@ class GoalHead:
         self.n_examples = 0
         #: Largest trial id the learner was fitted on: later trials are episode evidence.
         self.watermark = 0
-        self._table = ExampleTable()
+        self.table = ExampleTable()
         self._evidence: tuple[np.ndarray, ...] | None = None
         self._evidence_ids: set[int] = set()
 
     # ------------------------------------------------------------------ fitting
     def fit(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalHead:
         """Fit the learner on every record with a known change; forget episode evidence."""
-        examples = self._table.encode(records, changes)
+        examples = self.table.encode(records, changes)
         self.n_examples = len(examples)
         self.watermark = max((r.id for r in records if r.id is not None), default=0)
         positive = float(examples.weights @ examples.labels)
@@ -357,7 +357,7 @@ class GoalHead:
         ]
         if not fresh:
             return self
-        examples = self._table.encode(fresh, changes)
+        examples = self.table.encode(fresh, changes)
         self._evidence_ids.update(r.id for r in fresh)  # type: ignore[misc]
         if not len(examples):
             return self

@@ -128,13 +128,15 @@ class NaiveBayesGoal(GoalLearner):
         self.feature_log_prob = np.log(ones + self.alpha) - np.log(class_weight + 2 * self.alpha)[:, None]
         self.class_log_prior = np.log(class_weight) - np.log(class_weight.sum())
         self.platt = np.array([1.0, 0.0])
-        scale = LogisticRegression(C=1e4, max_iter=1000).fit(self._log_odds(features)[:, None], labels, sample_weight=weights)
+        scale = LogisticRegression(C=1e4, max_iter=1000).fit(self._log_odds_of_bits(x)[:, None], labels, sample_weight=weights)
         slope = float(scale.coef_[0, 0])
         if slope > 0:
             self.platt = np.array([slope, float(scale.intercept_[0])])
 
     def _log_odds(self, features: np.ndarray) -> np.ndarray:
-        x = self._bits(features)
+        return self._log_odds_of_bits(self._bits(features))
+
+    def _log_odds_of_bits(self, x: np.ndarray) -> np.ndarray:
         log_present = self.feature_log_prob
         log_absent = np.log1p(-np.exp(log_present))
         joint = x @ (log_present - log_absent).T + log_absent.sum(axis=1) + self.class_log_prior

@@ -11,6 +11,13 @@ never depends on when its store was made. Artifacts load without executing anyth
 (see :mod:`llcps.models.artifact`); one that fails to load is refitted and replaced, with
 a warning.
 
+A fit of the goal-aware head reads every visible trial's encoded (candidate, atom)
+examples; they are encoded once, the first time a fit reads the trial, and kept in
+the store beside it (:func:`keep_examples`, :func:`stored_examples`), tagged with
+:func:`model_code`: a later fit, on this branch or on a fork, reads them instead of
+encoding the trial again. The bytes are checked as they are read, and examples that
+fail the check are encoded again; either way the fit sees the same numbers.
+
 Within one process, fits are also remembered by the content of their training set
 (:func:`training_digest`): a process that solves many episodes on copies of the
 same trials in different stores (an experiment worker runs every measure and both
@@ -36,6 +43,7 @@ from llcps.trial_records import StoredFeatures, TrialChange, TrialRecord
 from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import WorldModelEntry, world_model_entry
+from llcps.models.relational import Examples, pack_examples, unpack_examples
 from llcps.store.trial_changes import pack_atoms, pack_bodies
 
 if TYPE_CHECKING:
@@ -101,15 +109,47 @@ def training_digest(records: Sequence[TrialRecord], changes: Mapping[int, TrialC
 
 
 def _fit(
-    entry: WorldModelEntry, seed: int, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange], goal: bool
+    entry: WorldModelEntry,
+    seed: int,
+    records: Sequence[TrialRecord],
+    changes: Mapping[int, TrialChange],
+    goal: bool,
+    examples: Callable[[], Mapping[int, Examples]] | None = None,
 ) -> WorldModel:
-    """A fresh fit, or a copy of this process's fit of the same training set."""
+    """A fresh fit, or a copy of this process's fit of the same training set.
+
+    Args:
+        examples: gives goal examples encoded before, by trial id (read only when a fit runs).
+    """
     slot = _remembered_fit(entry.name, seed, training_digest(records, changes), goal)
     if slot:
         return copy.deepcopy(slot[0])
-    model = entry(seed).fit(records, changes, goal=goal)
+    model = entry(seed)
+    if goal and examples is not None:
+        model.goal.table.prime(examples())
+    model.fit(records, changes, goal=goal)
     slot.append(copy.deepcopy(model))  # the caller updates its own model during exploration
     return model
+
+
+def stored_examples(store: Store, branch: str) -> dict[int, Examples]:
+    """The goal examples kept in the store for the trials ``branch`` sees, encoded by
+    today's model code; a row that does not read back is left out (encoded again)."""
+    found = {}
+    for trial_id, data in store.visible_examples(branch, model_code()).items():
+        try:
+            found[trial_id] = unpack_examples(data, trial_id)
+        except LlcpsError as exc:
+            logger.warning("stored goal examples of trial %s are unusable, encoding them again: %s", trial_id, exc.message)
+    return found
+
+
+def keep_examples(store: Store, model: WorldModel) -> None:
+    """Keep in the store the goal examples ``model`` encoded (so no later fit encodes them again)."""
+    table = model.goal.table
+    if table.encoded:
+        store.save_examples(model_code(), {trial_id: pack_examples(e) for trial_id, e in table.encoded.items() if trial_id > 0})
+        table.encoded = {}
 
 
 @functools.lru_cache(maxsize=FIT_MEMO_SIZE)
@@ -179,7 +219,8 @@ def fit_or_load(
         records = store.visible_trials(branch)
     if changes is None or len(changes) != known:
         changes = store.visible_changes(branch)
-    model = _fit(entry, seed, records, changes, goal)
+    model = _fit(entry, seed, records, changes, goal, lambda: stored_examples(store, branch))
+    keep_examples(store, model)
     artifact, meta = model.to_artifact()
     meta["changes"] = known
     meta["code"] = model_code()

@@ -20,7 +20,7 @@ from llcps.errors import LlcpsError, StoreError
 from llcps.store import visibility, writers
 from llcps.store.records import BranchChange, BranchInfo
 from llcps.store.settings import SettingQueries
-from llcps.store.tables import MAX_BRANCH_NAME, Branch, Episode, Operator, OperatorExecution, Run, Trial, TrialChangeRow, WorldModel
+from llcps.store.tables import MAX_BRANCH_NAME, Branch, Episode, Operator, OperatorExecution, Run, Trial, TrialChangeRow, TrialExamplesRow, WorldModel
 from llcps.store.transactions import CHANGED_HINT, utc_now
 from llcps.store.trials import iso_timestamp
 from llcps.store.visibility import Link
@@ -334,6 +334,7 @@ class BranchQueries(SettingQueries):
         )
         conn.execute(delete(WorldModel).where(clauses["model"]))
         conn.execute(delete(TrialChangeRow).where(TrialChangeRow.trial_id.in_(trial_ids)))
+        conn.execute(delete(TrialExamplesRow).where(TrialExamplesRow.trial_id.in_(trial_ids)))
         conn.execute(delete(Trial).where(clauses["trial"]))
         conn.execute(delete(Episode).where(clauses["episode"]))
 

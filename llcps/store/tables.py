@@ -206,6 +206,20 @@ class TrialChangeRow(Base):
     bodies: Mapped[bytes] = mapped_column(LargeBinary)
 
 
+class TrialExamplesRow(Base):
+    """A trial's encoded goal examples (llcps.models.relational.pack_examples), kept once.
+
+    Derived data: encoded the first time a fit reads the trial, tagged with the model
+    code that encoded them; a row of other code is encoded again and replaced.
+    """
+
+    __tablename__ = "trial_examples"
+
+    trial_id: Mapped[int] = mapped_column(ForeignKey("trials.id", ondelete="CASCADE"), primary_key=True)
+    code: Mapped[str] = mapped_column(String(16))
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+
+
 class Operator(Base):
     """A learned operator (the knowledge-base expansion K')."""
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, Sequence
 
-from sqlalchemy import ColumnElement, Connection, func, insert, select
+from sqlalchemy import ColumnElement, Connection, delete, func, insert, select
 from sqlalchemy.exc import IntegrityError
 
 from llcps.domain import check_id
@@ -19,7 +19,7 @@ from llcps.trial_records import TrialChange, TrialRecord
 from llcps.errors import LlcpsError, StoreError
 from llcps.store import backends, visibility
 from llcps.store.branches import BranchQueries
-from llcps.store.tables import Trial, TrialChangeRow
+from llcps.store.tables import Trial, TrialChangeRow, TrialExamplesRow
 from llcps.store.transactions import utc_now
 from llcps.store.trial_changes import CHANGE_COLUMNS, UNKNOWN, ChangeDecoder, change_row
 from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, trial_row
@@ -224,6 +224,40 @@ class TrialQueries(BranchQueries):
                 if changes is None:  # one query, sorted by the database
                     changes = decoder.decode_result(conn.execute(select_changes(chain)))
                 return {c.trial_id: c for c in changes}  # type: ignore[misc]
+
+    # ------------------------------------------------------ encoded examples
+
+    def visible_examples(self, branch: str | None, code: str) -> dict[int, bytes]:
+        """The stored encoded goal examples of the trials ``branch`` sees, by trial id,
+        of those encoded by model code ``code`` (the bytes are untrusted: the model
+        layer that reads them validates them)."""
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            rows = conn.execute(
+                select(TrialExamplesRow.trial_id, TrialExamplesRow.data)
+                .join(Trial, Trial.id == TrialExamplesRow.trial_id)
+                .where(visibility.clause(chain, Trial.branch_id, Trial.id), TrialExamplesRow.code == code)
+            ).all()
+        return {int(trial_id): data for trial_id, data in rows if isinstance(data, (bytes, bytearray, memoryview))}
+
+    def save_examples(self, code: str, examples: dict[int, bytes]) -> None:
+        """Keep trials' encoded goal examples (replacing what other code encoded for them).
+
+        Derived data: a concurrent writer that kept the same trial's examples first wins.
+        """
+        if not examples:
+            return
+        rows = [{"trial_id": int(trial_id), "code": code, "data": bytes(data)} for trial_id, data in examples.items()]
+        try:
+            with self._write() as conn:
+                ids = [row["trial_id"] for row in rows]
+                for start in range(0, len(ids), 5_000):
+                    conn.execute(delete(TrialExamplesRow).where(TrialExamplesRow.trial_id.in_(ids[start : start + 5_000])))
+                conn.execute(insert(TrialExamplesRow), rows)
+        except StoreError as exc:
+            if not isinstance(exc.__cause__, IntegrityError):
+                raise
+            # another process kept them meanwhile (or a trial is gone): nothing to keep
 
     def get_change(self, trial_id: int) -> TrialChange | None:
         """One trial's symbolic change; None when it is unknown or not recorded."""
