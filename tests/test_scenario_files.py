@@ -155,7 +155,13 @@ BAD: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
         lambda d: d["conditions"]["novelty"].update(table={"friction": 0}),
         "conditions.novelty.table.friction: must be positive",
     ),
-    "unknown robot key": (lambda d: d.update(robot={"reach": 0.5}), "robot.reach: unknown key"),
+    "unknown robot key": (lambda d: d.update(robot={"arm": 0.5}), "robot.arm: unknown key"),
+    "negative reach": (lambda d: d.update(robot={"reach": -0.5}), "robot.reach: must be positive"),
+    "reach beyond the arm's": (lambda d: d.update(robot={"reach": 1.5}), "robot.reach: a reach is at most 0.82 m"),
+    "inverted reach range in a condition": (
+        lambda d: d["conditions"]["novelty"].update(robot={"reach": [0.6, 0.5]}),
+        "conditions.novelty.robot.reach: the range [0.6, 0.5] is inverted",
+    ),
     "negative grip": (lambda d: d.update(robot={"grip_force": -5}), "robot.grip_force: must be positive"),
     "grip beyond the bound": (lambda d: d.update(robot={"grip_force": 5000}), "robot.grip_force: a grip is at most 1000 N"),
     "grip not a number in a condition": (

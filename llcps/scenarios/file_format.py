@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, PlainValidator, ValidationErr
 from llcps.domain import COLORS, ORIENTATIONS
 from llcps.errors import LlcpsError
 from llcps.domain import CONDITIONS as CONDITION_NAMES
-from llcps.sim.specs import MAX_FRICTION, MAX_GRIP_FORCE
+from llcps.sim.specs import BEYOND_REACH, MAX_FRICTION, MAX_GRIP_FORCE
 
 #: What an entity, fixture, scenario or alias name may look like (a PDDL object name).
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -146,6 +146,15 @@ class RobotModel(_Model):
     """What the scene changes about the robot (omitted: the Panda as built)."""
 
     grip_force: PositiveScalar | None = None
+    reach: PositiveScalar | None = None
+
+    @field_validator("reach")
+    @classmethod
+    def _reach_bound(cls, value: Scalar | None) -> Scalar | None:
+        high = value[1] if isinstance(value, tuple) else value
+        if high is not None and high > BEYOND_REACH:
+            raise ValueError(f"a reach is at most {BEYOND_REACH:g} m (the arm's own reaches no farther), got {high}")
+        return value
 
     @field_validator("grip_force")
     @classmethod
