@@ -243,6 +243,30 @@ def test_a_condition_weakens_the_grip_of_the_robot_it_builds() -> None:
         assert (weak.robot.grip_force, built.robot.grip_force) == (3.0, 60.0)
 
 
+def test_a_condition_shortens_the_reach_of_the_robot_it_builds() -> None:
+    """`[conditions.novelty.robot] reach` bounds where the hand comes down top-down in that
+    condition alone: perception calls the can unreachable and the placement is refused;
+    the original condition keeps the arm's own reach and describes no robot."""
+    from llcps.sim.controllers import PLAN_TOLERANCE
+    from llcps.sim.perception import is_reachable
+
+    data = copy.deepcopy(BASE)
+    data.update(name="mine")
+    data.pop("alias", None)
+    data["conditions"]["novelty"]["robot"] = {"reach": [0.3, 0.34]}
+    source = read_text(tomli_w.dumps(data), where="mine.toml")
+    novelty, original = source.scene("novelty", 0), source.scene("original", 0)
+    assert novelty.robot.reach == pytest.approx(0.32) and original.robot.reach is None
+    assert novelty.to_dict()["robot"] == {"reach": pytest.approx(0.32)} and "robot" not in original.to_dict()
+    assert type(novelty).from_dict(novelty.to_dict()) == novelty
+    with World.from_scene(novelty) as short, World.from_scene(original) as built:
+        x, y, _ = built.center("can")
+        assert (x * x + y * y) ** 0.5 > 0.32 + PLAN_TOLERANCE
+        assert is_reachable(built, "can") and not is_reachable(short, "can")
+        within = (0.31, 0.0, 0.1)
+        assert short.robot.reach_error(within, 0.0) == built.robot.reach_error(within, 0.0)  # within the reach: as before
+
+
 def test_bad_file_stores_nothing(tmp_path: Path) -> None:
     """`solve BAD.toml` refuses the file before it touches the store."""
     db = tmp_path / "llcps.db"
