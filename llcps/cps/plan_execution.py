@@ -186,7 +186,9 @@ def plan_and_repair(
     return first
 
 
-def resolves(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
+def resolves(
+    executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, trial: TrialResult, failure: Failure, *, count: bool = True
+) -> bool:
     """Did this trial resolve the novelty?
 
     A trial resolves it if the goal now holds, or if K (costed by experience) plans from
@@ -198,6 +200,7 @@ def resolves(executor: TrialExecutor, experience: BranchExperience, kb: Knowledg
     operators where they ran (a_f working after the trial, in the trial's context), so
     that the planner knows the chain of the learned operator and the plan it enabled;
     those of a re-plan that fails count nothing (exploration is not K's plan failing).
+    ``count=False`` counts nothing at all (a sweep judges every candidate alone).
     """
     scenario = executor.scenario
     if scenario.goal_reached(trial.after):
@@ -214,7 +217,7 @@ def resolves(executor: TrialExecutor, experience: BranchExperience, kb: Knowledg
     executed: list[tuple[str, Context, bool, int | None]] = []
     run = run_plan(executor, steps, record=known, executed=executed)
     resolved = run.failure is None and scenario.goal_reached(run.state)
-    if resolved:  # the plan the trial enabled worked: K's steps count where they ran
+    if resolved and count:  # the plan the trial enabled worked: K's steps count where they ran
         for execution in executed:
             experience.record(*execution)
     return resolved
