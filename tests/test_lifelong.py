@@ -186,6 +186,29 @@ def test_branch_knowledge_is_costed_by_its_experience(store: Store, new_trial) -
     assert store.operator_experience("main")[0].context == (("visible", "?o"),)
 
 
+def test_where_experience_leaves_no_plan_the_agent_still_finds_a_f(sqlite_store: Store, new_trial) -> None:  # noqa: ANN001
+    """A placement that failed in another task where the can stood as in scenario12's novelty
+    (within sight, out of reach, like a can under a shelf) bans every plan there; K's own
+    plan is then executed, and its failure is a_f, where exploration starts, rather than the
+    episode ending with no plan (a life met this)."""
+    from llcps.sim.perception import perceive
+    from llcps.sim.world import SETTLE_STEPS, World
+
+    scenario = SCENARIOS["scenario12"]
+    with World.from_scene(scenario.scene("novelty")) as world:
+        world.settle(max_steps=SETTLE_STEPS)
+        state = perceive(world)
+    kb = KnowledgeBase.default()
+    objects = {"can": "item", "bin": "container", "block": "item"}
+    (place,) = plan(kb, Task(objects=objects, init=state, goal_pos=scenario.goal_pos))
+    trial_id = sqlite_store.add_trial(new_trial(0, source="plan"))
+    context = sorted(kb.context(place, state))
+    sqlite_store.add_operator_execution(branch="main", operator=place.name, success=False, context=context, trial_id=trial_id)
+    result = solve(sqlite_store, branch="main", config=SolveConfig(scenario="scenario12", budget=0))
+    assert result.status == "budget_exhausted", result.as_json()
+    assert result.failed_action == "(place_in_container can bin)"
+
+
 @pytest.mark.slow
 def test_a_life_never_explores_more_than_a_fresh_branch(pretrained: Path, fresh: _Fresh) -> None:
     episodes = [(name, condition) for name in NAMES for condition in ("original", "novelty")]
