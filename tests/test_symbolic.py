@@ -351,6 +351,11 @@ def test_a_step_is_not_planned_where_its_operator_failed_and_the_learned_way_is(
     kb = KB.with_operator(learned_push())
     kb = kb.with_experience(Experience.of([(failed.name, kb.context(failed, FAILURE_STATE), False)]))
     assert not kb.allowed(failed, FAILURE_STATE) and kb.allowed(failed, AFTER_PUSH)
+    # predicted after the push, the removal's context contains the one it failed in: never
+    # seen to work there, it stays out of the plan
+    assert not kb.allowed(failed, AFTER_PUSH, predicted=True) and plan(kb, task) is None
+    # the removal that worked after the push (the re-plan that resolved the novelty) counts
+    kb = kb.with_experience(kb.experience.added(failed.name, kb.context(failed, AFTER_PUSH), True))
     assert planned(kb, task) == ["(push_front_r0p2_m0p3 tray cube)", "(remove_from_container cube tray)"]
     reachable = Task(TRAY_OBJECTS, AFTER_PUSH, goal_neg=task.goal_neg)
     assert planned(kb, reachable) == ["(remove_from_container cube tray)"]
@@ -362,6 +367,37 @@ def test_a_step_is_not_planned_where_its_operator_failed_and_the_learned_way_is(
     naive = KB.with_experience(Experience.of([(failed.name, KB.context(failed, FAILURE_STATE), False)]))
     assert not naive.allowed(failed, FAILURE_STATE)
     assert planned(naive, task) == ["(remove_from_container cube tray)"]
+
+
+CAN_BIN = {"can": "item", "bin": "container"}
+#: A bin under a shelf: the can within reach, the bin not.
+UNDER_SHELF = frozenset(
+    {F("visible", "can"), F("visible", "bin"), F("reachable", "can"), F("on", "can", "table"), F("on", "bin", "table")}
+)
+
+
+def test_an_untried_step_that_only_adds_a_fact_does_not_reopen_the_failed_one():
+    """The placement failed where the bin stood under a shelf; moving the bin out (the learned
+    push_together) made it work. K's own push_together, never tried, would add only
+    `touching` to the placement's context: the planner does not take it to try the placement
+    again, however often placements worked elsewhere, and replays what worked."""
+    goal = frozenset({F("in", "can", "bin")})
+    task = Task(CAN_BIN, UNDER_SHELF, goal_pos=goal)
+    (place,) = plan(KB, task)
+    moved = UNDER_SHELF | {F("reachable", "bin")}
+    spec = TrialSpec("push_together", ("bin", "can"), ControllerParams(0.1, 0.3, "front"))
+    learned = learn_operator(spec=spec, before=UNDER_SHELF, after=moved, objects=CAN_BIN, replaces="place_in_container")
+    kb = KB.with_operator(learned)
+    elsewhere = frozenset({F("visible", "?o"), F("visible", "?c"), F("near", "?o", "?c")})
+    kb = kb.with_experience(
+        Experience.of(
+            [(place.name, kb.context(place, UNDER_SHELF), False), (place.name, kb.context(place, moved), True), (learned.name, frozenset(learned.preconditions), True)]
+            + [(place.name, elsewhere, True)] * 20
+        )
+    )
+    touching = UNDER_SHELF | {F("touching", "bin", "can"), F("touching", "can", "bin")}
+    assert kb.allowed(place, touching) and not kb.allowed(place, touching, predicted=True)
+    assert planned(kb, task) == [f"({learned.name} bin can)", "(place_in_container can bin)"]
 
 
 def test_stored_refinements_of_earlier_versions_still_load():

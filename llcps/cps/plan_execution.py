@@ -19,6 +19,7 @@ from llcps.cps.executor import TrialExecutor
 from llcps.domain import State
 from llcps.scenarios.base import Scenario
 from llcps.sim.trial import TrialResult
+from llcps.symbolic.experience import Context, Experience
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.monitor import StepFailure, check_step
 from llcps.symbolic.planner import GroundAction, plan
@@ -78,6 +79,7 @@ def run_plan(
     store: bool = True,
     record: KnowledgeBase | None = None,
     experience: BranchExperience | None = None,
+    executed: list[tuple[str, Context, bool, int | None]] | None = None,
 ) -> PlanRun:
     """Execute a plan step by step with the monitor; stop at the first failing step.
 
@@ -93,6 +95,8 @@ def run_plan(
         record: the knowledge base the plan was made with: count each step in
             ``experience`` as an execution of its operator in its context (success or
             failure), which sets the operator's cost by experience. None: count nothing.
+        executed: with ``record``, collect the executions here instead of counting them
+            in ``experience`` (the caller counts them if it wants them).
     """
     scenario = executor.scenario
     state = executor.perceive()
@@ -106,9 +110,13 @@ def run_plan(
         trial, trial_record = executor.execute(spec, source="plan", snapshot_id=stored)
         reached = scenario.goal_reached(trial.after)
         failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], scenario), trial.after)
-        if record is not None and experience is not None and store:
-            context = record.context(step, trial.before)
-            experience.record(step.name, context, failure is None, trial_record.id if trial_record is not None else None)
+        if record is not None and store and (experience is not None or executed is not None):
+            execution = (step.name, record.context(step, trial.before), failure is None, trial_record.id if trial_record is not None else None)
+            if executed is not None:
+                executed.append(execution)
+            else:
+                assert experience is not None
+                experience.record(*execution)
         if reached:
             return PlanRun(trial.after)
         if failure is not None:
@@ -141,6 +149,10 @@ def plan_and_repair(
     ``store=False`` nothing is stored or counted (the path ``llcps inspect model`` takes
     to the failure point); the failed steps are still left out of the re-plans.
 
+    Where experience leaves no plan at all (every way failed in a context like this
+    one), K's first plan is made without it: its failure gives a_f, and exploration
+    starts there instead of the episode ending with no plan.
+
     Returns:
         The first failure, or None when no step failed. Exploration looks for an
         alternative to its step a_f from the state a_f was executed in.
@@ -151,6 +163,11 @@ def plan_and_repair(
         executor.report("plan" if attempt == 0 else "re-plan")
         known = experience.costed(kb)
         steps = plan(known, executor.task(state), exclude=excluded)
+        if steps is None and attempt == 0 and known.experience.entries:
+            # Experience bans every plan (each way failed in a context like this one,
+            # perhaps in another task): K's own plan, uncosted, is where a_f and so
+            # exploration come from, rather than giving up with no plan.
+            steps = plan(kb.with_experience(Experience()), executor.task(state), exclude=excluded)
         if steps is None:
             break
         labels = [step.label for step in steps]
@@ -193,7 +210,9 @@ def find_failure(executor: TrialExecutor, experience: BranchExperience, kb: Know
     return plan_and_repair(executor, experience, kb, state, log)
 
 
-def resolves(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, trial: TrialResult, failure: Failure) -> bool:
+def resolves(
+    executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, trial: TrialResult, failure: Failure, *, count: bool = True
+) -> bool:
     """Did this trial resolve the novelty?
 
     A trial resolves it if the goal now holds, or if K (costed by experience) plans from
@@ -201,7 +220,11 @@ def resolves(executor: TrialExecutor, experience: BranchExperience, kb: Knowledg
     failure point itself started with a_f, which failed there, so a plan that works now
     works because of the trial. Only a trial that changed a fact about an entity of a_f
     or of the goal is followed by a re-plan: other changes cannot have made a plan work
-    that did not before.
+    that did not before. The steps of a re-plan that works count as executions of their
+    operators where they ran (a_f working after the trial, in the trial's context), so
+    that the planner knows the chain of the learned operator and the plan it enabled;
+    those of a re-plan that fails count nothing (exploration is not K's plan failing).
+    ``count=False`` counts nothing at all (a sweep judges every candidate alone).
     """
     scenario = executor.scenario
     if scenario.goal_reached(trial.after):
@@ -210,9 +233,15 @@ def resolves(executor: TrialExecutor, experience: BranchExperience, kb: Knowledg
     changed = trial.after ^ failure.state
     if not any(focus.intersection(atom[1:]) for atom in changed):
         return False
-    steps = plan(experience.costed(kb), executor.task(trial.after))
+    known = experience.costed(kb)
+    steps = plan(known, executor.task(trial.after))
     if not steps:
         return False
     executor.report("re-plan")
-    run = run_plan(executor, steps)
-    return run.failure is None and scenario.goal_reached(run.state)
+    executed: list[tuple[str, Context, bool, int | None]] = []
+    run = run_plan(executor, steps, record=known, executed=executed)
+    resolved = run.failure is None and scenario.goal_reached(run.state)
+    if resolved and count:  # the plan the trial enabled worked: K's steps count where they ran
+        for execution in executed:
+            experience.record(*execution)
+    return resolved

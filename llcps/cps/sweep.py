@@ -119,7 +119,7 @@ def sweep(
                 spec = candidates[index]
                 trial, _ = executor.execute(spec, source="exploration", snapshot_id=failure.snapshot, start=failure.snapshot)
                 found.tried += 1
-                if resolves(executor, experience, kb, trial, failure):
+                if resolves(executor, experience, kb, trial, failure, count=False):
                     found.resolving.append(index)
                     found.labels.append(spec.label)
                 if progress is not None:

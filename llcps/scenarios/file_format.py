@@ -36,6 +36,7 @@ from llcps.limits import (
     MAX_TEXT,
     MIN_RATE,
 )
+from llcps.sim.specs import BEYOND_REACH
 
 #: What an entity, fixture, scenario or alias name may look like (a PDDL object name).
 NAME = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -174,6 +175,15 @@ class RobotModel(_Model):
     """What the scene changes about the robot (omitted: the Panda as built)."""
 
     grip_force: Force | None = None
+    reach: PositiveScalar | None = None
+
+    @field_validator("reach")
+    @classmethod
+    def _reach_bound(cls, value: Scalar | None) -> Scalar | None:
+        high = value[1] if isinstance(value, tuple) else value
+        if high is not None and high > BEYOND_REACH:
+            raise ValueError(f"a reach is at most {BEYOND_REACH:g} m (the arm's own reaches no farther), got {high}")
+        return value
 
     @field_validator("grip_force")
     @classmethod

@@ -31,7 +31,7 @@ from llcps.sim.builders import bucket, edge_lip, inside, open_box, shelf, solid,
 from llcps.sim.specs import EntitySpec, FixtureSpec, RobotSpec, SceneSpec, TableSpec
 
 #: Fields whose value is a number or a range.
-_NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half", "friction", "grip_force"})
+_NUMBER_FIELDS = frozenset({"x", "y", "yaw", "mass", "wall", "height", "thickness", "clearance", "x_min", "x_max", "y_half", "friction", "grip_force", "reach"})
 #: Fields that list numbers or ranges.
 _LIST_FIELDS = frozenset({"size", "offset"})
 

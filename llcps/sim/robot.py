@@ -171,11 +171,19 @@ class Robot:
     """
 
     def __init__(
-        self, client: Any, *, visuals: bool = True, reach: ReachSolutions | None = None, grip_force: float | None = None
+        self,
+        client: Any,
+        *,
+        visuals: bool = True,
+        reach: ReachSolutions | None = None,
+        grip_force: float | None = None,
+        top_down_reach: float | None = None,
     ) -> None:
         self.client = client
         #: Strength (N) of the grasp constraint that carries a lifted object.
         self.grip_force = GRASP_FORCE if grip_force is None else grip_force
+        #: Farthest horizontal distance (m) from the base of a top-down pose (None: the arm's own).
+        self.top_down_reach = top_down_reach
         #: The IK solutions of :meth:`reach_error`, shared by the robots of one engine.
         self.reach = reach if reach is not None else ReachSolutions()
         cid = client._client
@@ -348,6 +356,8 @@ class Robot:
             reset(body, j, s[0], s[1])
         pos, orn = state[4], state[5]
         err = math.dist(pos, position)
+        if self.top_down_reach is not None:  # a shorter reach: the pose is as far off as it lies beyond it
+            err = max(err, math.hypot(position[0], position[1]) - self.top_down_reach)
         # tool z axis in world: third column of the rotation matrix
         x, y, z, w = orn
         axis_z = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))

@@ -275,9 +275,14 @@ class RobotSpec(_Record):
         grip_force: strength (N) of the grasp that holds a lifted object; None:
             :data:`llcps.sim.robot.GRASP_FORCE`. An object whose weight and
             acceleration ask more slips out of the hand.
+        reach: the farthest horizontal distance (m) from the base at which the hand
+            comes down top-down (to grasp, release, or perceive a thing as reachable);
+            None: the arm's own, about :data:`TOP_DOWN_REACH`'s upper end. Strokes along
+            the table are not limited by it.
     """
 
     grip_force: float | None = None
+    reach: float | None = None
 
     def __post_init__(self) -> None:
         if self.grip_force is not None:
@@ -285,10 +290,20 @@ class RobotSpec(_Record):
             if not force > 0:
                 raise ValueError(f"the robot's grip_force must be positive, got {self.grip_force!r}")
             object.__setattr__(self, "grip_force", force)
+        if self.reach is not None:
+            reach = _number(self.reach, "the robot's reach", BEYOND_REACH)
+            if not reach > 0:
+                raise ValueError(f"the robot's reach must be positive, got {self.reach!r}")
+            object.__setattr__(self, "reach", reach)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Only the capabilities the scene changes: scenes written before a field existed
+        keep their exact description (and cache keys)."""
+        return {k: v for k, v in super().to_dict().items() if v is not None}
 
     @property
     def default(self) -> bool:
-        return self.grip_force is None
+        return self.grip_force is None and self.reach is None
 
 
 @dataclass(frozen=True)

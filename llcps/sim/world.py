@@ -174,7 +174,7 @@ class World:
         c.changeDynamics(self.fixtures[FLOOR], -1, lateralFriction=0.6, restitution=0.0)
         for spec in scene.fixtures:
             self.fixtures[spec.name] = build_fixture(c, spec)
-        self.robot = Robot(c, visuals=self.visuals, reach=self._connection.reach, grip_force=scene.robot.grip_force)
+        self.robot = Robot(c, visuals=self.visuals, reach=self._connection.reach, grip_force=scene.robot.grip_force, top_down_reach=scene.robot.reach)
         for link in (-1, 0):  # the base and shoulder stand on the table and never leave it
             c.setCollisionFilterPair(self.robot.body_id, self.fixtures[TABLE], link, -1, 0)
         for spec in scene.entities:

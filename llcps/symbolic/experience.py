@@ -107,6 +107,16 @@ class Experience:
                 s, f = s + es, f + ef
         return s, f
 
+    def counts_within(self, name: str, context: Context) -> tuple[int, int]:
+        """(successes, failures) of ``name`` in every context ``context`` contains: where
+        everything that held then holds now (and maybe more)."""
+        key = name.lower()
+        s = f = 0
+        for entry, ctx, es, ef in self.entries:
+            if entry == key and context.issuperset(ctx):
+                s, f = s + es, f + ef
+        return s, f
+
     def cost(self, name: str, nominal: float, context: Context | None = None) -> float:
         """The plan cost of ``name``: from its counts in ``context`` where it was executed
         there, else from its counts in every context (see the module docstring)."""

@@ -20,6 +20,9 @@ action costs (Fast Downward, through unified-planning, in the tests):
 
 What PDDL cannot carry, the cost of an operator in one context where experience there
 differs from its cost over every context, is listed in a comment at the top of the file.
+Nor does it carry the planner's stricter ban in the states a plan predicts (a context
+never seen that contains one where the operator only failed): a planner reading the
+export may plan such a step where llcps's planner does not.
 """
 
 from __future__ import annotations

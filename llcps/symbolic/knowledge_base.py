@@ -269,12 +269,24 @@ class KnowledgeBase:
             raise UnknownNameError("operator", step.name, [op.name for op in self.operators()])
         return step_context(variables, step.args, state, self.constants)
 
-    def allowed(self, step: GroundAction, state: State) -> bool:
+    def allowed(self, step: GroundAction, state: State, *, predicted: bool = False) -> bool:
         """Whether experience allows ``step`` in ``state``: not where its operator has failed
-        in the same context and never worked there (the planner then looks elsewhere)."""
+        in the same context and never worked there (the planner then looks elsewhere).
+
+        In a ``predicted`` state (one a plan expects to reach, not one perceived), a context
+        never seen is judged by the seen contexts it contains: a step that failed where
+        F held, and never worked where only facts of the predicted context held, stays out
+        wherever F still holds. Otherwise an untried step that merely adds a fact to the
+        context (``touching``) would let the planner try a_f again, where the learned
+        operator that made it work is known. A perceived state is judged by its own
+        context: after a trial changed it, the re-plan gets a fair chance.
+        """
         if not self.experience.entries:
             return True
-        successes, failures = self.experience.counts(step.name, self.context(step, state))
+        context = self.context(step, state)
+        successes, failures = self.experience.counts(step.name, context)
+        if predicted and not successes and not failures:
+            successes, failures = self.experience.counts_within(step.name, context)
         return successes > 0 or failures == 0
 
     def step_cost(self, step: GroundAction, state: State) -> float:

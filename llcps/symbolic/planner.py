@@ -9,12 +9,13 @@ The tests hold it against one all the same: Fast Downward, through unified-plann
 K' as :mod:`llcps.symbolic.export` writes it.
 
 Steps are costed by K's experience in the context they would run in, and a step is
-left out where its operator has failed in that context and never worked there
-(:meth:`KnowledgeBase.step_cost`, :meth:`KnowledgeBase.allowed`). Experience only
-orders plans, it never removes the last one: when every plan uses a step experience
-left out, the search runs again with those steps allowed (at their experience cost).
-A task K can solve has a plan under any experience, so the agent always reaches a
-step to fail at, and explores from there.
+left out where its operator has failed in that context and never worked there; in a state
+the plan predicts (beyond the perceived one), also where it failed in a context the
+predicted one contains and never worked in one (:meth:`KnowledgeBase.step_cost`,
+:meth:`KnowledgeBase.allowed`). Experience only orders plans, it never removes the last
+one: when every plan uses a step experience left out, the search runs again with those
+steps allowed (at their experience cost). A task K can solve has a plan under any
+experience, so the agent always reaches a step to fail at, and explores from there.
 
 Ties between plans of equal cost are broken deterministically: fewer steps first, then
 the order in which operators and their arguments sort.
@@ -138,7 +139,7 @@ def _search(
                 hint="raise max_expansions or give the task fewer objects",
             )
         for action in actions:
-            if not action.applicable(state) or (by_experience and not kb.allowed(action, state)):
+            if not action.applicable(state) or (by_experience and not kb.allowed(action, state, predicted=state is not start)):
                 continue
             successor = action.apply(state)
             if successor in closed:
