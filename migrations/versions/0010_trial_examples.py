@@ -7,8 +7,8 @@ and kept here, tagged with the digest of the model code that encoded them
 (``llcps.models.persistence.model_code``): rows of other code are encoded again. A
 derived table: the downgrade drops it and nothing is lost.
 
-Revision ID: 0009
-Revises: 0008
+Revision ID: 0010
+Revises: 0009
 Create Date: 2026-11-26
 """
 
@@ -17,8 +17,8 @@ from __future__ import annotations
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0009"
-down_revision = "0008"
+revision = "0010"
+down_revision = "0009"
 branch_labels = None
 depends_on = None
 
