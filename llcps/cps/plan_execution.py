@@ -19,7 +19,7 @@ from llcps.cps.executor import TrialExecutor
 from llcps.domain import State
 from llcps.scenarios.base import Scenario
 from llcps.sim.trial import TrialResult
-from llcps.symbolic.experience import Context, Experience
+from llcps.symbolic.experience import Context
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.monitor import StepFailure, check_step
 from llcps.symbolic.planner import GroundAction, plan
@@ -149,9 +149,9 @@ def plan_and_repair(
     ``store=False`` nothing is stored or counted (the path ``llcps inspect model`` takes
     to the failure point); the failed steps are still left out of the re-plans.
 
-    Where experience leaves no plan at all (every way failed in a context like this
-    one), K's first plan is made without it: its failure gives a_f, and exploration
-    starts there instead of the episode ending with no plan.
+    Experience never leaves K without a plan (the planner runs again with the steps
+    experience left out allowed, :func:`llcps.symbolic.planner.plan`): a step that
+    failed in a context like this one is planned, dearer, fails again, and gives a_f.
 
     Returns:
         The first failure, or None when no step failed. Exploration looks for an
@@ -163,11 +163,6 @@ def plan_and_repair(
         executor.report("plan" if attempt == 0 else "re-plan")
         known = experience.costed(kb)
         steps = plan(known, executor.task(state), exclude=excluded)
-        if steps is None and attempt == 0 and known.experience.entries:
-            # Experience bans every plan (each way failed in a context like this one,
-            # perhaps in another task): K's own plan, uncosted, is where a_f and so
-            # exploration come from, rather than giving up with no plan.
-            steps = plan(kb.with_experience(Experience()), executor.task(state), exclude=excluded)
         if steps is None:
             break
         labels = [step.label for step in steps]
