@@ -113,8 +113,7 @@ def run_cli(
         typer.Option(
             "--ordering",
             metavar="NAME",
-            help="Exploration ordering of every episode (default: the preset's: ranked for the paper's presets, "
-            "hedged for generalization); one of: " + ", ".join(ORDERINGS) + ". Run another ordering into another store.",
+            help="Exploration ordering of every episode (default: the preset's, ranked); one of: " + ", ".join(ORDERINGS) + ". Run another ordering into another store.",
             show_default=False,
         ),
     ] = None,

@@ -7,13 +7,7 @@ it. Random order knows nothing, but it is never misled. This ordering interleave
 two:
 
 - *the ranking*: the best untried candidate under the model and measure
-  (:class:`~llcps.cps.orderings.ranked.Ranked`, updated after every failed trial), by
-  the model's probability of resolving the novelty in steps of a factor
-  :data:`RESOLUTION` and, within a step, in random order's order: what the model cannot
-  tell apart, it tries as random order would. A model with a flat ranking is then
-  random order itself, not a second, independent order beside it (two independent
-  orders interleaved need a third more trials than one, for a single resolving
-  candidate);
+  (:class:`~llcps.cps.orderings.ranked.Ranked`, updated after every failed trial);
 - *random order*: the next untried candidate of the order the random-order baseline
   (the ``random`` world model, which scores each candidate by a hash of the seed and
   the candidate) gives the same candidates under the same measure and seed, ranked
@@ -60,7 +54,6 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from llcps.cps.exploration import FailurePoint, Ranking, rank_candidates
-from llcps.models.measures import GOAL_FLOOR
 from llcps.cps.orderings.base import Exploration
 from llcps.cps.orderings.ranked import Ranked
 
@@ -69,10 +62,6 @@ if TYPE_CHECKING:
 
 #: The world model whose ranking is random order.
 RANDOM_ORDER = "random"
-#: The model's side tells candidates apart by their probability of resolving in steps of
-#: this factor; within a step it follows random order's order. A model that cannot tell
-#: candidates apart (a flat ranking) then tries what random order tries, in its order.
-RESOLUTION = 2.0
 #: Most of the trials the model's ranking may take (the rest follow random order).
 MAX_MODEL_SHARE = 0.5
 #: Belief, before any trial, that the resolving candidate lies where the model says.
@@ -116,23 +105,12 @@ class Hedged(Ranked):
         self.exploration = exploration
         #: Random order's side: every candidate, in the order it tries them.
         self.permutation = self.random_side()
-        self._position = {index: k for k, index in enumerate(self.permutation)}
         super().__init__(exploration)
         self._cursor = 0
         self.log_odds = math.log(MODEL_PRIOR / (1.0 - MODEL_PRIOR))
         self.credit = 1.0
         self.picks: list[str] = []
         self.beliefs: list[float] = []
-
-    def ordered(self, ranking: Ranking) -> list[int]:
-        """The model's side: best first by the model's probability of resolving, in
-        steps of a factor :data:`RESOLUTION`; within a step, random order's order."""
-        probability = resolve_probabilities(ranking, self.exploration.point)
-        if probability is None:
-            return list(ranking.order)
-        level = np.floor(np.log(np.maximum(probability, GOAL_FLOOR)) / math.log(RESOLUTION))
-        key = {i: (-float(v), self._position[i]) for i, v in zip(ranking.indices, level)}
-        return sorted(ranking.order, key=key.__getitem__)
 
     def random_side(self) -> list[int]:
         """Every candidate in random order's order (:func:`random_order`)."""
