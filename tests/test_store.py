@@ -46,11 +46,13 @@ def test_add_trials_keeps_input_order_and_filters(store: Store, new_trial) -> No
     ids = store.add_trials(news)
     assert ids == sorted(ids) and len(set(ids)) == 12
     assert [store.get_trial(i).seed for i in ids] == list(range(12))
-    assert [t.id for t in store.visible_trials("main", source="plan")] == [ids[i] for i in range(12) if i % 4 == 1]
+    plan = TRIAL_SOURCES.index("plan")
+    assert [t.id for t in store.visible_trials("main", source="plan")] == [ids[i] for i in range(12) if i % len(TRIAL_SOURCES) == plan]
     assert [t.id for t in store.visible_trials("main", solved=True)] == [ids[i] for i in range(12) if i % 3 == 0]
     assert [t.id for t in store.visible_trials("main", scenario="s1", newest_first=True, limit=2)] == [ids[11], ids[9]]
     assert [t.id for t in store.visible_trials("main", after_id=ids[9])] == ids[10:]
-    assert store.count_visible_trials("main", source="pretrain") == 3
+    pretrain = TRIAL_SOURCES.index("pretrain")
+    assert store.count_visible_trials("main", source="pretrain") == sum(i % len(TRIAL_SOURCES) == pretrain for i in range(12))
     assert store.max_visible_trial_id("main") == ids[-1]
 
 

@@ -10,10 +10,11 @@ import typer
 
 from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, message, new_app, notice, open_store, print_json, print_table
 from llcps.cli._conventions import examples
+from llcps.domain import MAX_SEED
 from llcps.cli._progress import progress_display
 from llcps.errors import LlcpsError
 from llcps.experiments.executors import ENGINES
-from llcps.experiments.life import LIFE_CONDITIONS, condition_names
+from llcps.experiments.life import LIFE_CONDITIONS, MAX_EPISODES, condition_names
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
 
@@ -57,11 +58,11 @@ def run_cli(
     lives: Annotated[int, typer.Option("--lives", metavar="N", min=1, max=10_000, help="How many lives (life N draws its episodes from seed N).")] = 1,
     first_life: Annotated[
         int,
-        typer.Option("--first-life", metavar="K", min=0, help="Start at life K (K..K+N-1): runners on several machines sharing one store take disjoint lives."),
+        typer.Option("--first-life", metavar="K", min=0, max=MAX_SEED, help="Start at life K (K..K+N-1): runners on several machines sharing one store take disjoint lives."),
     ] = 0,
     episodes: Annotated[
         Optional[int],
-        typer.Option("--episodes", metavar="K", min=1, help="Cut each life to its first K episodes (a quick look; a store holds one length per life).", show_default=False),
+        typer.Option("--episodes", metavar="K", min=1, max=MAX_EPISODES, help="Cut each life to its first K episodes (a quick look; a store holds one length per life).", show_default=False),
     ] = None,
     conditions: Annotated[
         Optional[str],
@@ -183,8 +184,8 @@ def list_cli(as_json: JsonFlag = False) -> None:
 @app.command("show", epilog=examples("llcps life show default", "llcps life show default --life 3", "llcps life show mine.toml --life 0 --json"))
 def show_cli(
     life: LifeArg,
-    seed: Annotated[Optional[int], typer.Option("--life", metavar="N", min=0, help="Also list the episodes life N draws.", show_default=False)] = None,
-    episodes: Annotated[Optional[int], typer.Option("--episodes", metavar="K", min=1, help="Cut the life to K episodes.", show_default=False)] = None,
+    seed: Annotated[Optional[int], typer.Option("--life", metavar="N", min=0, max=MAX_SEED, help="Also list the episodes life N draws.", show_default=False)] = None,
+    episodes: Annotated[Optional[int], typer.Option("--episodes", metavar="K", min=1, max=MAX_EPISODES, help="Cut the life to K episodes.", show_default=False)] = None,
     as_json: JsonFlag = False,
 ) -> None:
     """A life file as written, and with --life N the episodes of life N (every condition solves these)."""

@@ -19,7 +19,7 @@ from typing import Any, Sequence
 
 from llcps.errors import LlcpsError
 from llcps.jobs._common import Progress, StoreRef, no_progress, opened
-from llcps.outputs import check_output_file
+from llcps.outputs import check_output_file, written_atomically
 
 #: Extensions of the policy files ``--out`` writes (a zip of .npy arrays).
 POLICY_SUFFIXES: tuple[str, ...] = (".npz",)
@@ -185,7 +185,8 @@ def train(
             branch=branch_name, name=POLICY_NAME, seed=0, watermark=s.max_visible_trial_id(branch_name), artifact=artifact.data, meta=artifact.meta
         )
     if out is not None:
-        Path(out).expanduser().write_bytes(write_policy_file(artifact))
+        with written_atomically(Path(out).expanduser(), what="--out") as target:
+            target.write_bytes(write_policy_file(artifact))
     return TrainResult(
         scenarios=info["scenarios"],
         variants=info["variants"],
