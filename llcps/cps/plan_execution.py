@@ -162,7 +162,7 @@ def plan_and_repair(
     for attempt in range(1 + MAX_PLAN_REPAIRS):
         executor.report("plan" if attempt == 0 else "re-plan")
         known = experience.costed(kb)
-        steps = plan(known, executor.task(state), exclude=excluded)
+        steps = plan(known, executor.task(state), exclude=excluded, last_resort=attempt == 0)
         if steps is None:
             break
         labels = [step.label for step in steps]

@@ -13,8 +13,8 @@ left out where its operator has failed in that context and never worked there; i
 the plan predicts (beyond the perceived one), also where it failed in a context the
 predicted one contains and never worked in one (:meth:`KnowledgeBase.step_cost`,
 :meth:`KnowledgeBase.allowed`). Experience only orders plans, it never removes the last
-one: when every plan uses a step experience left out, the search runs again with those
-steps allowed (at their experience cost). A task K can solve has a plan under any
+one: when every plan uses a step experience left out, the agent's first plan is searched
+again with those steps allowed (at their experience cost; ``last_resort``). A task K can solve has a plan under any
 experience, so the agent always reaches a step to fail at, and explores from there.
 
 Ties between plans of equal cost are broken deterministically: fewer steps first, then
@@ -82,6 +82,7 @@ def plan(
     exclude: Collection[tuple[str, tuple[str, ...]]] = (),
     max_expansions: int = MAX_EXPANSIONS,
     max_states: int = MAX_PLANNER_STATES,
+    last_resort: bool = False,
 ) -> Plan | None:
     """The cheapest plan from the task's initial state to its goal.
 
@@ -93,6 +94,11 @@ def plan(
         max_expansions: how many states the search may expand before giving up.
         max_states: how many states it may hold (reached, with cost and parent): this,
             not the expansions, bounds its memory.
+        last_resort: when experience leaves out every plan, search again with the steps
+            it left out allowed (at their experience cost). The agent asks for this for
+            its first plan only, so that it always reaches a step to fail at; a re-plan
+            after an exploration trial does not, or a trial would "resolve" the novelty
+            by re-running a step experience ruled out there.
 
     Returns:
         A cheapest plan (empty when s0 already satisfies the goal), or None when no plan
@@ -106,7 +112,7 @@ def plan(
     banned = {(name.lower(), tuple(args)) for name, args in exclude}
     actions = [a for a in ground(kb, task) if (a.name.lower(), a.args) not in banned]
     found = _search(kb, task, actions, max_expansions=max_expansions, max_states=max_states, by_experience=True)
-    if found is None and kb.experience.entries:
+    if found is None and last_resort and kb.experience.entries:
         # Experience left out every plan: it may make a step dear, never impossible.
         found = _search(kb, task, actions, max_expansions=max_expansions, max_states=max_states, by_experience=False)
     return found
