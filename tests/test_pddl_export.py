@@ -4,6 +4,9 @@ search on a translated SAS+ task) solves it, and UP's validator accepts llcps's 
 
 from __future__ import annotations
 
+import contextlib
+import tempfile
+
 import pytest
 import unified_planning.shortcuts as up
 from typer.testing import CliRunner
@@ -53,8 +56,11 @@ def _parse(domain: str, problem: str):
 
 
 def _solve(problem, *, optimal: bool = True):
-    with up.OneshotPlanner(name="fast-downward-opt" if optimal else "fast-downward") as planner:
-        return planner.solve(problem)
+    # Fast Downward's translator writes output.sas into the working directory: one of its
+    # own per call, or two test processes read each other's.
+    with tempfile.TemporaryDirectory() as scratch, contextlib.chdir(scratch):
+        with up.OneshotPlanner(name="fast-downward-opt" if optimal else "fast-downward") as planner:
+            return planner.solve(problem)
 
 
 def _validate(problem, steps: Plan | SequentialPlan):

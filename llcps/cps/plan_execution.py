@@ -109,7 +109,8 @@ def run_plan(
             stored, physics = None, executor.checkpoint()
         trial, trial_record = executor.execute(spec, source="plan", snapshot_id=stored)
         reached = scenario.goal_reached(trial.after)
-        failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], scenario), trial.after)
+        learned = record is not None and record.is_learned(step.name)
+        failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], scenario, learned=learned), trial.after)
         if record is not None and store and (experience is not None or executed is not None):
             execution = (step.name, record.context(step, trial.before), failure is None, trial_record.id if trial_record is not None else None)
             if executed is not None:
@@ -125,9 +126,19 @@ def run_plan(
     return PlanRun(state)
 
 
-def _relied_on(step: GroundAction, later: Sequence[GroundAction], scenario: Scenario) -> GroundAction:
-    """``step`` with only the effects the goal or a later step's preconditions need."""
+def _relied_on(step: GroundAction, later: Sequence[GroundAction], scenario: Scenario, *, learned: bool = False) -> GroundAction:
+    """``step`` with only the effects the goal or a later step's preconditions need.
+
+    A ``learned`` operator's facts about a later step's arguments are needed too: it is
+    planned for the context it gives the step it was learned to make work (the planner
+    judges that step by the facts of its arguments, :meth:`KnowledgeBase.allowed`), even
+    when no precondition names them. Bound to the wrong object (a block where a can was
+    learned) it leaves that context unmade, and the monitor must see it fail there, not
+    at the step after it.
+    """
     needed_true = set(scenario.goal_pos).union(*(s.preconditions for s in later))
+    if learned:
+        needed_true.update(atom for atom in step.add if any(set(atom[1:]) <= set(s.args) for s in later))
     needed_false = set(scenario.goal_neg).union(*(s.negative_preconditions for s in later))
     return replace(step, add=step.add & needed_true, delete=step.delete & needed_false)
 

@@ -311,6 +311,10 @@ class KnowledgeBase:
                 return op
         raise UnknownNameError("operator", name, [op.name for op in self.operators()])
 
+    def is_learned(self, name: str) -> bool:
+        """Whether ``name`` is one of the learned operators (K' beyond K's actions)."""
+        return any(op.name.lower() == name.lower() for op in self.learned)
+
     def learned_operator(self, name: str) -> LearnedOperator:
         """The learned operator called ``name`` (for its controller settings)."""
         for op in self.learned:

@@ -111,6 +111,10 @@ def plan(
     task.check(kb)
     banned = {(name.lower(), tuple(args)) for name, args in exclude}
     actions = [a for a in ground(kb, task) if (a.name.lower(), a.args) not in banned]
+    # Of equally cheap plans, the one acting on the goal's objects: a learned operator's
+    # context rarely tells the object it was learned on from a bystander of its type.
+    goal_objects = {term for atom in (*task.goal_pos, *task.goal_neg) for term in atom[1:]}
+    actions.sort(key=lambda a: -len(goal_objects.intersection(a.args)))
     found = _search(kb, task, actions, max_expansions=max_expansions, max_states=max_states, by_experience=True)
     if found is None and last_resort and kb.experience.entries:
         # Experience left out every plan: it may make a step dear, never impossible.
