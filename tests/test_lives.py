@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 from llcps.analysis.lives import COLUMNS, LifeRow, life_metrics
 from llcps.cli.main import app
 from llcps.errors import LlcpsError
-from llcps.experiments.life import draw_life, life_from_data, load_life, pretrain_branch
+from llcps.experiments.life import draw_life, life_condition, life_from_data, load_life, pretrain_branch
 from llcps.experiments.presets import PRESETS
 from llcps.experiments.runner import LifeTask, PretrainTask, SequenceTask, plan_life_tasks, plan_tasks, run_lives
 from llcps.store import Store
@@ -125,6 +125,20 @@ def test_an_ordering_runs_as_a_condition() -> None:
     assert tasks["ranked"].ordering == "ranked" and tasks["ranked"].condition.carry == "update"
     assert tasks["update"].ordering == tasks["reset"].ordering == ORDERINGS.default
     assert tasks["ranked"].episodes == tasks["update"].episodes and tasks["ranked"].label == "life-default-ranked-l0"
+
+
+def test_every_ordering_runs_as_a_condition_under_a_branch_safe_name() -> None:
+    from llcps.cps.orderings import ORDERINGS
+    from llcps.experiments.life import condition_names
+
+    named = {n: life_condition(n).ordering for n in condition_names() if life_condition(n).ordering}
+    assert sorted(named.values()) == sorted(ORDERINGS)  # case-based and trial-and-error too
+    life = load_life("default").with_conditions(["update", "case_based", "trial_and_error"])
+    tasks = {t.condition.name: t for t in plan_life_tasks(life, [0]) if isinstance(t, LifeTask)}
+    assert tasks["case_based"].ordering == "case-based" and tasks["trial_and_error"].ordering == "trial-and-error"
+    assert tasks["case_based"].label == "life-default-case_based-l0"
+    with pytest.raises(LlcpsError):
+        life_condition("case-based")  # a condition names branches: '_' for '-'
 
 
 def test_the_draw_holds_probes_back_and_marks_first_encounters() -> None:

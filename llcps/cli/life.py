@@ -68,7 +68,7 @@ def run_cli(
         Optional[str],
         typer.Option("--conditions", metavar="A,B", help="Conditions to run instead of the file's: "
                      + "; ".join(f"{c.name} ({c.description})" for c in LIFE_CONDITIONS.values())
-                     + "; or an exploration ordering, update exploring in it: "
+                     + "; or an exploration ordering, update exploring in it ('_' for '-'): "
                      + ", ".join(n for n in condition_names() if n not in LIFE_CONDITIONS) + ".", show_default=False),
     ] = None,
     workers: Annotated[

@@ -93,22 +93,26 @@ LIFE_CONDITIONS: Registry[LifeCondition] = Registry(
 
 def life_condition(name: str) -> LifeCondition:
     """The condition called ``name``: one of :data:`LIFE_CONDITIONS`, or an exploration
-    ordering's name (:data:`~llcps.cps.orderings.ORDERINGS`), which is ``update`` exploring
-    in that ordering, so every ordering (a baseline among them) runs as a condition."""
-    from llcps.cps.orderings import ORDERINGS
-
+    ordering's name (:data:`~llcps.cps.orderings.ORDERINGS`) with '_' for '-' (a
+    condition names branches), which is ``update`` exploring in that ordering, so every
+    ordering (a baseline among them) runs as a condition: ``case_based`` is ``case-based``."""
     if name in LIFE_CONDITIONS:
         return LIFE_CONDITIONS[name]
-    if name in ORDERINGS and _FIELD.match(name):
-        return LifeCondition(name, "update", ordering=name, description=f"update, exploring in the {name} ordering")
+    ordering = _orderings_by_condition().get(name)
+    if ordering is not None:
+        return LifeCondition(name, "update", ordering=ordering, description=f"update, exploring in the {ordering} ordering")
     raise UnknownNameError("life condition", name, condition_names())
+
+
+def _orderings_by_condition() -> dict[str, str]:
+    from llcps.cps.orderings import ORDERINGS
+
+    return {n.replace("-", "_"): n for n in ORDERINGS if _FIELD.match(n.replace("-", "_"))}
 
 
 def condition_names() -> tuple[str, ...]:
     """Every name :func:`life_condition` accepts: the conditions, then the orderings."""
-    from llcps.cps.orderings import ORDERINGS
-
-    return tuple(dict.fromkeys((*LIFE_CONDITIONS, *(n for n in ORDERINGS if _FIELD.match(n)))))
+    return tuple(dict.fromkeys((*LIFE_CONDITIONS, *_orderings_by_condition())))
 
 
 @functools.cache
