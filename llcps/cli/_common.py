@@ -18,9 +18,10 @@ import os
 import re
 import signal
 import sys
+from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import Enum
-from typing import Annotated, Any, Iterable
+from typing import Annotated, Any, Iterable, Iterator
 
 import typer
 from rich.console import Console
@@ -284,6 +285,30 @@ def notice(text: str) -> None:
     """A line for people, on stderr, that ``--quiet`` keeps: part of a command's result
     (``match``, a failed property), a warning, or a task that failed."""
     err_console.print(printable(text, keep="\n"), markup=False)
+
+
+#: Exit codes of a run of tasks (experiment run, life run): all done, a task failed, Ctrl-C.
+EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
+
+
+@contextmanager
+def resumable(what: str) -> Iterator[None]:
+    """A run of tasks that keeps every ``what`` imported: Ctrl-C says how to resume, exit 130."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        notice(f"interrupted: every {what} imported so far is kept; run the same command to resume")
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+
+
+def settle_run(summary: Any) -> None:
+    """Say how a run of tasks ended (a ``RunSummary``): exit 130 when it was interrupted,
+    else one line per failed task (the caller reports and exits)."""
+    if summary.status == "interrupted":
+        notice(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
+        raise typer.Exit(EXIT_INTERRUPTED)
+    for label, error in summary.failed:
+        notice(f"task {label} failed: {error}")
 
 
 def human_bytes(n: int) -> str:

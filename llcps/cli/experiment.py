@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
 
-from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, message, new_app, notice, open_store, print_json, print_table
+from llcps.cli._common import EXIT_FAILED, EXIT_OK, resumable, settle_run, CreateFlag, JsonFlag, choice_enum, message, new_app, notice, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_SEED
@@ -49,9 +49,6 @@ EngineName = choice_enum("EngineName", ENGINES)
 
 #: Most workers one run may ask for.
 MAX_WORKERS = 1024
-
-#: Exit codes of ``llcps experiment run``.
-EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 
 _PRESET_HELP = "Grid to run: " + "; ".join(
     f"{p.name} ({len(p.cells())} cells, {p.default_seeds} seeds, budget {'the whole candidate space' if p.budget is None else p.budget})"
@@ -159,7 +156,7 @@ def run_cli(
     if with_others:
         grid.with_others()
     run_seeds(grid, seeds=seeds, first_seed=first_seed, variants=scenes)
-    try:
+    with resumable("task"):
         with open_store(ctx, create=create) as store:
             with progress_display(f"experiment run {name}", "planning the tasks") as bar:
 
@@ -184,15 +181,8 @@ def run_cli(
                     progress=report,
                     report_progress=bar,
                 )
-    except KeyboardInterrupt:
-        notice("interrupted: every task imported so far is kept; run the same command to resume")
-        raise typer.Exit(EXIT_INTERRUPTED) from None
     summary = result.summary
-    if summary.status == "interrupted":
-        notice(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
-        raise typer.Exit(EXIT_INTERRUPTED)
-    for label, error in summary.failed:
-        notice(f"task {label} failed: {error}")
+    settle_run(summary)
     if summary.blocked:
         notice(f"{summary.blocked} sequence(s) not run: their pretraining failed")
     if result.report_dir is None or result.analysis is None:

@@ -8,7 +8,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from llcps.cli._common import CreateFlag, JsonFlag, choice_enum, message, new_app, notice, open_store, print_json, print_table
+from llcps.cli._common import EXIT_FAILED, EXIT_OK, resumable, settle_run, CreateFlag, JsonFlag, choice_enum, message, new_app, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.domain import MAX_SEED
 from llcps.cli._progress import progress_display
@@ -29,8 +29,6 @@ app = new_app(
 )
 
 EngineName = choice_enum("EngineName", ENGINES)
-#: Exit codes of ``llcps life run``.
-EXIT_OK, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 MAX_WORKERS = 1024
 
 LifeArg = Annotated[str, typer.Argument(metavar="LIFE", help="A shipped life (`llcps life list`) or a life .toml file.")]
@@ -97,7 +95,7 @@ def run_cli(
     chosen = resolve_life(life, episodes=episodes, conditions=chosen_conditions)
     life_seeds(lives, first_life)
     target = check_output_dir(out_dir if out_dir is not None else default_life_dir(chosen.name), what="--out-dir")
-    try:
+    with resumable("life"):
         with open_store(ctx, create=create) as store:
             with progress_display(f"life run {chosen.name}", "planning the lives") as bar:
 
@@ -117,15 +115,8 @@ def run_cli(
                     html=html,
                     progress=report,
                 )
-    except KeyboardInterrupt:
-        notice("interrupted: every life imported so far is kept; run the same command to resume")
-        raise typer.Exit(EXIT_INTERRUPTED) from None
     summary = result.summary
-    if summary.status == "interrupted":
-        notice(f"interrupted: {summary.done} task(s) imported by this run are kept; run the same command to resume")
-        raise typer.Exit(EXIT_INTERRUPTED)
-    for label, error in summary.failed:
-        notice(f"task {label} failed: {error}")
+    settle_run(summary)
     if result.report is None or result.metrics is None:
         raise LlcpsError("no episodes to report", hint="see the failed tasks above")
     if as_json:
