@@ -117,6 +117,10 @@ def _source_store(store: Store, new_trial) -> dict[str, Any]:
         [new_trial(100 + i, branch="child", source="exploration", run_id=run, episode_id=episode, snapshot_id=shared) for i in range(3)]
     )
     store.add_operator(branch="child", name="op", pddl="(:action op)", definition={"k": 1}, scenario="scenario1", episode_id=episode)
+    # Plan steps' executions cost K's operators on the branch: they travel with it.
+    context = [["near", "?o", "?c"], ["visible", "?o"]]
+    store.add_operator_execution(branch="child", operator="push", success=False, context=context, episode_id=episode, trial_id=child_ids[0])
+    store.add_operator_execution(branch="child", operator="push", success=True, context=context, episode_id=episode, trial_id=child_ids[1])
     store.finish_episode(episode, status="solved", summary={"episode_id": episode, "run_id": run, "resolving_trial_id": child_ids[-1], "exploration_trials": 3})
     store.finish_run(run, status="solved")
     return {"run": run, "episode": episode, "child_ids": child_ids}
@@ -131,7 +135,9 @@ def dest_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
 def test_payload_round_trip_remaps_ids_and_dedups_snapshots(store: Store, dest_url: str, new_trial) -> None:
     _source_store(store, new_trial)
     payload = export_branches(store, ["base", "child"])
-    assert count_rows(payload) == {"branches": 2, "runs": 1, "episodes": 1, "snapshots": 2, "trials": 9, "operators": 1, "changes": 0}
+    assert count_rows(payload) == {
+        "branches": 2, "runs": 1, "episodes": 1, "snapshots": 2, "trials": 9, "operators": 1, "changes": 0, "executions": 2
+    }  # fmt: skip
     with Store.open(dest_url, create=True) as dest:
         # Ids in the destination start elsewhere, and one snapshot is there already.
         dest.create_branch("other", from_branch="main", at=0)
@@ -150,6 +156,12 @@ def test_payload_round_trip_remaps_ids_and_dedups_snapshots(store: Store, dest_u
         assert episode.summary["episode_id"] == episode.id and episode.run_id == episode.summary["run_id"]
         assert episode.summary["resolving_trial_id"] == max(t.id for t in moved)
         assert {t.run_id for t in moved if t.branch == "child"} == {episode.run_id}
+        assert dest.operator_experience("child") == store.operator_experience("child") != []
+        assert dest.operator_experience("base") == []
+        executions = dest.own_operator_executions("child")
+        assert [e.trial_id for e in executions] == [t.id for t in moved if t.branch == "child"][:2]
+        assert {e.episode_id for e in executions} == {episode.id}
+        assert all(e.watermark == max(t.id for t in moved) for e in executions)
         # A second import writes nothing at all: the transaction is all or nothing.
         before = dest.status().trials_total
         with pytest.raises(StoreError, match="already exists"):
@@ -168,6 +180,7 @@ def test_payload_seeds_a_private_store_and_comes_back_onto_the_original_ids(stor
         private.create_branch("work", from_branch="base")
         private.add_trials([new_trial(900 + i, branch="work", source="exploration") for i in range(2)])
         private.add_operator(branch="work", name="w", pddl="(w)", definition={}, scenario=None, episode_id=None)
+        private.add_operator_execution(branch="work", operator="w", success=True, context=[["visible", "?o"]])
         back = export_branches(private, ["work"], external=inverse(seeded.trials))
     import_payload(store, back)
     work = store.visible_trials("work")
@@ -176,6 +189,7 @@ def test_payload_seeds_a_private_store_and_comes_back_onto_the_original_ids(stor
     ]
     assert store.resolve_branch("work").fork_point == max(t.id for t in store.visible_trials("base"))
     assert store.visible_operators("work")[0].watermark == max(t.id for t in work)
+    assert [(c.operator, c.successes, c.failures) for c in store.operator_experience("work")] == [("w", 1, 0)]
 
 
 # -- the smoke grid, run for real -------------------------------------------------------------

@@ -1,5 +1,5 @@
 """Moving experience between stores: branches with their trials, snapshots, runs,
-episodes and learned operators, as plain data.
+episodes, learned operators and operator executions, as plain data.
 
 An experiment task runs in a worker against a private temporary store and sends
 back a :class:`Payload`; the one writer imports it into the real store with
@@ -10,7 +10,7 @@ pretraining trials a task needs.
 Ids are local to the store they came from. On import every row gets a new id and
 references are remapped: trials, runs, episodes, snapshots (deduplicated by their
 content hash) and the trial ids that fork points, operator watermarks and episode
-summaries hold. Trials are imported in id order, so the mapping is monotone and
+summaries and operator executions hold. Trials are imported in id order, so the mapping is monotone and
 "visible up to trial id w" keeps its meaning. A payload may refer to trials it
 does not carry (the pretraining trials a branch forked from): ``external`` maps
 those ids to ids of the destination store.
@@ -30,9 +30,9 @@ from sqlalchemy import insert, select, update
 
 from llcps.trial_records import TrialChange, TrialRecord
 from llcps.errors import StoreError
-from llcps.store import EpisodeRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
+from llcps.store import EpisodeRecord, ExecutionRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
 from llcps.store.trial_changes import change_row
-from llcps.store.tables import Branch, Episode, Operator, Run, Snapshot, Trial, TrialChangeRow
+from llcps.store.tables import Branch, Episode, Operator, OperatorExecution, Run, Snapshot, Trial, TrialChangeRow
 from llcps.store.runs import run_provenance_values
 from llcps.store.trials import trial_row
 
@@ -62,6 +62,8 @@ class Payload:
         changes: the known symbolic changes of those trials (``trial_id`` of the source).
         external: ids of trials the payload refers to (fork points, watermarks) but
             does not carry, mapped to ids of the destination store.
+        executions: the branches' own operator executions as plan steps (what costs
+            K's operators on them), in id order.
     """
 
     branches: tuple[BranchLink, ...]
@@ -72,6 +74,7 @@ class Payload:
     operators: tuple[OperatorRecord, ...] = ()
     external: Mapping[int, int] = field(default_factory=dict)
     changes: tuple[TrialChange, ...] = ()
+    executions: tuple[ExecutionRecord, ...] = ()
 
     @property
     def branch_names(self) -> tuple[str, ...]:
@@ -118,11 +121,13 @@ def export_branches(
     episodes: list[EpisodeRecord] = []
     runs: dict[int, RunRecord] = {}
     operators: list[OperatorRecord] = []
+    executions: list[ExecutionRecord] = []
     for name in names:
         info = store.resolve_branch(name)
         links.append(BranchLink(name=name, parent=info.parent, fork_point=info.fork_point))
         trials.extend(t for t in store.visible_trials(name) if t.branch == name)
         operators.extend(o for o in store.visible_operators(name) if o.branch == name)
+        executions.extend(store.own_operator_executions(name))
         if provenance:
             episodes.extend(reversed(store.list_episodes(branch=name)))
             runs.update((r.id, r) for r in store.list_runs(branch=name))
@@ -141,6 +146,7 @@ def export_branches(
     else:
         trials = [replace(t, run_id=None, episode_id=None) for t in trials]
         operators = [replace(o, episode_id=None) for o in operators]
+        executions = [replace(e, episode_id=None) for e in executions]
         runs = {}
     if snapshots:
         snapshot_ids = sorted({t.snapshot_id for t in trials if t.snapshot_id is not None})
@@ -157,6 +163,7 @@ def export_branches(
         operators=tuple(operators),
         external=dict(external or {}),
         changes=tuple(changes),
+        executions=tuple(sorted(executions, key=lambda e: e.id)),
     )
 
 
@@ -328,6 +335,23 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                     created_at=_time(op.created_at),
                 )
             ).inserted_primary_key[0]
+        if payload.executions:
+            conn.execute(
+                insert(OperatorExecution),
+                [
+                    {
+                        "branch_id": branch_id(e.branch),
+                        "operator": e.operator,
+                        "success": bool(e.success),
+                        "context": [list(atom) for atom in e.context],
+                        "episode_id": _need(episode_ids, e.episode_id, "episode"),
+                        "trial_id": None if e.trial_id is None else trial_ids.known.get(e.trial_id),
+                        "watermark": trial_ids.bound(e.watermark),
+                        "created_at": _time(e.created_at) or _now(),
+                    }
+                    for e in sorted(payload.executions, key=lambda e: e.id)
+                ],
+            )
         for link in payload.branches:
             conn.execute(
                 update(Branch).where(Branch.id == branch_ids[link.name]).values(fork_point=trial_ids.bound(link.fork_point))
@@ -360,6 +384,7 @@ def count_rows(payload: Payload) -> dict[str, int]:
         "trials": len(payload.trials),
         "changes": len(payload.changes),
         "operators": len(payload.operators),
+        "executions": len(payload.executions),
     }
 
 

@@ -15,7 +15,7 @@ from llcps import bounded_json
 from llcps.errors import StoreError
 from llcps.store import visibility
 from llcps.store.branches import BranchQueries
-from llcps.store.records import ExecutionCounts, OperatorRecord
+from llcps.store.records import ExecutionCounts, ExecutionRecord, OperatorRecord
 from llcps.store.tables import Operator, OperatorExecution
 from llcps.store.transactions import utc_now
 from llcps.store.trials import iso_timestamp
@@ -139,3 +139,28 @@ class OperatorQueries(BranchQueries):
                 key = (str(name), _context_atoms(row_id, context))
                 counts.setdefault(key, [0, 0])[0 if success else 1] += 1
         return [ExecutionCounts(name, context, s, f) for (name, context), (s, f) in sorted(counts.items())]
+
+    def own_operator_executions(self, branch: str) -> list[ExecutionRecord]:
+        """The executions recorded on ``branch`` itself (not inherited), oldest first: what
+        a branch moved to another store carries.
+
+        Raises:
+            StoreError: a stored context is not a list of atoms (lists of strings).
+        """
+        with self._read() as conn:
+            link = self._chain(conn, branch)[0]
+            stmt = select(OperatorExecution).where(OperatorExecution.branch_id == link.branch_id).order_by(OperatorExecution.id)
+            return [
+                ExecutionRecord(
+                    id=r.id,
+                    branch=link.name,
+                    operator=str(r.operator),
+                    success=bool(r.success),
+                    context=_context_atoms(r.id, r.context),
+                    episode_id=r.episode_id,
+                    trial_id=r.trial_id,
+                    watermark=int(r.watermark),
+                    created_at=iso_timestamp(r.created_at) or "",
+                )
+                for r in conn.execute(stmt)
+            ]

@@ -143,6 +143,22 @@ class OperatorRecord:
 
 
 @dataclass(frozen=True)
+class ExecutionRecord:
+    """One execution of an operator as a plan step on a branch (a row of the experience
+    that costs operators), as moved between stores."""
+
+    id: int
+    branch: str
+    operator: str
+    success: bool
+    context: tuple[tuple[str, ...], ...]
+    episode_id: int | None
+    trial_id: int | None
+    watermark: int
+    created_at: str
+
+
+@dataclass(frozen=True)
 class ExecutionCounts:
     """How often an operator, executed as a plan step in one context, worked or failed.
 
