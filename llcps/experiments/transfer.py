@@ -9,9 +9,9 @@ pretraining trials a task needs.
 
 Ids are local to the store they came from. On import every row gets a new id and
 references are remapped: trials, runs, episodes, snapshots (deduplicated by their
-content hash) and the trial ids that fork points, operator watermarks and episode
-summaries and operator executions hold. Trials are imported in id order, so the mapping is monotone and
-"visible up to trial id w" keeps its meaning. A payload may refer to trials it
+content hash) and the trial ids that fork points, operator watermarks, episode
+summaries and operator executions hold. Trials are imported in id order, so the
+mapping is monotone and "visible up to trial id w" keeps its meaning. A payload may refer to trials it
 does not carry (the pretraining trials a branch forked from): ``external`` maps
 those ids to ids of the destination store.
 
@@ -345,11 +345,11 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                         "success": bool(e.success),
                         "context": [list(atom) for atom in e.context],
                         "episode_id": _need(episode_ids, e.episode_id, "episode"),
-                        "trial_id": None if e.trial_id is None else trial_ids.known.get(e.trial_id),
+                        "trial_id": _need(trial_ids.known, e.trial_id, "trial"),
                         "watermark": trial_ids.bound(e.watermark),
                         "created_at": _time(e.created_at) or _now(),
                     }
-                    for e in sorted(payload.executions, key=lambda e: e.id)
+                    for e in payload.executions
                 ],
             )
         for link in payload.branches:
