@@ -140,6 +140,49 @@ def test_family_ratios_tests_and_overall_on_hand_worked_numbers(table: ResultsTa
     assert overall.geomean_ratio == pytest.approx(math.sqrt(1.0 * 3.0))
 
 
+def _hedged(table: ResultsTable) -> list[ResultRow]:
+    """The default model's rows again in the hedged ordering: twice the random order's trials in
+    family a (every ratio 2), the random order's own in family b (every ratio 1)."""
+    random = {(r.scenario, r.variant): r.exploration_trials for r in table if r.model == "random"}
+    return [
+        replace(r, ordering="hedged", solved=True, exploration_trials=random[(r.scenario, r.variant)] * (2 if r.scenario == "scenario1" else 1))
+        for r in table
+        if r.model != "random"
+    ]
+
+
+def test_two_orderings_against_one_random_set_are_two_row_groups(table: ResultsTable) -> None:
+    both = ResultsTable([*table, *_hedged(table)])
+    results = family_results(both)
+    assert [(r.ordering, r.family) for r in results] == [
+        ("ranked", "scenario1"), ("ranked", "scenario2"), ("hedged", "scenario1"), ("hedged", "scenario2"),
+    ]  # fmt: skip
+    ranked = [r for r in results if r.ordering == "ranked"]
+    assert ranked == list(family_results(table))  # the ranked numbers do not change beside another ordering
+    ha, hb = (r for r in results if r.ordering == "hedged")
+    assert (ha.median_ratio, ha.ratio_of_medians, ha.median_random, ha.n) == (2.0, 2.0, 4.0, 5)
+    assert (hb.median_ratio, hb.ratio_of_medians, hb.median_random) == (1.0, 1.0, 1.0)
+    assert all(r.default for r in ranked) and not ha.default and not hb.default  # default: model, measure and ordering
+    # Holm within each ordering's families, not across the three tests made: hedged's only test
+    # (b has no differences) keeps its p-value
+    assert ha.p_value == pytest.approx(sps.wilcoxon([8, 8, 6, 32, 10], [4, 4, 3, 16, 5]).pvalue)
+    assert ha.p_holm == ha.p_value and math.isnan(hb.p_value) and math.isnan(hb.p_holm)
+    overall = {r.ordering: r for r in generalization_summary(results)}
+    assert overall["hedged"].geomean_ratio == pytest.approx(math.sqrt(2.0)) and overall["hedged"].worse_than_random == 1
+    assert overall["ranked"].geomean_ratio == pytest.approx(math.sqrt(3.0)) and overall["ranked"].default
+
+
+def test_random_rows_of_the_papers_ordering_are_every_orderings_baseline(table: ResultsTable) -> None:
+    hedged = _hedged(table)
+    # The hedged store's own random rows (other numbers): the ranked ones still pair with hedged.
+    own = [replace(r, ordering="hedged", exploration_trials=r.exploration_trials + 100) for r in table if r.model == "random"]
+    results = family_results(ResultsTable([*table, *hedged, *own]))
+    assert [r.median_ratio for r in results if r.ordering == "hedged"] == [2.0, 1.0]
+    # Without random rows of the paper's ordering, an ordering pairs with its own.
+    alone = family_results(ResultsTable([*hedged, *own]))
+    assert [r.ordering for r in alone] == ["hedged", "hedged"] and alone[0].median_random == 104.0
+
+
 def test_ratio_and_geometric_mean_edge_cases() -> None:
     assert ratio(0, 0) == 1.0 and ratio(3, 0) == math.inf and ratio(3, 6) == 0.5
     assert geometric_mean([0.5, 2.0]) == pytest.approx(1.0)
