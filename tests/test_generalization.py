@@ -208,6 +208,53 @@ def test_the_report_writes_the_family_table_json_and_plot(table: ResultsTable, t
     assert "## Leave one family out" in text and "| scenario2 |" in text
     assert {p.suffix for p in paths.plots["generalization"]} == {".png", ".svg"}
     assert 'id="generalization-1"' in paths.report_html.read_text()  # type: ignore[union-attr]
+    # One ranked run reads as before orderings were recorded: its labels do not name the ordering.
+    label = f"{DEFAULT[0]} / {DEFAULT[1]} / p200 / reset (default)"
+    assert f"| scenario1 | {label} |" in text and "ranked" not in text.split("## Leave one family out")[1]
+    assert "Orderings:" not in text
+
+
+def test_a_report_of_two_orderings_names_them_in_every_row_group(table: ResultsTable, tmp_path: Path) -> None:
+    from llcps.report.build import build_report
+    from llcps.report import plots
+
+    drawn: list[list[str]] = []
+    original = plots.save
+
+    def save(fig, stem):  # noqa: ANN001, ANN202
+        drawn.append([t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()])
+        return original(fig, stem)
+
+    both = ResultsTable([*table, *_hedged(table)])
+    plots.save = save  # type: ignore[assignment]
+    try:
+        paths = build_report(both, tmp_path / "r", resamples=200, html=True)
+    finally:
+        plots.save = original  # type: ignore[assignment]
+    model, measure = DEFAULT
+    text = paths.report_md.read_text()
+    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 |" in text
+    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 8.0 | 4.0 | 2.00 | 2.00 |" in text
+    assert f"| {model} / {measure} / hedged / p200 / reset | 2 | 1.41 | 1 of 2 |" in text
+    assert "Orderings: ranked, hedged;" in text and "every other section covers the ranked ordering" in text
+    assert f"{model} / {measure} / hedged / p200 / reset" in paths.report_html.read_text()  # type: ignore[union-attr]
+    # The per-family plot draws one series per ordering (two markers each)
+    legend = next(texts for texts in drawn if any("median of ratios" in t for t in texts))
+    assert legend == [
+        f"{model} / {measure} / {o} / p200 / reset: {what}" for o in ("ranked", "hedged") for what in ("median of ratios", "ratio of medians")
+    ]
+    rows = (tmp_path / "r" / "generalization.csv").read_text().splitlines()
+    assert rows[0].split(",")[:5] == ["family", "model", "measure", "ordering", "pretrain_size"]
+    data = json.loads(paths.generalization_json.read_text())  # type: ignore[union-attr]
+    assert [(r["ordering"], r["label"]) for r in data["overall"]] == [
+        ("ranked", f"{model} / {measure} / ranked / p200 / reset"), ("hedged", f"{model} / {measure} / hedged / p200 / reset")
+    ]  # fmt: skip
+    # Every other section covers one ordering: the random comparison holds the ranked rows only.
+    analysis = json.loads(paths.figure2_json.read_text())
+    assert analysis["overview"]["orderings"] == ["ranked", "hedged"] and analysis["overview"]["cell_ordering"] == "ranked"
+    ranked_a = next(r for r in analysis["random_comparison"] if r["scenario"] == "scenario1")
+    assert (ranked_a["n_model"], ranked_a["median_model"]) == (5, 6.0)
+    assert ResultsTable.read(paths.results_csv) == both  # the report's results hold both orderings
 
 
 # -- a tiny grid end to end ------------------------------------------------------------------

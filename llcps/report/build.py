@@ -19,6 +19,7 @@ from llcps.analysis.analyse import analyse, analysis_json
 from llcps.analysis.figure2 import Figure2Row
 from llcps.analysis.generalization import FamilyResult
 from llcps.analysis.results import ResultsTable, table_budget
+from llcps.analysis.selection import one_ordering
 from llcps.analysis.stats import DEFAULT_RESAMPLES
 from llcps.analysis.survival import SurvivalComparison
 from llcps.analysis.versus_random import RandomComparison
@@ -129,7 +130,9 @@ def build_report(
     film_paths = dict(films) if films is not None else artifacts.existing_films(out)
     plot_dir = out / "plots"
     plot_paths = {
-        "distribution": plots.exploration_distribution(table, plot_dir / "distribution", metric=metric, budget=table_budget(table)),
+        "distribution": plots.exploration_distribution(
+            one_ordering(table)[1], plot_dir / "distribution", metric=metric, budget=table_budget(table)
+        ),
         "cumulative": plots.cumulative_plot(analysis.cumulative, plot_dir / "cumulative", metric=metric),
     }
     if analysis.figure2:  # a preset of one condition has no Figure 2 to draw
