@@ -257,6 +257,58 @@ def test_a_report_of_two_orderings_names_them_in_every_row_group(table: ResultsT
     assert ResultsTable.read(paths.results_csv) == both  # the report's results hold both orderings
 
 
+# -- several results directories in one report ----------------------------------------------
+def _results_dir(path: Path, rows: list[ResultRow], host: str) -> Path:
+    ResultsTable(rows).write_csv(path / "results.csv")
+    (path / "provenance.json").write_text(json.dumps([{"host": host, "llcps_version": "0.1.0", "runs": len(rows)}]))
+    return path
+
+
+def test_experiment_report_merges_the_results_of_two_orderings_into_one_report(table: ResultsTable, tmp_path: Path) -> None:
+    random = [r for r in table if r.model == "random"]
+    ranked = _results_dir(tmp_path / "ranked", list(table), "first")
+    hedged = _results_dir(tmp_path / "hedged", [*random, *_hedged(table)], "second")  # a copy of the store's random rows
+    out = tmp_path / "orderings"
+    runner = CliRunner()
+    result = runner.invoke(app, ["experiment", "report", str(ranked), str(hedged / "results.csv"), "--out-dir", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert [(r["ordering"], r["family"], r["median_ratio"]) for r in data["generalization"]["families"]] == [
+        ("ranked", "scenario1", 1.0), ("ranked", "scenario2", 3.0), ("hedged", "scenario1", 2.0), ("hedged", "scenario2", 1.0),
+    ]  # fmt: skip
+    merged = ResultsTable.read(out)
+    assert len(merged) == len(table) + len(table) // 2 and merged.unique("ordering") == ("ranked", "hedged")
+    text = (out / "report.md").read_text()
+    model, measure = DEFAULT
+    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 8.0 | 4.0 | 2.00 |" in text
+    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 | 6.0 | 4.0 | 1.00 |" in text
+    # where the runs ran: every directory's environments, each marked with its directory
+    provenance = json.loads((out / "provenance.json").read_text())
+    assert sorted((p["host"], p["results"]) for p in provenance) == [("first", str(ranked)), ("second", str(hedged))]
+    assert f"[{hedged}]" in text
+    shown = runner.invoke(app, ["experiment", "report", str(ranked), str(hedged), "--out-dir", str(tmp_path / "again")])
+    assert shown.exit_code == 0 and f"{model} / {measure} / hedged / p200 / reset" in shown.stdout
+    # ... and the merged directory reports alone, its provenance still marked
+    alone = runner.invoke(app, ["experiment", "report", str(out), "--out-dir", str(tmp_path / "alone"), "--json"])
+    assert alone.exit_code == 0 and json.loads((tmp_path / "alone" / "provenance.json").read_text()) == provenance
+
+
+def test_experiment_report_of_several_directories_refuses_conflicts_and_wants_an_out_dir(table: ResultsTable, tmp_path: Path) -> None:
+    random = [r for r in table if r.model == "random"]
+    ranked = _results_dir(tmp_path / "ranked", list(table), "first")
+    # a hedged run's results written before the ordering was recorded: they read as ranked
+    old = _results_dir(tmp_path / "old", [*random, *(replace(r, ordering="ranked") for r in _hedged(table))], "second")
+    runner = CliRunner()
+    clash = runner.invoke(app, ["experiment", "report", str(ranked), str(old), "--out-dir", str(tmp_path / "out")])
+    assert clash.exit_code == 2, clash.output
+    first = min((r for r in table if r.model != "random"), key=lambda r: (r.sequence, scenario_rank(r.scenario)))
+    assert f"{ranked} and {old} hold different results for {first.branch} {first.scenario} (ranked)" in clash.stderr
+    assert "ordering column" in clash.stderr and "Traceback" not in clash.output and not (tmp_path / "out").exists()
+    bare = runner.invoke(app, ["experiment", "report", str(ranked), str(old)])
+    assert bare.exit_code == 2 and "needs its own directory" in bare.stderr and "--out-dir" in bare.stderr
+    assert "Traceback" not in bare.output and not (ranked / "report.md").exists()
+
+
 # -- a tiny grid end to end ------------------------------------------------------------------
 TINY = replace(PRESETS["generalization"], budget=5, pretrain_pool=8, pretrain_sizes=(8,), scenarios=("scenario1", "scenario4"))
 
