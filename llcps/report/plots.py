@@ -359,6 +359,8 @@ def generalization_plot(rows: Sequence[FamilyResult], stem: str | Path) -> tuple
     ax.invert_yaxis()
     ax.set_xlabel("exploration trials / random order's (log scale; < 1: fewer than random)", fontsize=8)
     ax.grid(alpha=0.3, axis="x")
-    ax.legend(fontsize=7, loc="best")
+    # Beside the axes, as the survival plots': every family's row has markers, so inside,
+    # the legend would hide some.
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
     ax.set_title("leave one family out: each held-out family against the random order", fontsize=10)
     return save(fig, stem)
