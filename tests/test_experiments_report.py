@@ -182,6 +182,59 @@ def test_bad_results_file_is_a_project_error(tmp_path) -> None:  # noqa: ANN001
         ResultsTable.read_csv(tmp_path / "missing.csv")
 
 
+def test_results_written_before_the_ordering_column_read_as_the_papers_ordering(tmp_path) -> None:  # noqa: ANN001
+    table = synthetic_table(seeds=1)
+    hedged = ResultsTable(dataclasses.replace(r, ordering="hedged") for r in table)
+    assert ResultsTable.read(hedged.write_csv(tmp_path / "h.csv")) == hedged  # the column round-trips
+    lines = table.write_csv(tmp_path / "r.csv").read_text().splitlines()
+    assert lines[0].endswith(",ordering") and all(line.endswith(",ranked") for line in lines[1:])
+    (tmp_path / "old.csv").write_text("\n".join(line.rsplit(",", 1)[0] for line in lines) + "\n")
+    assert "ordering" not in (tmp_path / "old.csv").read_text()
+    old = ResultsTable.read(tmp_path / "old.csv")
+    assert old == table and old.unique("ordering") == ("ranked",)
+    records = json.loads(hedged.write_json(tmp_path / "h.json").read_text())
+    for record in records["rows"]:
+        del record["ordering"]
+    (tmp_path / "old.json").write_text(json.dumps(records))
+    assert ResultsTable.read(tmp_path / "old.json").unique("ordering") == ("ranked",)
+    for bad in ("", "two\nlines"):
+        with pytest.raises(ValueError, match="ordering"):
+            dataclasses.replace(table.rows[0], ordering=bad)
+
+
+def test_rows_of_two_orderings_of_one_sequence_and_scenario_sit_in_one_table() -> None:
+    table = synthetic_table(seeds=1)
+    hedged = [dataclasses.replace(r, ordering="hedged", exploration_trials=r.exploration_trials + 1) for r in table]
+    both = ResultsTable([*hedged, *table])
+    assert len(both) == 2 * len(table) and both.unique("ordering") == ("ranked", "hedged")
+    assert both.rows[0].key == (both.rows[0].sequence, both.rows[0].scenario, "ranked")
+    assert both.filter(ordering="hedged") == ResultsTable(hedged)
+    assert both.complete_sequences() == table.complete_sequences()
+    # one ordering incomplete: the sequence is not complete, though the other ordering's rows are
+    partial = ResultsTable(r for r in both if not (r.ordering == "hedged" and r.scenario == "scenario3" and r.seed == 0))
+    assert partial.complete_runs() < both.complete_runs()
+    assert not any(s.seed == 0 for s in partial.complete_sequences())
+    with pytest.raises(LlcpsError, match=r"two results for .* scenario1 \(hedged\)"):
+        ResultsTable([hedged[0], dataclasses.replace(hedged[0], exploration_trials=99)])
+
+
+def test_merging_tables_keeps_rows_held_alike_once_and_refuses_different_ones() -> None:
+    from llcps.analysis.results import merge_tables
+
+    table = synthetic_table(seeds=1)
+    random = ResultsTable(r for r in table if r.model == "random")
+    hedged = ResultsTable([*random, *(dataclasses.replace(r, ordering="hedged") for r in table if r.model != "random")])
+    merged = merge_tables([("a/results.csv", table), ("b/results.csv", hedged)])
+    assert len(merged) == len(table) + len(hedged) - len(random)
+    assert merged.filter(ordering="hedged") == hedged.filter(ordering="hedged")
+    changed = next(r for r in table if r.model == "nb")
+    other = ResultsTable([dataclasses.replace(changed, exploration_trials=changed.exploration_trials + 1)])
+    with pytest.raises(LlcpsError) as info:
+        merge_tables([("a/results.csv", table), ("b/results.csv", other)])
+    assert f"a/results.csv and b/results.csv hold different results for {changed.branch} {changed.scenario} (ranked)" in info.value.message
+    assert "ordering column" in (info.value.hint or "")
+
+
 def _summary(seq: Sequence, scenario: str, trials: int, episode_id: int, **extra: object) -> dict[str, object]:
     """The shape of ``SolveResult.as_json()`` as the store keeps it."""
     return {
@@ -215,6 +268,7 @@ def test_table_from_episodes_parses_branches_and_keeps_the_latest() -> None:
     table = imported.table
     assert len(table) == 6
     assert table.complete_sequences() == {update, reset}
+    assert table.unique("ordering") == ("ranked",)  # summaries written before the ordering was recorded
     row = next(r for r in table if r.condition == "reset" and r.scenario == "scenario2")
     assert (row.exploration_trials, row.episode_id, row.preset, row.pretrain_size) == (21, 11, "smoke", 4)
     assert imported.skipped == {
@@ -223,6 +277,16 @@ def test_table_from_episodes_parses_branches_and_keeps_the_latest() -> None:
         "not an experiment branch": 1,
         "not the novelty condition": 1,
     }
+
+
+def test_table_from_episodes_takes_the_ordering_from_each_summary() -> None:
+    update, _ = PRESETS["smoke"].sequences(1)
+    episodes = [_summary(update, s, 10 + i, i + 1, ordering="trial-and-error") for i, s in enumerate(PAPER_SCENARIOS)]
+    episodes.append(_summary(update, "scenario1", 4, 9, ordering="hedged"))  # another ordering on the same branch
+    table = table_from_episodes(episodes).table
+    assert sorted((r.scenario, r.ordering) for r in table) == sorted(
+        [(s, "trial-and-error") for s in PAPER_SCENARIOS] + [("scenario1", "hedged")]
+    )
 
 
 def test_table_from_a_real_store(tmp_path) -> None:  # noqa: ANN001

@@ -140,6 +140,49 @@ def test_family_ratios_tests_and_overall_on_hand_worked_numbers(table: ResultsTa
     assert overall.geomean_ratio == pytest.approx(math.sqrt(1.0 * 3.0))
 
 
+def _hedged(table: ResultsTable) -> list[ResultRow]:
+    """The default model's rows again in the hedged ordering: twice the random order's trials in
+    family a (every ratio 2), the random order's own in family b (every ratio 1)."""
+    random = {(r.scenario, r.variant): r.exploration_trials for r in table if r.model == "random"}
+    return [
+        replace(r, ordering="hedged", solved=True, exploration_trials=random[(r.scenario, r.variant)] * (2 if r.scenario == "scenario1" else 1))
+        for r in table
+        if r.model != "random"
+    ]
+
+
+def test_two_orderings_against_one_random_set_are_two_row_groups(table: ResultsTable) -> None:
+    both = ResultsTable([*table, *_hedged(table)])
+    results = family_results(both)
+    assert [(r.ordering, r.family) for r in results] == [
+        ("ranked", "scenario1"), ("ranked", "scenario2"), ("hedged", "scenario1"), ("hedged", "scenario2"),
+    ]  # fmt: skip
+    ranked = [r for r in results if r.ordering == "ranked"]
+    assert ranked == list(family_results(table))  # the ranked numbers do not change beside another ordering
+    ha, hb = (r for r in results if r.ordering == "hedged")
+    assert (ha.median_ratio, ha.ratio_of_medians, ha.median_random, ha.n) == (2.0, 2.0, 4.0, 5)
+    assert (hb.median_ratio, hb.ratio_of_medians, hb.median_random) == (1.0, 1.0, 1.0)
+    assert all(r.default for r in ranked) and not ha.default and not hb.default  # default: model, measure and ordering
+    # Holm within each ordering's families, not across the three tests made: hedged's only test
+    # (b has no differences) keeps its p-value
+    assert ha.p_value == pytest.approx(sps.wilcoxon([8, 8, 6, 32, 10], [4, 4, 3, 16, 5]).pvalue)
+    assert ha.p_holm == ha.p_value and math.isnan(hb.p_value) and math.isnan(hb.p_holm)
+    overall = {r.ordering: r for r in generalization_summary(results)}
+    assert overall["hedged"].geomean_ratio == pytest.approx(math.sqrt(2.0)) and overall["hedged"].worse_than_random == 1
+    assert overall["ranked"].geomean_ratio == pytest.approx(math.sqrt(3.0)) and overall["ranked"].default
+
+
+def test_random_rows_of_the_papers_ordering_are_every_orderings_baseline(table: ResultsTable) -> None:
+    hedged = _hedged(table)
+    # The hedged store's own random rows (other numbers): the ranked ones still pair with hedged.
+    own = [replace(r, ordering="hedged", exploration_trials=r.exploration_trials + 100) for r in table if r.model == "random"]
+    results = family_results(ResultsTable([*table, *hedged, *own]))
+    assert [r.median_ratio for r in results if r.ordering == "hedged"] == [2.0, 1.0]
+    # Without random rows of the paper's ordering, an ordering pairs with its own.
+    alone = family_results(ResultsTable([*hedged, *own]))
+    assert [r.ordering for r in alone] == ["hedged", "hedged"] and alone[0].median_random == 104.0
+
+
 def test_ratio_and_geometric_mean_edge_cases() -> None:
     assert ratio(0, 0) == 1.0 and ratio(3, 0) == math.inf and ratio(3, 6) == 0.5
     assert geometric_mean([0.5, 2.0]) == pytest.approx(1.0)
@@ -165,6 +208,105 @@ def test_the_report_writes_the_family_table_json_and_plot(table: ResultsTable, t
     assert "## Leave one family out" in text and "| scenario2 |" in text
     assert {p.suffix for p in paths.plots["generalization"]} == {".png", ".svg"}
     assert 'id="generalization-1"' in paths.report_html.read_text()  # type: ignore[union-attr]
+    # One ranked run reads as before orderings were recorded: its labels do not name the ordering.
+    label = f"{DEFAULT[0]} / {DEFAULT[1]} / p200 / reset (default)"
+    assert f"| scenario1 | {label} |" in text and "ranked" not in text.split("## Leave one family out")[1]
+    assert "Orderings:" not in text
+
+
+def test_a_report_of_two_orderings_names_them_in_every_row_group(table: ResultsTable, tmp_path: Path) -> None:
+    from llcps.report.build import build_report
+    from llcps.report import plots
+
+    drawn: list[list[str]] = []
+    original = plots.save
+
+    def save(fig, stem):  # noqa: ANN001, ANN202
+        drawn.append([t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()])
+        return original(fig, stem)
+
+    both = ResultsTable([*table, *_hedged(table)])
+    plots.save = save  # type: ignore[assignment]
+    try:
+        paths = build_report(both, tmp_path / "r", resamples=200, html=True)
+    finally:
+        plots.save = original  # type: ignore[assignment]
+    model, measure = DEFAULT
+    text = paths.report_md.read_text()
+    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 |" in text
+    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 8.0 | 4.0 | 2.00 | 2.00 |" in text
+    assert f"| {model} / {measure} / hedged / p200 / reset | 2 | 1.41 | 1 of 2 |" in text
+    assert "Orderings: ranked, hedged;" in text and "every other section covers the ranked ordering" in text
+    assert f"{model} / {measure} / hedged / p200 / reset" in paths.report_html.read_text()  # type: ignore[union-attr]
+    # The per-family plot draws one series per ordering (two markers each)
+    legend = next(texts for texts in drawn if any("median of ratios" in t for t in texts))
+    assert legend == [
+        f"{model} / {measure} / {o} / p200 / reset: {what}" for o in ("ranked", "hedged") for what in ("median of ratios", "ratio of medians")
+    ]
+    rows = (tmp_path / "r" / "generalization.csv").read_text().splitlines()
+    assert rows[0].split(",")[:5] == ["family", "model", "measure", "ordering", "pretrain_size"]
+    data = json.loads(paths.generalization_json.read_text())  # type: ignore[union-attr]
+    assert [(r["ordering"], r["label"]) for r in data["overall"]] == [
+        ("ranked", f"{model} / {measure} / ranked / p200 / reset"), ("hedged", f"{model} / {measure} / hedged / p200 / reset")
+    ]  # fmt: skip
+    # Every other section covers one ordering: the random comparison holds the ranked rows only.
+    analysis = json.loads(paths.figure2_json.read_text())
+    assert analysis["overview"]["orderings"] == ["ranked", "hedged"] and analysis["overview"]["cell_ordering"] == "ranked"
+    ranked_a = next(r for r in analysis["random_comparison"] if r["scenario"] == "scenario1")
+    assert (ranked_a["n_model"], ranked_a["median_model"]) == (5, 6.0)
+    assert ResultsTable.read(paths.results_csv) == both  # the report's results hold both orderings
+
+
+# -- several results directories in one report ----------------------------------------------
+def _results_dir(path: Path, rows: list[ResultRow], host: str) -> Path:
+    ResultsTable(rows).write_csv(path / "results.csv")
+    (path / "provenance.json").write_text(json.dumps([{"host": host, "llcps_version": "0.1.0", "runs": len(rows)}]))
+    return path
+
+
+def test_experiment_report_merges_the_results_of_two_orderings_into_one_report(table: ResultsTable, tmp_path: Path) -> None:
+    random = [r for r in table if r.model == "random"]
+    ranked = _results_dir(tmp_path / "ranked", list(table), "first")
+    hedged = _results_dir(tmp_path / "hedged", [*random, *_hedged(table)], "second")  # a copy of the store's random rows
+    out = tmp_path / "orderings"
+    runner = CliRunner()
+    result = runner.invoke(app, ["experiment", "report", str(ranked), str(hedged / "results.csv"), "--out-dir", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert [(r["ordering"], r["family"], r["median_ratio"]) for r in data["generalization"]["families"]] == [
+        ("ranked", "scenario1", 1.0), ("ranked", "scenario2", 3.0), ("hedged", "scenario1", 2.0), ("hedged", "scenario2", 1.0),
+    ]  # fmt: skip
+    merged = ResultsTable.read(out)
+    assert len(merged) == len(table) + len(table) // 2 and merged.unique("ordering") == ("ranked", "hedged")
+    text = (out / "report.md").read_text()
+    model, measure = DEFAULT
+    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 8.0 | 4.0 | 2.00 |" in text
+    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 | 6.0 | 4.0 | 1.00 |" in text
+    # where the runs ran: every directory's environments, each marked with its directory
+    provenance = json.loads((out / "provenance.json").read_text())
+    assert sorted((p["host"], p["results"]) for p in provenance) == [("first", str(ranked)), ("second", str(hedged))]
+    assert f"[{hedged}]" in text
+    shown = runner.invoke(app, ["experiment", "report", str(ranked), str(hedged), "--out-dir", str(tmp_path / "again")])
+    assert shown.exit_code == 0 and f"{model} / {measure} / hedged / p200 / reset" in shown.stdout
+    # ... and the merged directory reports alone, its provenance still marked
+    alone = runner.invoke(app, ["experiment", "report", str(out), "--out-dir", str(tmp_path / "alone"), "--json"])
+    assert alone.exit_code == 0 and json.loads((tmp_path / "alone" / "provenance.json").read_text()) == provenance
+
+
+def test_experiment_report_of_several_directories_refuses_conflicts_and_wants_an_out_dir(table: ResultsTable, tmp_path: Path) -> None:
+    random = [r for r in table if r.model == "random"]
+    ranked = _results_dir(tmp_path / "ranked", list(table), "first")
+    # a hedged run's results written before the ordering was recorded: they read as ranked
+    old = _results_dir(tmp_path / "old", [*random, *(replace(r, ordering="ranked") for r in _hedged(table))], "second")
+    runner = CliRunner()
+    clash = runner.invoke(app, ["experiment", "report", str(ranked), str(old), "--out-dir", str(tmp_path / "out")])
+    assert clash.exit_code == 2, clash.output
+    first = min((r for r in table if r.model != "random"), key=lambda r: (r.sequence, scenario_rank(r.scenario)))
+    assert f"{ranked} and {old} hold different results for {first.branch} {first.scenario} (ranked)" in clash.stderr
+    assert "ordering column" in clash.stderr and "Traceback" not in clash.output and not (tmp_path / "out").exists()
+    bare = runner.invoke(app, ["experiment", "report", str(ranked), str(old)])
+    assert bare.exit_code == 2 and "needs its own directory" in bare.stderr and "--out-dir" in bare.stderr
+    assert "Traceback" not in bare.output and not (ranked / "report.md").exists()
 
 
 # -- a tiny grid end to end ------------------------------------------------------------------

@@ -2,7 +2,10 @@
 
 :func:`analyse` runs Figure 2 with intervals and p-values, the reductions beside the
 paper's, the censoring-aware comparison, the comparison with the random order and the
-cumulative exploration, and corrects every p-value together (Holm). The report's
+cumulative exploration, and corrects every p-value together (Holm). A table of several
+orderings (results of several stores, merged) is compared ordering by ordering in the
+leave-one-family-out analysis; every other statistic covers one of them
+(:func:`~llcps.analysis.selection.one_ordering`). The report's
 tables, plots and pages are drawn from one :class:`Analysis` (:mod:`llcps.report`);
 ``figure2.json`` and ``--json`` are :func:`analysis_json` of it.
 """
@@ -20,10 +23,13 @@ from llcps.analysis.generalization import (
     GeneralizationSummary,
     family_results,
     generalization_summary,
+    group_label,
+    shows_ordering,
 )
 from llcps.analysis.figure2 import Figure2Row, Reduction, figure2_table, our_cells, reduction_summary
 from llcps.analysis.paper import PAPER_CAPTION_FRACTION_REDUCED, paper_cells
 from llcps.analysis.results import ResultsTable, group_rows
+from llcps.analysis.selection import one_ordering, orderings
 from llcps.analysis.stats import ALPHA, DEFAULT_RESAMPLES, adjust
 from llcps.analysis.survival import SurvivalComparison, SurvivalCurve, survival_curves, survival_table
 from llcps.analysis.versus_random import RandomComparison, best_versus_random, random_comparison
@@ -125,24 +131,27 @@ def solve_order(table: ResultsTable) -> list[str]:
     return ranked
 
 
-def _overview(table: ResultsTable) -> dict[str, Any]:
-    complete = table.complete_sequences()
-    sequences = {r.sequence for r in table}
+def _overview(table: ResultsTable, cells: tuple[str, ResultsTable]) -> dict[str, Any]:
+    """What the table holds; ``cells``: the ordering the per-cell sections cover, and its rows."""
+    complete = table.complete_runs()
+    sequences = {(r.sequence, r.ordering) for r in table}
     unsolved = [r for r in table if not r.solved]
     seeds = sorted(table.unique("seed"))
     variants = sorted(table.unique("variant"))
     return {
         "variants": variants,
-        "scenarios": solve_order(table),
+        "scenarios": list(dict.fromkeys([*solve_order(cells[1]), *sorted(table.unique("scenario"), key=scenario_rank)])),
         "rows": len(table),
         "presets": list(table.unique("preset")),
         "models": sorted(table.unique("model"), key=model_rank),
         "measures": sorted(table.unique("measure"), key=measure_rank),
         "pretrain_sizes": sorted(table.unique("pretrain_size"), reverse=True),
         "conditions": sorted(table.unique("condition"), key=condition_rank),
+        "orderings": list(orderings(table)),
+        "cell_ordering": cells[0],
         "seeds": len(seeds),
         "seed_range": [seeds[0], seeds[-1]] if seeds else None,
-        "cells": len({r.cell for r in table}),
+        "cells": len({(r.cell, r.ordering) for r in table}),
         "sequences": len(sequences),
         "complete_sequences": len(complete & sequences),
         "unsolved_episodes": len(unsolved),
@@ -162,11 +171,12 @@ def analyse(
     if len(table) == 0:
         raise LlcpsError("the results table is empty: nothing to report", hint="run `llcps experiment run` first")
     families = family_results(table, metric=metric)
+    ordering, cells = one_ordering(table)
     rows, survival, random = adjust(
         [
-            figure2_table(table, metric=metric, resamples=resamples, seed=seed),
-            survival_table(table, resamples=max(resamples // 5, 100), seed=seed),
-            random_comparison(table, metric=metric),
+            figure2_table(cells, metric=metric, resamples=resamples, seed=seed),
+            survival_table(cells, resamples=max(resamples // 5, 100), seed=seed),
+            random_comparison(cells, metric=metric),
         ]
     )
     return Analysis(
@@ -177,11 +187,11 @@ def analyse(
         ours_reduction=reduction_summary(our_cells(rows)),
         paper_reduction=reduction_summary(paper_cells()),
         random=random,
-        cumulative=cumulative_exploration(table, metric=metric, resamples=resamples, seed=seed),
-        overview=_overview(table),
+        cumulative=cumulative_exploration(cells, metric=metric, resamples=resamples, seed=seed),
+        overview=_overview(table, (ordering, cells)),
         survival=survival,
-        curves=survival_curves(table),
-        per_variant=per_variant(table, metric),
+        curves=survival_curves(cells),
+        per_variant=per_variant(cells, metric),
         generalization=families,
         generalization_overall=generalization_summary(families),
     )
@@ -203,7 +213,11 @@ def _reduction_json(r: Reduction) -> dict[str, Any]:
 
 
 def analysis_json(analysis: Analysis) -> dict[str, Any]:
-    """The analysis as plain, strict JSON data (NaN and infinity become null)."""
+    """The analysis as plain, strict JSON data (NaN and infinity become null).
+
+    Each leave-one-family-out entry carries its row group's ``label`` as the report prints it.
+    """
+    named = shows_ordering(analysis.generalization)
     return _clean(
         {
             "metric": analysis.metric,
@@ -228,9 +242,9 @@ def analysis_json(analysis: Analysis) -> dict[str, Any]:
             "kaplan_meier": [asdict(c) for c in analysis.curves],
             "generalization": {
                 "headline_ratio": HEADLINE_RATIO,
-                "correction": "holm across the families of each ordering",
-                "families": [asdict(r) for r in analysis.generalization],
-                "overall": [asdict(r) for r in analysis.generalization_overall],
+                "correction": "holm across the families of each row group (model, measure, ordering, pretraining size, condition)",
+                "families": [{**asdict(r), "label": group_label(r, ordering=named)} for r in analysis.generalization],
+                "overall": [{**asdict(r), "label": group_label(r, ordering=named)} for r in analysis.generalization_overall],
             },
             "per_variant": [
                 {**asdict(v), "results": {k: None if r is None else {"value": r[0], "solved": r[1]} for k, r in v.results.items()}}

@@ -3,9 +3,11 @@ never tuned on?
 
 A scenario is a novelty *family* (what resolves the novelty); its variants vary the
 layout. Pretraining never sees a family (it is random layouts from the sampler's
-catalog), so every family a table holds is held out of it. Per family F and per
-ordering (a model x measure other than the random order), paired by scene variant
-(seed N solves variant N, the same variants for every ordering):
+catalog), so every family a table holds is held out of it. Per family F and per row
+group (a model x measure other than the random order, explored in one ordering of
+:mod:`llcps.cps.orderings`, at one pretraining size and condition), paired by scene
+variant (seed N solves variant N, the same variants for every row group) with the
+random order's rows:
 
 - the median exploration trials of the ordering and of the random order;
 - the ratio ordering / random two ways: the **median of the per-variant ratios**
@@ -13,12 +15,16 @@ ordering (a model x measure other than the random order), paired by scene varian
   **ratio of the medians** ``median_v t_model(v) / median_v t_random(v)``; a ratio
   above 1 means the ordering explored more than random;
 - a two-sided paired Wilcoxon signed-rank test over variants, Holm-corrected across
-  the families of one ordering;
+  the families of one row group;
 - when some episode ended unsolved (censored at the budget): Kaplan–Meier medians
   and a log-rank test (:mod:`llcps.analysis.survival`).
 
-Overall, per ordering: the geometric mean of the per-family median ratios
+Overall, per row group: the geometric mean of the per-family median ratios
 ``exp(mean_F log r_F)`` and how many families have ``r_F > 1``.
+
+Every ordering is measured against the same random-order rows: those of the random model
+run in the paper's ordering (where it explores in a seeded random order), or, where a
+table has none for a family, those run in the row group's own ordering.
 """
 
 from __future__ import annotations
@@ -32,8 +38,10 @@ import numpy as np
 from llcps.analysis.results import ResultsTable, group_rows
 from llcps.analysis.stats import holm, paired_wilcoxon
 from llcps.analysis.survival import budget, kaplan_meier, logrank
+from llcps.cps.orderings import ORDERINGS, PAPER_ORDERING
 from llcps.experiments.design import OWN_BRANCH_CONDITIONS, RANDOM_ORDER_MODEL, condition_rank, scenario_rank
 from llcps.experiments.presets import PRESETS, measure_rank, model_rank
+from llcps.experiments.rows import ordering_rank
 from llcps.models.measures import MEASURES
 from llcps.models.registry import WORLD_MODELS
 
@@ -43,24 +51,27 @@ HEADLINE_RATIO = "median of per-variant ratios"
 
 @dataclass(frozen=True)
 class FamilyResult:
-    """One ordering against the random order on one held-out family.
+    """One row group (model, measure, ordering, pretraining size, condition) against the
+    random order on one held-out family.
 
     Attributes:
         family: the scenario.
+        ordering: the exploration ordering of the row group's episodes.
         condition: ``reset`` (pretraining only) or ``others`` (also the other families' episodes).
         n: variants both orderings solved or gave up on (the pairs).
         median_ratio: median over variants of trials(ordering) / trials(random); 0/0 counts as 1.
         ratio_of_medians: median trials(ordering) / median trials(random).
-        p_value, p_reason, p_holm: paired Wilcoxon over variants; Holm across this ordering's families.
+        p_value, p_reason, p_holm: paired Wilcoxon over variants; Holm across this row group's families.
         unsolved_model, unsolved_random: episodes that ended unsolved (censored at the budget).
         km_median_model, km_median_random: Kaplan–Meier medians (None: not reached, or no censoring).
         logrank_p, logrank_reason: log-rank test, only when some episode was censored.
-        default: the ordering is the registries' default world model and measure.
+        default: the row group is the registries' default world model, measure and ordering.
     """
 
     family: str
     model: str
     measure: str
+    ordering: str
     pretrain_size: int
     condition: str
     n: int
@@ -82,7 +93,7 @@ class FamilyResult:
 
 @dataclass(frozen=True)
 class GeneralizationSummary:
-    """One ordering over every held-out family.
+    """One row group over every held-out family.
 
     Attributes:
         geomean_ratio: geometric mean of the families' median ratios (:data:`HEADLINE_RATIO`).
@@ -91,6 +102,7 @@ class GeneralizationSummary:
 
     model: str
     measure: str
+    ordering: str
     pretrain_size: int
     condition: str
     families: int
@@ -118,21 +130,28 @@ def geometric_mean(values: list[float]) -> float:
 
 
 def family_results(table: ResultsTable, *, metric: str = "exploration_trials") -> tuple[FamilyResult, ...]:
-    """Every ordering against the random order on every family, paired by seed (= variant).
+    """Every row group against the random order on every family, paired by seed (= variant).
 
-    Only conditions that solve each family on its own branch count (``reset``,
-    ``others``); the random order's rows are matched on family, condition and
-    pretraining size (the random order ignores its measure). Empty without random rows,
-    and for rows of presets that do not hold their scenarios out as families.
+    A row group is (model, measure, ordering, pretraining size, condition). Only
+    conditions that solve each family on its own branch count (``reset``, ``others``);
+    the random order's rows are matched on family, condition and pretraining size (the
+    random order ignores its measure), and are those of the paper's ordering for every
+    row group when the table holds them (else those of the row group's own ordering).
+    Empty without random rows, and for rows of presets that do not hold their scenarios
+    out as families.
     """
     rows = [r for r in table if r.condition in OWN_BRANCH_CONDITIONS and r.preset in PRESETS and PRESETS[r.preset].per_family]
-    random = group_rows((r for r in rows if r.model == RANDOM_ORDER_MODEL), lambda r: (r.scenario, r.condition, r.pretrain_size))
+    random = group_rows(
+        (r for r in rows if r.model == RANDOM_ORDER_MODEL), lambda r: (r.scenario, r.condition, r.pretrain_size, r.ordering)
+    )
     groups = group_rows(
-        (r for r in rows if r.model != RANDOM_ORDER_MODEL), lambda r: (r.model, r.measure, r.pretrain_size, r.condition, r.scenario)
+        (r for r in rows if r.model != RANDOM_ORDER_MODEL),
+        lambda r: (r.model, r.measure, r.ordering, r.pretrain_size, r.condition, r.scenario),
     )
     out: list[FamilyResult] = []
-    for (model, measure, size, condition, family), mine in groups.items():
-        theirs = {(r.seed, r.variant): r for r in random.get((family, condition, size), [])}
+    for (model, measure, ordering, size, condition, family), mine in groups.items():
+        baseline = random.get((family, condition, size, PAPER_ORDERING)) or random.get((family, condition, size, ordering), [])
+        theirs = {(r.seed, r.variant): r for r in baseline}
         pairs = [(r, theirs[(r.seed, r.variant)]) for r in mine if (r.seed, r.variant) in theirs]
         if not pairs:
             continue
@@ -155,6 +174,7 @@ def family_results(table: ResultsTable, *, metric: str = "exploration_trials") -
                 family=family,
                 model=model,
                 measure=measure,
+                ordering=ordering,
                 pretrain_size=size,
                 condition=condition,
                 n=len(pairs),
@@ -171,19 +191,40 @@ def family_results(table: ResultsTable, *, metric: str = "exploration_trials") -
                 km_median_random=km_b,
                 logrank_p=lr,
                 logrank_reason="" if lr is not None else lr_reason,
-                default=(model, measure) == (WORLD_MODELS.default, MEASURES.default),
+                default=(model, measure, ordering) == (WORLD_MODELS.default, MEASURES.default, ORDERINGS.default),
             )
         )
     out.sort(key=_order)
-    return _holm_per_ordering(out)
+    return _holm_per_group(out)
 
 
-def _ordering(r: FamilyResult) -> tuple[str, str, int, str]:
-    return (r.model, r.measure, r.pretrain_size, r.condition)
+def row_group(r: FamilyResult | GeneralizationSummary) -> tuple[str, str, str, int, str]:
+    """What one line of comparisons is about: (model, measure, ordering, pretraining size, condition)."""
+    return (r.model, r.measure, r.ordering, r.pretrain_size, r.condition)
 
 
 def _order(r: FamilyResult) -> tuple:
-    return (not r.default, model_rank(r.model), measure_rank(r.measure), -r.pretrain_size, condition_rank(r.condition), scenario_rank(r.family))
+    return (
+        not r.default,
+        model_rank(r.model),
+        measure_rank(r.measure),
+        ordering_rank(r.ordering),
+        -r.pretrain_size,
+        condition_rank(r.condition),
+        scenario_rank(r.family),
+    )
+
+
+def shows_ordering(rows: Iterable[FamilyResult | GeneralizationSummary]) -> bool:
+    """Whether the rows' labels name the ordering: when they are not all of the paper's
+    ordering (a report of one ``ranked`` run reads as before orderings were recorded)."""
+    return any(r.ordering != PAPER_ORDERING for r in rows)
+
+
+def group_label(r: FamilyResult | GeneralizationSummary, *, ordering: bool = True) -> str:
+    """A row group for people: ``nb / goal-directed / trial-and-error / p200 / reset``
+    (without the ordering when ``ordering`` is false)."""
+    return " / ".join((r.model, r.measure, *((r.ordering,) if ordering else ()), f"p{r.pretrain_size}", r.condition))
 
 
 T = TypeVar("T")
@@ -197,24 +238,25 @@ def _group(items: Iterable[T], key: Callable[[T], K]) -> dict[K, list[T]]:
     return groups
 
 
-def _holm_per_ordering(results: list[FamilyResult]) -> tuple[FamilyResult, ...]:
-    """Holm's correction across the families of each ordering (one family of tests per ordering)."""
+def _holm_per_group(results: list[FamilyResult]) -> tuple[FamilyResult, ...]:
+    """Holm's correction across the families of each row group (one family of tests per row group)."""
     adjusted: dict[int, float] = {}
-    for members in _group(range(len(results)), lambda i: _ordering(results[i])).values():
+    for members in _group(range(len(results)), lambda i: row_group(results[i])).values():
         for i, p in zip(members, holm(results[i].p_value for i in members)):
             adjusted[i] = p
     return tuple(replace(r, p_holm=adjusted[i]) for i, r in enumerate(results))
 
 
 def generalization_summary(results: tuple[FamilyResult, ...]) -> tuple[GeneralizationSummary, ...]:
-    """Per ordering: the geometric mean of its families' median ratios and the families above 1."""
+    """Per row group: the geometric mean of its families' median ratios and the families above 1."""
     out = []
-    for (model, measure, size, condition), members in _group(results, _ordering).items():
+    for (model, measure, ordering, size, condition), members in _group(results, row_group).items():
         ratios = [r.median_ratio for r in members]
         out.append(
             GeneralizationSummary(
                 model=model,
                 measure=measure,
+                ordering=ordering,
                 pretrain_size=size,
                 condition=condition,
                 families=len(members),
@@ -233,5 +275,8 @@ __all__ = [
     "family_results",
     "generalization_summary",
     "geometric_mean",
+    "group_label",
     "ratio",
+    "row_group",
+    "shows_ordering",
 ]

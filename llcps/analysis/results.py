@@ -24,12 +24,14 @@ from llcps.inputs import read_user_text
 from llcps.limits import MAX_RESULTS_FILE_BYTES
 from llcps.experiments.design import Sequence, parse_branch, scenario_rank
 from llcps.experiments.presets import PRESETS
+from llcps.cps.orderings import PAPER_ORDERING
 from llcps.experiments.rows import (
     COLUMNS,
     METRICS,
     ColumnError,
     NOVELTY,
     ResultRow,
+    ordering_rank,
     row_records,
     write_rows_csv,
     write_rows_json,
@@ -77,9 +79,11 @@ def _parse_bool(text: str) -> bool:
 def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
     """Build a row from strings (CSV) or JSON values, with one clear error per bad field.
 
-    Results written before scene variants existed have no ``variant`` column: variant 0.
+    Results written before scene variants existed have no ``variant`` column: variant 0;
+    before orderings were recorded, no ``ordering`` column: the paper's ordering, the
+    only one runs had.
     """
-    data = {"variant": 0, **data}
+    data = {"variant": 0, "ordering": PAPER_ORDERING, **data}
     missing = [c for c in COLUMNS if c not in data]
     if missing:
         raise LlcpsError(
@@ -116,20 +120,21 @@ def _shown(raw: Any) -> str:
 
 
 class ResultsTable:
-    """An immutable, ordered collection of :class:`ResultRow` with one row per key.
+    """An immutable, ordered collection of :class:`ResultRow` with one row per key
+    (sequence, scenario, ordering).
 
-    Rows are kept sorted by (sequence, scenario order), so two tables with the same
-    rows compare, serialise and analyse identically whatever order they were built in.
+    Rows are kept sorted by (sequence, ordering, scenario order), so two tables with the
+    same rows compare, serialise and analyse identically whatever order they were built in.
     """
 
     def __init__(self, rows: Iterable[ResultRow] = ()) -> None:
-        by_key: dict[tuple[Sequence, str], ResultRow] = {}
+        by_key: dict[tuple[Sequence, str, str], ResultRow] = {}
         for row in rows:
             if row.key in by_key:
-                raise LlcpsError(f"two results for {row.sequence.branch_name} {row.scenario}")
+                raise LlcpsError(f"two results for {row.label}")
             by_key[row.key] = row
         self._rows: tuple[ResultRow, ...] = tuple(
-            sorted(by_key.values(), key=lambda r: (r.sequence, scenario_rank(r.scenario)))
+            sorted(by_key.values(), key=lambda r: (r.sequence, ordering_rank(r.ordering), scenario_rank(r.scenario)))
         )
 
     # -- collection protocol -------------------------------------------------
@@ -172,18 +177,24 @@ class ResultsTable:
         return tuple(dict.fromkeys(getattr(r, name) for r in self._rows))
 
     # -- completeness, for resumable runs ------------------------------------
-    def complete_sequences(self) -> frozenset[Sequence]:
-        """Sequences with a row for every scenario their preset's rows hold.
+    def complete_runs(self) -> frozenset[tuple[Sequence, str]]:
+        """(sequence, ordering) pairs with a row for every scenario their preset's rows hold.
 
         The store does not record which scenarios a run asked for, so a preset's list
         is every scenario any of its sequences solved in this table.
         """
-        seen: dict[Sequence, set[str]] = {}
+        seen: dict[tuple[Sequence, str], set[str]] = {}
         per_preset: dict[str, set[str]] = {}
         for row in self._rows:
-            seen.setdefault(row.sequence, set()).add(row.scenario)
+            seen.setdefault((row.sequence, row.ordering), set()).add(row.scenario)
             per_preset.setdefault(row.preset, set()).add(row.scenario)
-        return frozenset(s for s, done in seen.items() if done >= per_preset[s.preset])
+        return frozenset(run for run, done in seen.items() if done >= per_preset[run[0].preset])
+
+    def complete_sequences(self) -> frozenset[Sequence]:
+        """Sequences complete (:meth:`complete_runs`) in every ordering the table holds them in."""
+        complete = self.complete_runs()
+        runs = {(r.sequence, r.ordering) for r in self._rows}
+        return frozenset(s for s, _ in runs) - frozenset(s for s, o in runs if (s, o) not in complete)
 
     def missing(self, sequences: Iterable[Sequence]) -> tuple[Sequence, ...]:
         """The given sequences that are not complete yet, in the given order."""
@@ -239,6 +250,26 @@ class ResultsTable:
         return cls.read_csv(path)
 
 
+def merge_tables(sources: Iterable[tuple[str, ResultsTable]]) -> ResultsTable:
+    """One table of the rows of several, each given with where it came from (a path).
+
+    A row that several hold alike (same key, same values: e.g. the random-order rows
+    every copy of one store keeps) is kept once. Two rows with the same key and
+    different values cannot both be a result: an error naming the key and both sources.
+    """
+    merged: dict[tuple[Sequence, str, str], tuple[ResultRow, str]] = {}
+    for source, table in sources:
+        for row in table:
+            held = merged.setdefault(row.key, (row, source))
+            if held[0] != row:
+                raise LlcpsError(
+                    f"{held[1]} and {source} hold different results for {row.label}",
+                    hint="one sequence, scenario and ordering has one result; results written before the ordering "
+                    f"was recorded read as {PAPER_ORDERING!r}: set the ordering column of the rows another ordering ran",
+                )
+    return ResultsTable(row for row, _ in merged.values())
+
+
 def _episode_summary(episode: Any) -> Mapping[str, Any] | None:
     if isinstance(episode, Mapping):
         return episode
@@ -247,6 +278,7 @@ def _episode_summary(episode: Any) -> Mapping[str, Any] | None:
         return None
     merged = dict(summary)
     # The record's columns are authoritative; the summary may predate the episode's end.
+    # (The record has no ordering column: the summary's, absent before it was recorded.)
     columns = ("branch", "status", "scenario", "condition", "model", "measure")
     for key, attribute in (*((c, c) for c in columns), ("episode_id", "id")):
         value = getattr(episode, attribute, None)
@@ -267,17 +299,18 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
     """Build the results table from the experience store's episodes.
 
     Each episode is a mapping holding ``SolveResult.as_json()`` (scenario, condition,
-    model, measure, seed, branch, solved, status, exploration_trials, sim_seconds,
-    wall_seconds, episode_id), or a store ``EpisodeRecord`` whose ``summary`` holds it;
+    model, measure, ordering, seed, branch, solved, status, exploration_trials,
+    sim_seconds, wall_seconds, episode_id), or a store ``EpisodeRecord`` whose ``summary`` holds it;
     the record's own ``branch``, ``status`` and ``id`` take precedence. The cell and
-    seed come from the branch name; the summary must agree with it.
+    seed come from the branch name; the summary must agree with it. The ordering is the
+    summary's (the paper's when a summary predates it).
 
     Episodes on other branches, in the original condition, or still ``running``
     (a run cut off mid-episode) are skipped and counted. When one (sequence,
-    scenario) was solved more than once (a re-run), the latest episode wins.
+    scenario) was solved more than once in one ordering (a re-run), the latest episode wins.
     """
     skipped: dict[str, int] = {}
-    chosen: dict[tuple[Sequence, str], tuple[tuple[int, int], ResultRow]] = {}
+    chosen: dict[tuple[Sequence, str, str], tuple[tuple[int, int], ResultRow]] = {}
 
     def skip(reason: str) -> None:
         skipped[reason] = skipped.get(reason, 0) + 1
@@ -325,6 +358,7 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
                 episode_id=None if summary.get("episode_id") is None else int(summary["episode_id"]),
                 branch=str(summary["branch"]),
                 variant=seq.variant,
+                ordering=str(summary.get("ordering") or PAPER_ORDERING),
             )
         except (KeyError, TypeError, ValueError):
             skip("malformed summary")
@@ -363,6 +397,7 @@ __all__ = [
     "ResultsTable",
     "by_seed",
     "group_rows",
+    "merge_tables",
     "table_budget",
     "table_from_episodes",
 ]

@@ -1,5 +1,6 @@
 """Which results one report covers: a preset's rows from the store, one set of scenes,
-one preset, and the random-order baseline run beside it."""
+one preset, the random-order baseline run beside it, and the ordering of its per-cell
+sections."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ from typing import Iterable
 
 from llcps.analysis.results import ResultsTable, table_from_episodes
 from llcps.analysis.versus_random import BASELINE_MODEL
+from llcps.cps.orderings import PAPER_ORDERING
+from llcps.experiments.rows import ordering_rank
 from llcps.errors import LlcpsError
 from llcps.store import Store
 
@@ -106,4 +109,29 @@ def with_baseline(table: ResultsTable, source: ResultsTable, baseline_preset: st
     return ResultsTable([*table, *extra])
 
 
-__all__ = ["one_preset", "results_table", "select_scenes", "with_baseline"]
+def orderings(table: ResultsTable) -> tuple[str, ...]:
+    """The orderings the table's rows ran, the paper's first."""
+    return tuple(sorted(table.unique("ordering"), key=ordering_rank))
+
+
+def one_ordering(table: ResultsTable) -> tuple[str, ResultsTable]:
+    """The ordering a report's per-cell sections cover, and its rows with their baseline.
+
+    Cells are named by model, measure, pretraining size and condition, so two
+    orderings' rows of one cell (results of several stores, merged) would be pooled;
+    the leave-one-family-out comparison groups by ordering and takes the whole table,
+    every other section one ordering: the paper's when a model other than the random
+    order ran it, else the first such. Its random-order rows are those of the paper's
+    ordering when the table holds them (the baseline of every ordering), else its own.
+    A table of one ordering is returned whole.
+    """
+    if len(table.unique("ordering")) <= 1:
+        return (str(table.rows[0].ordering) if len(table) else PAPER_ORDERING), table
+    guided = ResultsTable(r for r in table if r.model != BASELINE_MODEL)
+    chosen = orderings(guided)[0] if len(guided) else orderings(table)[0]
+    random = orderings(ResultsTable(r for r in table if r.model == BASELINE_MODEL))
+    base = PAPER_ORDERING if PAPER_ORDERING in random else chosen
+    return chosen, ResultsTable(r for r in table if r.ordering == (base if r.model == BASELINE_MODEL else chosen))
+
+
+__all__ = ["one_ordering", "one_preset", "orderings", "results_table", "select_scenes", "with_baseline"]

@@ -110,7 +110,8 @@ def run_cli(
         typer.Option(
             "--ordering",
             metavar="NAME",
-            help="Exploration ordering of every episode (default: the preset's, ranked); one of: " + ", ".join(ORDERINGS) + ". Run another ordering into another store.",
+            help="Exploration ordering of every episode (default: the preset's, ranked); one of: " + ", ".join(ORDERINGS) + ". Run another ordering into another store "
+            "and compare them in one report: `llcps experiment report DIR DIR --out-dir DIR`.",
             show_default=False,
         ),
     ] = None,
@@ -202,6 +203,7 @@ def run_cli(
     epilog=examples(
         "llcps experiment report --html                              # results/paper, with report.html",
         "llcps experiment report results/paper                       # rebuild from results.csv",
+        "llcps experiment report results/ranked results/trial-and-error --out-dir results/orderings   # two orderings in one report",
         "llcps --db runs.db experiment report --from-db --preset paper --html",
         "llcps --db runs.db experiment report --from-db --preset paper --baseline-preset random --out-dir results/paper",
         "llcps --db runs.db experiment report --from-db --preset vs_random --variants 100:110 --out-dir results/held-apart",
@@ -209,12 +211,13 @@ def run_cli(
 )
 def report_cli(
     ctx: typer.Context,
-    source: Annotated[
-        Optional[Path],
+    sources: Annotated[
+        Optional[list[Path]],
         typer.Argument(
-            metavar="[DIR]",
-            help="A results directory (its results.csv) or a results .csv/.json file "
-            "(default: results/<preset>, that of --preset or of the default preset, when it holds results).",
+            metavar="DIR",
+            help="Results directories (their results.csv) or results .csv/.json files; the rows of several are merged "
+            "into one table, rows they hold alike kept once (default: results/<preset>, that of --preset or of the "
+            "default preset, when it holds results).",
             show_default=False,
         ),
     ] = None,
@@ -244,7 +247,11 @@ def report_cli(
     out_dir: Annotated[
         Optional[Path],
         typer.Option(
-            "--out-dir", metavar="DIR", help="Report directory (default: DIR itself, or results/<preset> with --from-db).", show_default=False, file_okay=False
+            "--out-dir",
+            metavar="DIR",
+            help="Report directory (default: DIR itself, or results/<preset> with --from-db; required with several DIRs).",
+            show_default=False,
+            file_okay=False,
         ),
     ] = None,
     html: HtmlFlag = False,
@@ -257,11 +264,18 @@ def report_cli(
     default) is read. From a results directory, the provenance and films it already holds
     are used (`experiment run --html` films them); the films of report.html are made only
     with --from-db, which reads the results, and films a resolving trial per scenario,
-    from the store (--db)."""
+    from the store (--db).
+
+    Several DIRs make one report of their rows, e.g. of orderings run into separate stores
+    (`experiment run --ordering`): leave one family out then compares every ordering with
+    the same random-order rows. Rows the DIRs hold alike (the random order's, from copies
+    of one store) count once; two different results for one branch, scenario and ordering
+    are an error naming both DIRs. Each result row records its ordering; a results file
+    written before it did reads as ranked. The provenance of every DIR is kept."""
     from llcps.jobs.experiment import report_experiment_job  # the analysis and the plots load here, not at start
 
-    if source is not None and from_db:
-        raise LlcpsError("give a results directory or --from-db, not both", hint="e.g. `llcps experiment report results/paper`")
+    if sources and from_db:
+        raise LlcpsError("give results directories or --from-db, not both", hint="e.g. `llcps experiment report results/paper`")
     scenes = None if variants is None else parse_range(variants)
 
     def build(results: Any, bar: Any) -> Any:
@@ -271,7 +285,7 @@ def report_cli(
 
     with progress_display("experiment report", "reading the results") as bar:
         if not from_db:
-            result = build(source, bar)
+            result = build(sources or None, bar)
         else:
             with open_store(ctx) as store:
                 result = build(store, bar)
@@ -380,16 +394,17 @@ def _ratio(value: Any) -> str:
 
 
 def show_generalization(analysis: dict[str, Any]) -> None:
-    """Leave one family out: per held-out family, each ordering against the random order, and overall."""
+    """Leave one family out: per held-out family, each row group (model / measure / ordering, when
+    not all ran the paper's / pretraining / condition) against the random order, and overall."""
     data = analysis["generalization"]
     print_table(
-        "leave one family out: median exploration trials per held-out family, ordering vs random order "
-        "(ratio > 1: the ordering explored more)",
-        ("family", "ordering", "n", "median", "median random", "median of ratios", "ratio of medians", "Wilcoxon p", "Holm p", "unsolved", "log-rank p"),
+        "leave one family out: median exploration trials per held-out family, row group vs random order "
+        "(ratio > 1: the row group explored more)",
+        ("family", "row group", "n", "median", "median random", "median of ratios", "ratio of medians", "Wilcoxon p", "Holm p", "unsolved", "log-rank p"),
         [
             (
                 r["family"],
-                f"{r['model']} / {r['measure']} / {r['condition']}" + (" (default)" if r["default"] else ""),
+                r["label"] + (" (default)" if r["default"] else ""),
                 r["n"],
                 _num(r["median_model"]),
                 _num(r["median_random"]),
@@ -405,10 +420,10 @@ def show_generalization(analysis: dict[str, Any]) -> None:
     )
     print_table(
         f"over every family (geometric mean of the {data['headline_ratio']})",
-        ("ordering", "families", "geometric mean ratio", "families with ratio > 1"),
+        ("row group", "families", "geometric mean ratio", "families with ratio > 1"),
         [
             (
-                f"{r['model']} / {r['measure']} / {r['condition']}" + (" (default)" if r["default"] else ""),
+                r["label"] + (" (default)" if r["default"] else ""),
                 r["families"],
                 _ratio(r["geomean_ratio"]),
                 r["worse_than_random"],

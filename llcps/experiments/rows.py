@@ -2,7 +2,9 @@
 
 A row says how much exploration one scenario of one sequence took and whether it was
 solved; its cell, seed and variant come from the sequence's branch
-(:mod:`llcps.experiments.design`). This module fixes the row's columns and how rows
+(:mod:`llcps.experiments.design`), its exploration ordering from the episode (branch
+names do not record it, so each ordering runs into its own store and reports of
+several are merged from their rows). This module fixes the row's columns and how rows
 are written to ``results.csv`` and ``results.json``; reading them back, with one clear
 error per bad field, is :mod:`llcps.analysis.results`.
 """
@@ -16,10 +18,11 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any, Iterable
 
+from llcps.cps.orderings import ORDERINGS, PAPER_ORDERING
 from llcps.domain import MAX_ID, MAX_PRETRAIN_TRIALS, MAX_SEED
 from llcps.errors import LlcpsError
 from llcps.outputs import replaced_atomically, write_text
-from llcps.experiments.design import Cell, Sequence
+from llcps.experiments.design import Cell, Sequence, rank_by
 from llcps.tabular import csv_value
 
 #: Columns that can be analysed as "exploration" (the paper's Figure 2 uses time).
@@ -29,7 +32,7 @@ NOVELTY = "novelty"
 
 
 #: Columns that hold a name.
-_TEXT_COLUMNS: tuple[str, ...] = ("preset", "model", "measure", "condition", "scenario", "branch")
+_TEXT_COLUMNS: tuple[str, ...] = ("preset", "model", "measure", "condition", "scenario", "branch", "ordering")
 #: Longest name a text column may hold.
 MAX_TEXT_VALUE = 200
 
@@ -68,6 +71,9 @@ class ResultRow:
     branch: str
     #: The scene variant (0: the canonical scene).
     variant: int = 0
+    #: The exploration ordering the episode ran (:mod:`llcps.cps.orderings`); results
+    #: written before the column existed ran the paper's.
+    ordering: str = PAPER_ORDERING
 
     def __post_init__(self) -> None:
         """Each field of the type and range a run writes: a results file is user input,
@@ -99,9 +105,18 @@ class ResultRow:
         return Sequence(self.preset, self.cell, self.seed, self.variant)
 
     @property
-    def key(self) -> tuple[Sequence, str]:
-        """What identifies a row: at most one row per (sequence, scenario)."""
-        return (self.sequence, self.scenario)
+    def key(self) -> tuple[Sequence, str, str]:
+        """What identifies a row: at most one row per (sequence, scenario, ordering).
+
+        The branch names the sequence but not the ordering, so two orderings' rows of one
+        sequence and scenario (run into two stores) sit side by side in one table.
+        """
+        return (self.sequence, self.scenario, self.ordering)
+
+    @property
+    def label(self) -> str:
+        """The key for people: ``exp-...-s3 scenario2 (hedged)``."""
+        return f"{self.branch} {self.scenario} ({self.ordering})"
 
     def on_scenes(self, paired: bool) -> bool:
         """Whether the row ran on the canonical scenes (variant 0) or, ``paired``, on its
@@ -115,6 +130,11 @@ class ResultRow:
 
 
 COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(ResultRow))
+
+
+def ordering_rank(ordering: str) -> tuple[int, str]:
+    """Sort key: the registered orderings in the registry's order (the paper's first), others after by name."""
+    return rank_by(tuple(ORDERINGS), ordering)
 
 
 def row_records(rows: Iterable[ResultRow]) -> list[dict[str, Any]]:
@@ -144,4 +164,15 @@ def write_rows_json(rows: Iterable[ResultRow], path: str | Path) -> Path:
     return write_text(path, json.dumps({"columns": list(COLUMNS), "rows": row_records(rows)}, indent=1) + "\n", what="results")
 
 
-__all__ = ["COLUMNS", "ColumnError", "METRICS", "NOVELTY", "ResultRow", "check_metric", "row_records", "write_rows_csv", "write_rows_json"]
+__all__ = [
+    "COLUMNS",
+    "ColumnError",
+    "METRICS",
+    "NOVELTY",
+    "ResultRow",
+    "check_metric",
+    "ordering_rank",
+    "row_records",
+    "write_rows_csv",
+    "write_rows_json",
+]

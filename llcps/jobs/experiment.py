@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
-from llcps.analysis.results import ResultsTable, table_from_episodes
+from llcps.analysis.results import ResultsTable, merge_tables, table_from_episodes
 from llcps.analysis.selection import one_preset, results_table, select_scenes, with_baseline
 from llcps.experiments.presets import Preset, get_preset, run_seeds
 from llcps.experiments.runner import run_experiment
@@ -139,9 +139,16 @@ def default_results_dir(preset: str | None = None) -> Path:
     return path
 
 
+def read_results(paths: Sequence[str | Path]) -> ResultsTable:
+    """The rows of one or several results directories or files, merged into one table
+    (:func:`~llcps.analysis.results.merge_tables`: rows several hold alike are kept once,
+    differing rows of one key are an error naming both)."""
+    return merge_tables((str(path), ResultsTable.read(path)) for path in paths)
+
+
 def report_experiment_job(
     *,
-    source: str | Path | Store | None = None,
+    source: str | Path | Store | Sequence[str | Path] | None = None,
     preset: str | None = None,
     baseline_preset: str | None = None,
     variants: range | None = None,
@@ -152,33 +159,48 @@ def report_experiment_job(
     """Rebuild a report from stored results, running no experiment.
 
     Args:
-        source: a results directory (its results.csv), a results .csv/.json file, or a
-            store (its episodes; provenance and films come from it too). From a
-            directory, the provenance and films it already holds are kept. None: the
-            default results directory of ``preset`` (:func:`default_results_dir`).
+        source: a results directory (its results.csv), a results .csv/.json file, several
+            of them (their rows merged into one table: :func:`read_results`, e.g. the
+            results of two orderings run into two stores), or a store (its episodes;
+            provenance and films come from it too). From a directory, the provenance
+            and films it already holds are kept; from several, every directory's
+            provenance. None: the default results directory of ``preset``
+            (:func:`default_results_dir`).
         preset: the preset to report on (needed when the results hold several).
         baseline_preset: add the random-model results of this preset (run on the same store).
         variants: report on the sequences run on these scene variants (default: the
             canonical scenes, or all when the results are of one variants run).
         out_dir: the report's directory (default: the source directory itself, or
-            ``results/<preset>`` from a store).
+            ``results/<preset>`` from a store); needed with several sources.
         html: also write report.html.
         progress: called as ``(phase, done, total)`` while the report is built.
     """
     if source is None:
         source = default_results_dir(preset)
     store = source if isinstance(source, Store) else None
-    path = None if store is not None else Path(source)  # type: ignore[arg-type]
-    source_dir = None if path is None else (path if path.is_dir() else path.parent)
-    table = table_from_episodes(store.list_episodes()).table if store is not None else ResultsTable.read(path)  # type: ignore[arg-type]
+    if store is not None:
+        paths: list[Path] = []
+    elif isinstance(source, (str, Path)):
+        paths = [Path(source)]
+    else:
+        paths = list(dict.fromkeys(Path(p) for p in source))  # the same directory twice is read once
+    if store is None and not paths:
+        raise LlcpsError("no results directory given", hint="pass one or more results directories or results files")
+    if len(paths) > 1 and out_dir is None:
+        raise LlcpsError(
+            f"a report of {len(paths)} results directories needs its own directory",
+            hint="name it with --out-dir, e.g. `llcps experiment report results/ranked results/hedged --out-dir results/orderings`",
+        )
+    source_dirs = list(dict.fromkeys(path if path.is_dir() else path.parent for path in paths))
+    table = table_from_episodes(store.list_episodes()).table if store is not None else read_results(paths)
     name, mine = one_preset(table, preset)
     if baseline_preset is not None:
         mine = with_baseline(mine, table, baseline_preset)
     mine, left_out = select_scenes(mine, variants)
-    target = out_dir if out_dir is not None else (default_out_dir(name) if source_dir is None else source_dir)
+    target = out_dir if out_dir is not None else (default_out_dir(name) if not source_dirs else source_dirs[0])
     target = check_output_dir(target, what="--out-dir")
-    report_dir, analysis = write_report(mine, target, store=store, source_dir=source_dir, html=html, progress=progress)
+    report_dir, analysis = write_report(mine, target, store=store, source_dirs=source_dirs, html=html, progress=progress)
     return ExperimentReport(name, report_dir, analysis, left_out)
 
 
-__all__ = ["ExperimentReport", "ExperimentRun", "default_results_dir", "report_experiment_job", "run_experiment_job"]
+__all__ = ["ExperimentReport", "ExperimentRun", "default_results_dir", "read_results", "report_experiment_job", "run_experiment_job"]

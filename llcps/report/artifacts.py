@@ -42,6 +42,10 @@ def write_provenance(out_dir: Path, provenance: Sequence[Mapping[str, Any]]) -> 
     return write_text(path, json.dumps(list(provenance), indent=1, sort_keys=True) + "\n", what="report")
 
 
+#: The key marking which results directory an environment's runs came from, in a report of several.
+RESULTS_KEY = "results"
+
+
 def read_provenance(out_dir: Path) -> list[dict[str, Any]]:
     """The provenance a report directory holds; empty when it has none or it is unreadable."""
     path = out_dir / PROVENANCE_FILE
@@ -51,15 +55,32 @@ def read_provenance(out_dir: Path) -> list[dict[str, Any]]:
         data = json.loads(read_user_text(path, what="provenance file", max_bytes=MAX_RESULTS_FILE_BYTES, hint=""))
     except (LlcpsError, ValueError, RecursionError):
         return []
-    known = set(Provenance.__dataclass_fields__) | {"runs"}
+    known = set(Provenance.__dataclass_fields__) | {"runs", RESULTS_KEY}
     return [{k: v for k, v in item.items() if k in known} for item in data if isinstance(item, dict)] if isinstance(data, list) else []
 
 
+def merged_provenance(source_dirs: Sequence[Path]) -> list[dict[str, Any]]:
+    """The provenance of several results directories, each environment marked with the
+    directory it was read from (:data:`RESULTS_KEY`; one marked already keeps its mark).
+
+    Run counts stay per directory: a run whose rows two directories hold (a copied
+    store's) is counted in each, so they are not added up.
+    """
+    merged: list[dict[str, Any]] = []
+    for folder in source_dirs:
+        for item in read_provenance(Path(folder)):
+            marked = {**item, RESULTS_KEY: item.get(RESULTS_KEY) or str(folder)}
+            if marked not in merged:
+                merged.append(marked)
+    return merged
+
+
 def provenance_line(item: Mapping[str, Any]) -> str:
-    """One environment for people, with its run count."""
+    """One environment for people, with its run count (and the results directory it came from, if marked)."""
     env = Provenance(**{k: v for k, v in item.items() if k in Provenance.__dataclass_fields__})
     runs = item.get("runs")
-    return env.summary() + (f" — {runs} run(s)" if isinstance(runs, int) else "")
+    source = item.get(RESULTS_KEY)
+    return env.summary() + (f" — {runs} run(s)" if isinstance(runs, int) else "") + (f" [{source}]" if isinstance(source, str) else "")
 
 
 def typical_resolution(rows: Sequence[ResultRow]) -> ResultRow | None:
@@ -105,8 +126,10 @@ def existing_films(out_dir: Path) -> dict[str, Path]:
 __all__ = [
     "FILMS_DIR",
     "PROVENANCE_FILE",
+    "RESULTS_KEY",
     "existing_films",
     "film_resolutions",
+    "merged_provenance",
     "provenance_line",
     "read_provenance",
     "table_provenance",

@@ -19,6 +19,7 @@ from llcps.analysis.analyse import analyse, analysis_json
 from llcps.analysis.figure2 import Figure2Row
 from llcps.analysis.generalization import FamilyResult
 from llcps.analysis.results import ResultsTable, table_budget
+from llcps.analysis.selection import one_ordering
 from llcps.analysis.stats import DEFAULT_RESAMPLES
 from llcps.analysis.survival import SurvivalComparison
 from llcps.analysis.versus_random import RandomComparison
@@ -129,7 +130,9 @@ def build_report(
     film_paths = dict(films) if films is not None else artifacts.existing_films(out)
     plot_dir = out / "plots"
     plot_paths = {
-        "distribution": plots.exploration_distribution(table, plot_dir / "distribution", metric=metric, budget=table_budget(table)),
+        "distribution": plots.exploration_distribution(
+            one_ordering(table)[1], plot_dir / "distribution", metric=metric, budget=table_budget(table)
+        ),
         "cumulative": plots.cumulative_plot(analysis.cumulative, plot_dir / "cumulative", metric=metric),
     }
     if analysis.figure2:  # a preset of one condition has no Figure 2 to draw
@@ -202,7 +205,7 @@ def write_report(
     out_dir: str | Path,
     *,
     store: Store | None = None,
-    source_dir: Path | None = None,
+    source_dirs: Sequence[Path] = (),
     html: bool = False,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> tuple[Path, dict[str, Any]]:
@@ -211,11 +214,14 @@ def write_report(
     With the ``store`` the results came from, the report records where their runs ran
     and, with ``html``, films a resolving trial per scenario for report.html. Without a
     store, where the runs ran comes from the report directory the results were read
-    from (``source_dir``), else from what ``out_dir`` holds.
+    from (``source_dirs``), else from what ``out_dir`` holds; from several, every
+    directory's, each marked with its directory (:func:`~llcps.report.artifacts.merged_provenance`).
     """
     provenance = films = None
-    if store is None and source_dir is not None and Path(source_dir).resolve() != Path(out_dir).resolve():
-        provenance = artifacts.read_provenance(Path(source_dir)) or None
+    if store is None and len(source_dirs) > 1:
+        provenance = artifacts.merged_provenance(source_dirs) or None
+    elif store is None and source_dirs and Path(source_dirs[0]).resolve() != Path(out_dir).resolve():
+        provenance = artifacts.read_provenance(Path(source_dirs[0])) or None
     if store is not None:
         provenance = artifacts.table_provenance(store, table)
         if html:

@@ -103,10 +103,11 @@ def render_markdown(
             "## Leave one family out: held-out novelty families against the random order",
             "",
             "Each scenario is a novelty family the pretraining never saw (it draws random layouts from the "
-            "sampler's catalog); each ordering solves it on the same scene variants as the random order, each "
-            "episode on its own branch. Ratios are trials(ordering) / trials(random): above 1, the ordering "
-            f"explored more. The overall figure is the geometric mean of the families' {HEADLINE_RATIO} "
-            "(per-variant ratios, paired). Wilcoxon: two-sided, paired by variant, Holm across each ordering's "
+            "sampler's catalog); each row group (a model x measure explored in one ordering) solves it on the "
+            "same scene variants as the random order, each episode on its own branch, and every ordering is "
+            "compared with the same random-order rows. Ratios are trials(row group) / trials(random): above 1, "
+            f"the row group explored more. The overall figure is the geometric mean of the families' {HEADLINE_RATIO} "
+            "(per-variant ratios, paired). Wilcoxon: two-sided, paired by variant, Holm across each row group's "
             "families; Kaplan–Meier medians and the log-rank test only where an episode ended unsolved.",
             "",
             *block_lines(generalization_overall_block(analysis.generalization_overall)),

@@ -26,7 +26,7 @@ from llcps.analysis.figure2 import Figure2Row
 from llcps.analysis.paper import FIGURE2_SCENARIOS, PAPER_FIGURE2
 from llcps.analysis.results import ResultsTable
 from llcps.analysis.stats import ALPHA
-from llcps.analysis.generalization import FamilyResult
+from llcps.analysis.generalization import FamilyResult, group_label, row_group, shows_ordering
 from llcps.analysis.survival import SurvivalCurve
 from llcps.experiments.design import cell_title, condition_rank, scenario_rank
 from llcps.experiments.presets import measure_rank, model_rank
@@ -322,30 +322,32 @@ def survival_plots(curves: Sequence[SurvivalCurve], directory: str | Path) -> di
 
 
 def generalization_plot(rows: Sequence[FamilyResult], stem: str | Path) -> tuple[Path, ...]:
-    """Per held-out family, each ordering's ratio to the random order on a log axis.
+    """Per held-out family, each row group's ratio to the random order on a log axis: one
+    series, in its own colour, per model x measure x ordering x pretraining size x condition.
 
     A filled marker is the median of the per-variant ratios, a hollow one the ratio of
-    the medians; left of the line at 1 the ordering explored less than random. Infinite
+    the medians; left of the line at 1 the row group explored less than random. Infinite
     or zero ratios are drawn at the axis' edge.
     """
     families = sorted({r.family for r in rows}, key=scenario_rank)
-    orderings = list(dict.fromkeys((r.model, r.measure, r.pretrain_size, r.condition) for r in rows))
-    height = 1.2 + 0.45 * max(len(families), 1) * max(len(orderings), 1) ** 0.5
+    groups = list(dict.fromkeys(row_group(r) for r in rows))
+    named = shows_ordering(rows)
+    height = 1.2 + 0.45 * max(len(families), 1) * max(len(groups), 1) ** 0.5
     fig = Figure(figsize=(6.4, height))
     ax = fig.subplots()
     finite = [v for r in rows for v in (r.median_ratio, r.ratio_of_medians) if math.isfinite(v) and v > 0]
     low, high = (min(finite + [0.5]) / 1.5, max(finite + [2.0]) * 1.5)
-    step = 0.8 / max(len(orderings), 1)
+    step = 0.8 / max(len(groups), 1)
     colors = matplotlib.colormaps["tab10"]
-    for k, key in enumerate(orderings):
-        mine = {r.family: r for r in rows if (r.model, r.measure, r.pretrain_size, r.condition) == key}
+    for k, key in enumerate(groups):
+        mine = {r.family: r for r in rows if row_group(r) == key}
         ys = [i - 0.4 + step * (k + 0.5) for i, f in enumerate(families) if f in mine]
         shown = [mine[f] for f in families if f in mine]
 
         def clip(v: float) -> float:
             return high if v == math.inf or math.isnan(v) else (low if v <= 0 else min(max(v, low), high))
 
-        label = cell_title(key[0], key[1], key[2]) + f" / {key[3]}"
+        label = group_label(shown[0], ordering=named)
         ax.scatter([clip(r.median_ratio) for r in shown], ys, color=colors(k % 10), label=f"{label}: median of ratios", zorder=3)
         ax.scatter(
             [clip(r.ratio_of_medians) for r in shown], ys, facecolors="none", edgecolors=colors(k % 10), label=f"{label}: ratio of medians", zorder=3
@@ -357,6 +359,8 @@ def generalization_plot(rows: Sequence[FamilyResult], stem: str | Path) -> tuple
     ax.invert_yaxis()
     ax.set_xlabel("exploration trials / random order's (log scale; < 1: fewer than random)", fontsize=8)
     ax.grid(alpha=0.3, axis="x")
-    ax.legend(fontsize=7, loc="best")
+    # Beside the axes, as the survival plots': every family's row has markers, so inside,
+    # the legend would hide some.
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
     ax.set_title("leave one family out: each held-out family against the random order", fontsize=10)
     return save(fig, stem)

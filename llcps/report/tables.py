@@ -10,7 +10,7 @@ from typing import Iterable
 
 from llcps.analysis.analyse import Analysis, VariantResult
 from llcps.analysis.figure2 import Figure2Row
-from llcps.analysis.generalization import HEADLINE_RATIO, FamilyResult, GeneralizationSummary
+from llcps.analysis.generalization import HEADLINE_RATIO, FamilyResult, GeneralizationSummary, group_label, shows_ordering
 from llcps.analysis.paper import FIGURE2_SCENARIOS, PAPER_CAPTION_FRACTION_REDUCED, PAPER_FIGURE2, PRETRAIN_NAMES
 from llcps.analysis.survival import SurvivalComparison
 from llcps.analysis.versus_random import BASELINE_MODEL, RandomComparison
@@ -182,20 +182,28 @@ def _km(value: float | None, unsolved: int) -> str:
     return "-" if unsolved == 0 and value is None else ("not reached" if value is None else format_num(value))
 
 
-def _ordering_name(model: str, measure: str, size: int, condition: str, default: bool) -> str:
-    return f"{model} / {measure} / p{size} / {condition}" + (" (default)" if default else "")
+def _group_header(named: bool) -> str:
+    return "model / measure / ordering / pretraining / condition" if named else "model / measure / pretraining / condition"
+
+
+def _group_name(r: FamilyResult | GeneralizationSummary, named: bool) -> str:
+    return group_label(r, ordering=named) + (" (default)" if r.default else "")
 
 
 def generalization_block(rows: tuple[FamilyResult, ...]) -> TableBlock:
-    """Per held-out family and ordering: medians, both ratios, Wilcoxon and log-rank."""
+    """Per held-out family and row group: medians, both ratios, Wilcoxon and log-rank.
+
+    The row groups name their ordering when not all are of the paper's (:func:`shows_ordering`).
+    """
+    named = shows_ordering(rows)
     header = (
-        "family", "ordering", "n", "median trials", f"median {BASELINE_MODEL}", "median of ratios", "ratio of medians",
+        "family", _group_header(named), "n", "median trials", f"median {BASELINE_MODEL}", "median of ratios", "ratio of medians",
         "Wilcoxon p", "Holm p", "unsolved", f"unsolved {BASELINE_MODEL}", "KM median", f"KM median {BASELINE_MODEL}", "log-rank p",
     )  # fmt: skip
     body = tuple(
         (
             r.family,
-            _ordering_name(r.model, r.measure, r.pretrain_size, r.condition, r.default),
+            _group_name(r, named),
             str(r.n),
             format_num(r.median_model),
             format_num(r.median_random),
@@ -217,11 +225,12 @@ def generalization_block(rows: tuple[FamilyResult, ...]) -> TableBlock:
 
 
 def generalization_overall_block(rows: tuple[GeneralizationSummary, ...]) -> TableBlock:
-    """Per ordering: the geometric mean of the per-family median ratios and the families above 1."""
-    header = ("ordering", "families", f"geometric mean of the {HEADLINE_RATIO}", f"families worse than {BASELINE_MODEL} (ratio > 1)")
+    """Per row group: the geometric mean of the per-family median ratios and the families above 1."""
+    named = shows_ordering(rows)
+    header = (_group_header(named), "families", f"geometric mean of the {HEADLINE_RATIO}", f"families worse than {BASELINE_MODEL} (ratio > 1)")
     body = tuple(
         (
-            _ordering_name(r.model, r.measure, r.pretrain_size, r.condition, r.default),
+            _group_name(r, named),
             str(r.families),
             _ratio(r.geomean_ratio),
             f"{r.worse_than_random} of {r.families}",

@@ -129,6 +129,17 @@ def overview_text(analysis: Analysis) -> str:
         f"{o['sequences']} sequences ({o['complete_sequences']} complete), {o['rows']} episodes, "
         f"{o['unsolved_episodes']} unsolved. Simulated {o['sim_seconds']:.0f} s in {o['wall_seconds']:.0f} s of wall time. "
         + scenes_text(o.get("variants", [0]))
+        + orderings_text(o.get("orderings") or [], o.get("cell_ordering"))
+    )
+
+
+def orderings_text(orderings: Sequence[str], cell_ordering: str | None) -> str:
+    """Which orderings a report of several covers where (nothing for a report of one)."""
+    if len(orderings) < 2:
+        return ""
+    return (
+        f" Orderings: {', '.join(orderings)}; leave one family out compares each with the random order, "
+        f"every other section covers the {cell_ordering} ordering (and the random order)."
     )
 
 
@@ -161,4 +172,4 @@ def plot_caption(name: str, metric: str) -> str:
     return captions.get(name, name.replace("_", " "))
 
 
-__all__ = ["SUMMARY_LIST_LIMIT", "method_text", "overview_text", "plot_caption", "scenes_text", "summary_lines"]
+__all__ = ["SUMMARY_LIST_LIMIT", "method_text", "orderings_text", "overview_text", "plot_caption", "scenes_text", "summary_lines"]
