@@ -160,3 +160,25 @@ def test_remembered_rebuilds_and_perceptions_change_no_trial(tmp_path: Path, mon
     remembered = run("remembered", 2048)
     assert remembered == rebuilt
     assert any(t[-1] for t in rebuilt[0]) and any(t[1] == "plan" for t in rebuilt[0])
+
+
+def _refused_here(trial) -> bool:
+    """A pick-and-place trial that moved nothing: a refused call runs only the rest
+    phase, a dozen steps from a scene at rest; any motion takes hundreds."""
+    return trial.spec.action in ("place_in_container", "remove_from_container") and trial.sim_steps < 100
+
+
+def test_the_reach_check_tries_last_what_the_arm_would_refuse(tmp_path: Path) -> None:
+    # scenario13's robot reaches top-down no farther than 55 cm: every pick of the puck is refused
+    tried = {}
+    for check in (False, True):
+        with Store.open(str(tmp_path / f"r{check}.db"), create=True) as store:
+            config = SolveConfig(scenario="scenario13", model="random", budget=24, seed=0, reach_check=check)
+            result = solve(store, branch=None, config=config)
+            assert result.reach_check is check
+            tried[check] = store.visible_trials("main", source="exploration")
+    assert any(_refused_here(t) for t in tried[False])  # the paper's agent tries them in its order
+    assert not any(_refused_here(t) for t in tried[True])
+    # random order knows nothing else: the check only takes the refused calls out of its sequence
+    kept = [t.spec for t in tried[False] if not _refused_here(t)]
+    assert [t.spec for t in tried[True]][: len(kept)] == kept

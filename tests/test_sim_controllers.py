@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, fluent
@@ -112,3 +114,56 @@ def test_bad_arguments_are_refused(world) -> None:
         execute(world, TrialSpec("push", ("nothing",), ControllerParams(0.1, 0.1, "left")))
     with pytest.raises(LlcpsError):
         execute(world, TrialSpec("push_together", ("a", "a"), ControllerParams(0.1, 0.1, "left")))
+
+
+FAR = SceneSpec(
+    entities=(
+        solid("near", "box", "red", (0.045, 0.045, 0.045), at=(0.5, 0.05)),
+        solid("far", "box", "blue", (0.045, 0.045, 0.045), at=(1.3, 0.0)),
+        open_box("tray", "green", at=(0.45, -0.3), size=(0.2, 0.2, 0.08)),
+    )
+)
+
+
+@pytest.fixture(scope="module")
+def far_world():
+    w = World.from_scene(FAR, visuals=False)
+    w.settle(max_steps=240)
+    w.start = w.snapshot()
+    yield w
+    w.close()
+
+
+def _poses(world: World) -> dict[str, tuple[float, float, float]]:
+    return {name: world.center(name) for name in ("near", "far", "tray")}
+
+
+@pytest.mark.parametrize("orientation", ORIENTATIONS)
+def test_a_pick_out_of_reach_is_refused_and_moves_nothing(far_world, orientation) -> None:
+    from llcps.sim.controllers import refuses
+
+    world = far_world
+    for magnitude in (0.05, 0.3):
+        spec = TrialSpec("place_in_container", ("far", "tray"), ControllerParams(0.4, magnitude, orientation))
+        world.restore(world.start)
+        before = _poses(world)
+        assert refuses(world, spec)
+        assert _poses(world) == before  # asking moves nothing
+        execute(world, spec)
+        after = _poses(world)
+        assert all(math.dist(before[n], after[n]) < 1e-4 for n in before)  # the trial moved nothing either
+
+
+def test_what_the_arm_reaches_is_not_refused_and_pushes_never_are(far_world) -> None:
+    from llcps.sim.controllers import refuses
+
+    world = far_world
+    world.restore(world.start)
+    place = TrialSpec("place_in_container", ("near", "tray"), ControllerParams(0.4, 0.15, "top"))
+    assert not refuses(world, place)
+    assert not refuses(world, TrialSpec("push", ("far",), ControllerParams(0.4, 0.15, "front")))
+    assert not refuses(world, TrialSpec("push_together", ("far", "near"), ControllerParams(0.4, 0.15, "front")))
+    before = world.center("near")
+    execute(world, place)
+    assert fluent("in", "near", "tray") in perceive(world)
+    assert math.dist(before, world.center("near")) > 0.1

@@ -53,6 +53,14 @@ def solve_cli(
             "the policy of `llcps rl train` (rl); see docs/world_models.md.",
         ),
     ] = ORDERINGS.default,  # type: ignore[assignment]
+    reach_check: Annotated[
+        bool,
+        typer.Option(
+            "--reach-check/--no-reach-check",
+            help="Try last the candidates the arm would refuse at the failure point (a pick-and-place waypoint "
+            "out of reach: they move nothing); --no-reach-check tries every candidate in the ordering's order, as the paper's agent.",
+        ),
+    ] = True,
     variant: Annotated[
         int,
         typer.Option(
@@ -113,6 +121,7 @@ def solve_cli(
             model=str(model.value),  # type: ignore[attr-defined]
             measure=str(measure.value),  # type: ignore[attr-defined]
             ordering=str(ordering.value),  # type: ignore[attr-defined]
+            reach_check=reach_check,
             seed=seed,
             model_seed=model_seed,
             budget=budget,

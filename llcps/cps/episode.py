@@ -71,6 +71,10 @@ class SolveConfig:
     variant: int = 0
     #: Seed of the world model's fit (None: the episode's ``seed``).
     model_seed: int | None = None
+    #: Try last the candidates the arm would refuse at the failure point (a pick-and-place
+    #: waypoint out of reach, :func:`~llcps.sim.controllers.refuses`): they move nothing.
+    #: The paper's agent tries every candidate in its ordering's order (False).
+    reach_check: bool = True
 
     @property
     def fit_seed(self) -> int:
@@ -115,6 +119,8 @@ class SolveResult:
     branch: str
     variant: int = 0
     ordering: str = ORDERINGS.default
+    #: Whether candidates the arm would refuse were tried last (:attr:`SolveConfig.reach_check`).
+    reach_check: bool = False
     status: str = "running"
     plan: list[str] = field(default_factory=list)
     plan_repairs: list[dict[str, object]] = field(default_factory=list)
@@ -144,6 +150,7 @@ class SolveResult:
             "model": self.model,
             "measure": self.measure,
             "ordering": self.ordering,
+            "reach_check": self.reach_check,
             "seed": self.seed,
             "variant": self.variant,
             "branch": self.branch,
@@ -282,6 +289,7 @@ def solve(
             branch=branch_name,
             variant=config.variant,
             ordering=config.ordering,
+            reach_check=config.reach_check,
             status="error" if found.status == "running" else found.status,
             plan=list(log.plan),
             plan_repairs=list(log.repairs),
@@ -344,7 +352,7 @@ def _explore(
 
     snapshot = failure.snapshot
     assert snapshot is not None  # the episode stores its plan
-    point = start_exploration(executor, experience, kb, failure, grid=config.candidate_grid(executor.scenario))
+    point = start_exploration(executor, experience, kb, failure, grid=config.candidate_grid(executor.scenario), reach_check=config.reach_check)
     candidates = point.candidates
     found.candidates = len(candidates)
     trial_ids: dict[int, int | None] = {}  # candidate index -> the id of its stored trial
@@ -361,11 +369,18 @@ def _explore(
             episode_id=executor.episode_id,
         )
     )
+    # What the arm would refuse moves nothing, so it cannot resolve the novelty: tried
+    # only once every other candidate was, in candidate order, unknown to the ordering.
+    refused = sorted(point.refused)
+    ordering.exclude(refused)
     executor.report("explore", total=min(config.budget, len(candidates)))
     while executor.tally.exploration_trials < config.budget:
         index = ordering.next()
+        deferred = index is None
         if index is None:
-            break
+            if not refused:
+                break
+            index = refused.pop(0)
         spec = candidates[index]
         trial, record = executor.execute(spec, source="exploration", snapshot_id=snapshot, start=snapshot)
         trial_ids[index] = record.id if record is not None else None
@@ -375,7 +390,8 @@ def _explore(
             found.resolving_trial_id = record.id if record is not None else None
             found.status = "solved"
             return
-        ordering.observe(index, trial.after)
+        if not deferred:
+            ordering.observe(index, trial.after)
     found.status = "budget_exhausted"
 
 
@@ -401,4 +417,5 @@ def _config_json(config: SolveConfig) -> dict[str, Any]:
         "model_seed": config.fit_seed,
         "budget": config.budget,
         "refit_every": config.refit_every,
+        "reach_check": config.reach_check,
     }

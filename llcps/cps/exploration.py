@@ -132,6 +132,9 @@ class FailurePoint:
         desired: Omega-bit weights for the kinds of change a_f lacked (the fallback measure).
         claimed: per candidate, the missing atoms (with their sign: True to add) that the
             knowledge base claims its action has as an effect (the goal head's prior).
+        refused: the candidates whose controller would refuse them here, a waypoint out
+            of the arm's reach (:func:`~llcps.sim.controllers.refuses`): they can move
+            nothing. Empty unless asked for (``reach_check``).
     """
 
     scenario: str
@@ -143,6 +146,7 @@ class FailurePoint:
     desired: np.ndarray
     claimed: tuple[frozenset[tuple[Fluent, bool]], ...] = ()
     subgoals: tuple[Subgoal, ...] = ()
+    refused: frozenset[int] = frozenset()
 
     @property
     def missing_effects(self) -> str:
@@ -194,7 +198,14 @@ class FailureSite(Protocol):
 
 
 def failure_point(
-    site: FailureSite, failure: StepFailure, state: State, kb: KnowledgeBase, *, grid: Grid, known: KnowledgeBase | None = None
+    site: FailureSite,
+    failure: StepFailure,
+    state: State,
+    kb: KnowledgeBase,
+    *,
+    grid: Grid,
+    known: KnowledgeBase | None = None,
+    reach_check: bool = False,
 ) -> FailurePoint:
     """The failure point of ``site``'s world as it is now (just after a_f failed).
 
@@ -203,7 +214,12 @@ def failure_point(
         grid: the controller settings the candidates take.
         known: K costed by the experience the branch has now, whose steps give the
             subgoals (default: ``kb``).
+        reach_check: also find the candidates the arm would refuse here
+            (:attr:`FailurePoint.refused`); the check solves IK, which leaves the arm's
+            joints as they were but not every byte the world saves next, so only a
+            caller that restores the world before its next trial asks for it.
     """
+    from llcps.sim.controllers import refuses
     from llcps.sim.perception import entity_features, scene_bodies
 
     world = site.world
@@ -220,16 +236,19 @@ def failure_point(
     claimed = claimed_by(_signed_missing(failure))
     steps_of = kb if known is None else known
     routes = tuple(Subgoal(step, atoms, claimed_by(atoms)) for step, atoms in subgoals(steps_of, task, failure, state))
+    bodies = scene_bodies(world)
+    refused = frozenset(i for i, spec in enumerate(specs) if refuses(world, spec)) if reach_check else frozenset()
     return FailurePoint(
         scenario=site.scenario.name,
         failure=failure,
         state=state,
-        bodies=scene_bodies(world),
+        bodies=bodies,
         candidates=tuple(specs),
         inputs=inputs,
         desired=desired_outcome(missing_add=failure.missing_add, missing_del=failure.missing_del),
         claimed=claimed,
         subgoals=routes,
+        refused=refused,
     )
 
 
@@ -240,10 +259,13 @@ class ExplorationSite(FailureSite, Protocol):
 
 
 def start_exploration(
-    site: ExplorationSite, experience: BranchExperience, kb: KnowledgeBase, failure: Failure, *, grid: Grid
+    site: ExplorationSite, experience: BranchExperience, kb: KnowledgeBase, failure: Failure, *, grid: Grid, reach_check: bool = False
 ) -> FailurePoint:
     """Return the world to the stored state a_f was executed from and describe the
-    failure point there (subgoals from K costed by the branch's experience now).
+    failure point there (subgoals from K costed by the branch's experience now; with
+    ``reach_check``, the candidates the arm would refuse there). Every trial from the
+    failure point must restore ``failure.snapshot`` first, as :meth:`TrialExecutor.execute
+    <llcps.cps.executor.TrialExecutor.execute>` with ``start`` does.
 
     What an episode (:mod:`llcps.cps.episode`) and the Gymnasium environment
     (:mod:`llcps.gym`) both do once K's plan failed; every candidate starts from
@@ -252,7 +274,7 @@ def start_exploration(
     if failure.snapshot is None:
         raise ValueError("exploration starts from a stored snapshot: run the plan with store=True")
     site.restore(failure.snapshot)
-    return failure_point(site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb))
+    return failure_point(site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb), reach_check=reach_check)
 
 
 @dataclass(frozen=True)

@@ -175,6 +175,8 @@ def _schema() -> Any:
         #: The exploration ordering (None: the registry's default); a condition named after
         #: an ordering explores in that one instead.
         ordering: str | None = None
+        #: Try last the candidates the arm would refuse (False: the paper's agent).
+        reach_check: bool = True
         #: Episodes in the last-m window of the novelty reaction (None: the last quarter).
         last: int | None = Field(None, ge=1)
         #: Re-solve every met family after the life (fresh variant and original condition).
@@ -239,6 +241,7 @@ class Life:
     model: str | None = None
     measure: str | None = None
     ordering: str | None = None
+    reach_check: bool = True
     last: int | None = None
     forgetting: bool = True
     variant_draw: str = "random"
@@ -536,6 +539,7 @@ def life_from_data(where: str, data: dict[str, Any], *, text: str = "") -> Life:
         model=model.model,
         measure=model.measure,
         ordering=model.ordering,
+        reach_check=model.reach_check,
         last=model.last,
         forgetting=model.forgetting,
         variant_draw=model.variants.draw,

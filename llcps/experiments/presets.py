@@ -67,6 +67,9 @@ class Preset:
     #: The exploration ordering of every episode (:mod:`llcps.cps.orderings`): the paper's
     #: ranking for the paper's presets, so their reproduction stays comparable.
     ordering: str = PAPER_ORDERING
+    #: Whether exploration tries last the candidates the arm would refuse (SolveConfig's
+    #: ``reach_check``): not the paper's agent, which tries every candidate in order.
+    reach_check: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.refit_every, bool) or not isinstance(self.refit_every, int) or self.refit_every < 1:
@@ -286,6 +289,7 @@ PRESETS: Registry[Preset] = Registry(
             scenarios=None,
             per_family=True,
             ordering=ORDERINGS.default,
+            reach_check=True,
         ),
         # Small enough for the test suite: 8 random interactions per seed, 5 exploration trials per episode.
         "smoke": Preset("smoke", ("nb",), ("most-changes",), (4,), default_seeds=2, budget=5, pretrain_pool=8),

@@ -62,6 +62,8 @@ class SequenceTask:
     refit_every: int = 1
     #: The exploration ordering (the preset's ``ordering``).
     ordering: str = PAPER_ORDERING
+    #: Try last what the arm would refuse (the preset's ``reach_check``; SolveConfig's).
+    reach_check: bool = False
     #: The store whose physics cache answers trials simulated before (None: no cache).
     #: A URL with its credentials: the worker opens the store itself.
     cache_url: str | None = None
@@ -119,6 +121,7 @@ class LifeTask:
     after: tuple[tuple[str, int], ...] = ()
     refit_every: int = 1
     ordering: str = PAPER_ORDERING
+    reach_check: bool = False
     base: Payload | None = None
     cache_url: str | None = None
 
@@ -184,7 +187,15 @@ def plan_tasks(
     for seed in chosen:
         tasks.append(PretrainTask(preset.name, seed, preset.pretrain_pool, tuple(preset.pretrain_sizes)))
         tasks.extend(
-            SequenceTask(s, budget, refit_every=preset.refit_every, ordering=preset.ordering, cache_url=cache_url, sources=sources)
+            SequenceTask(
+                s,
+                budget,
+                refit_every=preset.refit_every,
+                ordering=preset.ordering,
+                reach_check=preset.reach_check,
+                cache_url=cache_url,
+                sources=sources,
+            )
             for s in sequences
             if s.seed == seed
         )
@@ -224,6 +235,7 @@ def plan_life_tasks(life: Life, seeds: Iterable[int], *, cache_url: str | None =
                     after=draw.after if condition.forgets else (),
                     refit_every=life.refit_every,
                     ordering=life.ordering_for(condition),
+                    reach_check=life.reach_check,
                     cache_url=cache_url,
                 )
             )

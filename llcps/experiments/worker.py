@@ -195,6 +195,7 @@ def _solve(store: Store, task: SequenceTask, branch: str, source: str) -> str:
         budget=task.budget,
         refit_every=task.refit_every,
         ordering=task.ordering,
+        reach_check=task.reach_check,
     )
     result = solve(store, branch=branch, config=config, command=f"{COMMAND} --preset {seq.preset}", cache=_cache(task))
     if result.status == "interrupted":
@@ -218,6 +219,7 @@ def _solve_life_episode(
         model=task.model,
         measure=task.measure,
         ordering=task.ordering,
+        reach_check=task.reach_check,
         seed=task.seed,
         variant=variant,
         budget=task.budget,

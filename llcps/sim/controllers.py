@@ -17,6 +17,7 @@ top         +x, contact near the entity's top  straight over / the robot side (-
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Mapping
 
 from llcps.domain import ACTIONS, PUSH_DIRECTION, SIDE
@@ -264,39 +265,26 @@ def _support_z(world: "World", x: float, y: float, below: float, ignore: int) ->
     return world.scene.table.floor_z
 
 
-def _carry(
-    world: "World",
-    m: Motion,
-    obj: str,
-    grasp: tuple[float, float, float],
-    carry_z: float,
-    target: tuple[float, float],
-    params: "ControllerParams",
-    safe_z: float,
-) -> bool:
-    """Check the waypoints, pick ``obj``, lift it and carry it above ``target`` at ``rate``.
+@dataclass(frozen=True)
+class _Carry:
+    """Where a pick-and-place call takes its object: the grasp point, the height it is
+    carried at, the point above which it is carried, and how far below the tool it hangs."""
 
-    Returns:
-        False when the action was refused (a waypoint out of reach) or the grasp
-        failed; the arm is then back home with nothing held.
-    """
-    tx, ty = target
-    if not _reachable(world, grasp, (tx, ty, max(carry_z, grasp[2] + params.movement_magnitude))):
-        return False
-    if not _pick(world, m, obj, safe_z):
-        m.open_hand()
-        m.go_home(safe_z)
-        return False
-    _lift(m, params, carry_z)
-    m.move_to((tx, ty, m.target[2]), params.rate)
-    return True
+    obj: str
+    grasp: tuple[float, float, float]
+    held: float
+    carry_z: float
+    target: tuple[float, float]
+
+    def waypoints(self, params: "ControllerParams") -> tuple[tuple[float, float, float], ...]:
+        """The tool poses the arm must reach: the grasp, and the carry above the target."""
+        tx, ty = self.target
+        return self.grasp, (tx, ty, max(self.carry_z, self.grasp[2] + params.movement_magnitude))
 
 
-def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params: "ControllerParams") -> None:
-    """Grasp ``o`` from the top, lift, carry over ``c`` at ``rate``, lower in (top) or
-    release offset toward a side from carry height."""
+def _place_carry(world: "World", args: tuple[str, ...], params: "ControllerParams") -> _Carry:
+    """``place_in_container(o, c)``: over ``c``'s centre (top) or offset toward a side."""
     obj, container = args
-    safe_z = _safe_z(world)
     grasp, held = _grasp_point(world, obj)
     carry_z = g.top(world, container) + CARRY_CLEARANCE + held
     cx, cy, _ = world.center(container)
@@ -306,10 +294,48 @@ def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params:
         side = SIDE[params.orientation]
         off = SIDE_RELEASE_OFFSET * g.inner_half(world, container, side)
         tx, ty = cx + side[0] * off, cy + side[1] * off
-    if not _carry(world, m, obj, grasp, carry_z, (tx, ty), params, safe_z):
+    return _Carry(obj, grasp, held, carry_z, (tx, ty))
+
+
+def _remove_carry(world: "World", args: tuple[str, ...], params: "ControllerParams") -> _Carry:
+    """``remove_from_container(o, c)``: beyond ``c``'s footprint toward the orientation's side."""
+    obj, container = args
+    grasp, held = _grasp_point(world, obj)
+    carry_z = g.top(world, container) + CARRY_CLEARANCE + held
+    side = SIDE[params.orientation]
+    cx, cy, _ = world.center(container)
+    reach = g.extent_along(world, container, side) + g.extent_along(world, obj, side) + SET_DOWN_GAP
+    return _Carry(obj, grasp, held, carry_z, (cx + side[0] * reach, cy + side[1] * reach))
+
+
+def _carry(world: "World", m: Motion, carry: _Carry, params: "ControllerParams", safe_z: float) -> bool:
+    """Check the waypoints, pick the object, lift it and carry it above the target at ``rate``.
+
+    Returns:
+        False when the action was refused (a waypoint out of reach) or the grasp
+        failed; the arm is then back home with nothing held.
+    """
+    if not _reachable(world, *carry.waypoints(params)):
+        return False
+    if not _pick(world, m, carry.obj, safe_z):
+        m.open_hand()
+        m.go_home(safe_z)
+        return False
+    _lift(m, params, carry.carry_z)
+    m.move_to((*carry.target, m.target[2]), params.rate)
+    return True
+
+
+def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params: "ControllerParams") -> None:
+    """Grasp ``o`` from the top, lift, carry over ``c`` at ``rate``, lower in (top) or
+    release offset toward a side from carry height."""
+    _, container = args
+    safe_z = _safe_z(world)
+    carry = _place_carry(world, args, params)
+    if not _carry(world, m, carry, params, safe_z):
         return
     if params.orientation == "top":
-        m.move_to((tx, ty, g.inner_floor_z(world, container) + 0.015 + held), VERTICAL_SPEED)
+        m.move_to((*carry.target, g.inner_floor_z(world, container) + 0.015 + carry.held), VERTICAL_SPEED)
     m.open_hand()
     m.go_home(safe_z)
 
@@ -317,20 +343,32 @@ def place_in_container(world: "World", m: Motion, args: tuple[str, ...], params:
 def remove_from_container(world: "World", m: Motion, args: tuple[str, ...], params: "ControllerParams") -> None:
     """Grasp ``o`` from the top, lift clear of ``c``'s rim, carry at ``rate`` beyond
     ``c``'s footprint toward the orientation's side, set it down and release."""
-    obj, container = args
+    obj = args[0]
     safe_z = _safe_z(world)
-    grasp, held = _grasp_point(world, obj)
-    carry_z = g.top(world, container) + CARRY_CLEARANCE + held
-    side = SIDE[params.orientation]
-    cx, cy, _ = world.center(container)
-    reach = g.extent_along(world, container, side) + g.extent_along(world, obj, side) + SET_DOWN_GAP
-    tx, ty = cx + side[0] * reach, cy + side[1] * reach
-    if not _carry(world, m, obj, grasp, carry_z, (tx, ty), params, safe_z):
+    carry = _remove_carry(world, args, params)
+    if not _carry(world, m, carry, params, safe_z):
         return
-    support = _support_z(world, tx, ty, m.target[2] - held - 0.005, world.body(obj))
-    m.move_to((tx, ty, support + 0.01 + held), VERTICAL_SPEED)
+    tx, ty = carry.target
+    support = _support_z(world, tx, ty, m.target[2] - carry.held - 0.005, world.body(obj))
+    m.move_to((tx, ty, support + 0.01 + carry.held), VERTICAL_SPEED)
     m.open_hand()
     m.go_home(safe_z)
+
+
+#: The pick-and-place actions: where each carries its object (the others never refuse).
+_CARRIES: Mapping[str, Callable[["World", tuple[str, ...], "ControllerParams"], _Carry]] = {
+    "place_in_container": _place_carry,
+    "remove_from_container": _remove_carry,
+}
+
+
+def refuses(world: "World", spec: TrialSpec) -> bool:
+    """Whether the controller would refuse ``spec`` in the world as it stands: a
+    pick-and-place call with a waypoint out of the arm's reach (:func:`_reachable`), which
+    moves nothing. What its trial would check first, asked without running it: IK only,
+    no time passes and no body moves (:meth:`~llcps.sim.robot.Robot.reach_error`)."""
+    where = _CARRIES.get(spec.action)
+    return where is not None and not _reachable(world, *where(world, spec.arguments, spec.params).waypoints(spec.params))
 
 
 Controller = Callable[["World", Motion, tuple[str, ...], "ControllerParams"], None]

@@ -22,7 +22,7 @@ the same trials give the same order.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Collection
 
 import numpy as np
 
@@ -74,6 +74,10 @@ class TrialAndError(Ordering):
         draws = self.rng.beta([self.alpha[k] for k in open_families], [self.beta[k] for k in open_families])
         family = open_families[int(np.argmax(draws))]
         return next(i for i in self.families[family] if i in self._untried)
+
+    def exclude(self, indices: Collection[int]) -> None:
+        super().exclude(indices)
+        self._untried.difference_update(indices)
 
     def learn(self, index: int, after: State) -> None:
         self._untried.discard(index)
