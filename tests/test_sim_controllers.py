@@ -26,13 +26,18 @@ SCENE = SceneSpec(
 )
 
 
-@pytest.fixture(scope="module")
-def world():
-    w = World.from_scene(SCENE, visuals=False)
+def settled(scene: SceneSpec):
+    """A world of ``scene`` at rest, its start snapshot in ``start``; closed after the module."""
+    w = World.from_scene(scene, visuals=False)
     w.settle(max_steps=240)
     w.start = w.snapshot()
     yield w
     w.close()
+
+
+@pytest.fixture(scope="module")
+def world():
+    yield from settled(SCENE)
 
 
 def run(world: World, action: str, args: tuple[str, ...], rate: float, magnitude: float, orientation: str) -> int:
@@ -127,11 +132,7 @@ FAR = SceneSpec(
 
 @pytest.fixture(scope="module")
 def far_world():
-    w = World.from_scene(FAR, visuals=False)
-    w.settle(max_steps=240)
-    w.start = w.snapshot()
-    yield w
-    w.close()
+    yield from settled(FAR)
 
 
 def _poses(world: World) -> dict[str, tuple[float, float, float]]:
