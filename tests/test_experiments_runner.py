@@ -11,6 +11,7 @@ import subprocess
 import sys
 import time
 from contextlib import closing
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -190,6 +191,63 @@ def test_payload_seeds_a_private_store_and_comes_back_onto_the_original_ids(stor
     assert store.resolve_branch("work").fork_point == max(t.id for t in store.visible_trials("base"))
     assert store.visible_operators("work")[0].watermark == max(t.id for t in work)
     assert [(c.operator, c.successes, c.failures) for c in store.operator_experience("work")] == [("w", 1, 0)]
+
+
+def _policy_file(path: Path) -> Path:
+    """An untrained policy in the file format `llcps rl train --out` writes."""
+    from llcps.cps.policy import DEFAULT_HIDDEN, export_policy, new_policy, write_policy_file
+
+    torch = pytest.importorskip("torch")
+    torch.manual_seed(0)
+    artifact = export_policy(new_policy(DEFAULT_HIDDEN), hidden=DEFAULT_HIDDEN, info={"budget": 5, "timesteps": 0})
+    path.write_bytes(write_policy_file(artifact))
+    return path
+
+
+def test_a_workers_seed_carries_the_policy_its_branch_sees(store: Store, store_url: str, tmp_path: Path, new_trial) -> None:
+    pytest.importorskip("sb3_contrib")
+    from llcps.cps.policy import POLICY_NAME
+
+    _source_store(store, new_trial)
+    result = CliRunner().invoke(app, ["--db", store_url, "--branch", "main", "rl", "import", str(_policy_file(tmp_path / "p.npz"))])
+    assert result.exit_code == 0, result.output
+    stored = store.latest_world_model("base", POLICY_NAME, 0)  # on main, seen from base
+    assert stored is not None and stored.branch == "main"
+    assert export_branches(store, ["base"]).policies == ()  # only a worker's seed asks for it
+    base = export_branches(store, ["base"], snapshots=False, provenance=False, policies=True)
+    assert count_rows(base)["policies"] == 1
+    with Store.open(str(tmp_path / "private.db"), create=True) as private:
+        private.create_branch("filler", from_branch="main", at=0)
+        private.add_trials([new_trial(500 + i, branch="filler") for i in range(3)])  # private ids differ
+        import_payload(private, base)
+        private.create_branch("work", from_branch="base")
+        carried = private.latest_world_model("work", POLICY_NAME, 0)
+        assert carried is not None and carried.branch == "base" and carried.artifact == stored.artifact
+        assert carried.meta == stored.meta and carried.watermark <= private.resolve_branch("work").fork_point
+    # A damaged payload is refused whole.
+    broken = replace(base, policies=(replace(base.policies[0], artifact=base.policies[0].artifact[:-1]),))
+    with Store.open(str(tmp_path / "other.db"), create=True) as other, pytest.raises(StoreError, match="checksum"):
+        import_payload(other, broken)
+    with Store.open(str(tmp_path / "other.db")) as other:
+        assert "base" not in other.branch_names()
+
+
+@pytest.mark.parametrize(
+    ("content", "error"),
+    [(b"not a zip", "not an array archive"), (None, "no policy file")],
+)
+def test_rl_import_refuses_what_is_not_a_policy_and_stores_nothing(
+    store: Store, store_url: str, tmp_path: Path, content: bytes | None, error: str
+) -> None:
+    pytest.importorskip("sb3_contrib")
+    from llcps.cps.policy import POLICY_NAME
+
+    path = tmp_path / "p.npz"
+    if content is not None:
+        path.write_bytes(content)
+    result = CliRunner().invoke(app, ["--db", store_url, "rl", "import", str(path)])
+    assert result.exit_code == 2 and error in result.output and "Traceback" not in result.output
+    assert store.latest_world_model("main", POLICY_NAME, 0) is None
 
 
 # -- the smoke grid, run for real -------------------------------------------------------------
@@ -470,6 +528,33 @@ def test_rerun_skips_every_stored_task(reference: tuple[Store, Any]) -> None:
     summary = run_experiment(store, preset="smoke", workers=2)
     assert (summary.done, summary.skipped, summary.status) == (0, summary.tasks, "ok")
     assert store_signature(store) == before
+
+
+def test_the_rl_ordering_runs_a_grid_with_the_policy_of_each_pretraining_branch(reference: tuple[Store, Any], tmp_path: Path) -> None:
+    """Seed 0's sequences again, exploring in the rl ordering with a policy stored on its
+    pretraining branch; first refused while that branch holds none."""
+    pytest.importorskip("sb3_contrib")
+    ref_store, _ = reference
+    path = tmp_path / "rl.db"
+    with closing(sqlite3.connect(ref_store.engine.url.database)) as src, closing(sqlite3.connect(path)) as dst:
+        src.backup(dst)
+    sequences = [t for t in plan_tasks(SMOKE, [0]) if isinstance(t, SequenceTask)]
+    with Store.open(str(path)) as store:
+        for task in sequences:
+            for branch in reversed(task.branches):
+                store.delete_branch(branch, dry_run=False)
+        pretraining = {t.pretrain_branch for t in sequences}
+        with pytest.raises(LlcpsError, match="needs a trained policy on every pretraining branch") as refused:
+            run_experiment(store, preset="smoke", seeds=[0], ordering="rl")
+        assert "rl import" in (refused.value.hint or "")
+        assert not any(b in store.branch_names() for t in sequences for b in t.branches)  # nothing ran
+        for branch in sorted(pretraining):
+            result = CliRunner().invoke(app, ["--db", str(path), "--branch", branch, "rl", "import", str(_policy_file(tmp_path / "p.npz"))])
+            assert result.exit_code == 0, result.output
+        summary = run_experiment(store, preset="smoke", seeds=[0], ordering="rl")
+        assert (summary.status, summary.done) == ("ok", len(sequences))
+        episodes = [e for t in sequences for b in t.branches for e in store.list_episodes(branch=b)]
+        assert episodes and {e.summary["ordering"] for e in episodes} == {"rl"}
 
 
 def test_a_task_with_only_some_branches_is_refused(store: Store) -> None:

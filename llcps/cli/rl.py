@@ -77,3 +77,33 @@ def train_cli(
         ],
     )
     message(f"stored policy {result.policy_id} on branch {result.branch}" + (f"; wrote {result.out}" if result.out else ""))
+
+
+IMPORT_EXAMPLES = examples(
+    "llcps rl train --scenario scenario2 --timesteps 2000 --out policy.npz",
+    "llcps --db runs.db --branch exp-generalization-pretrain-p200-s0 rl import policy.npz",
+    "llcps --db runs.db experiment run --preset generalization --ordering rl   # every pretraining branch holds one",
+)
+
+
+@app.command("import", epilog=IMPORT_EXAMPLES)
+def import_cli(
+    ctx: typer.Context,
+    path: Annotated[Path, typer.Argument(metavar="FILE", help="A policy file written by `llcps rl train --out`.", dir_okay=False, show_default=False)],
+    create: CreateFlag = False,
+    as_json: JsonFlag = False,
+) -> None:
+    """Store a trained policy file on the branch (--branch, default: the current one).
+
+    The rl ordering uses the newest policy its branch sees, so a policy stored on an
+    experiment's pretraining branch is what `experiment run --ordering rl` explores with
+    on every sequence forked from it. The file is checked (shapes, checksum, plain
+    arrays; never unpickled) before anything is stored.
+    """
+    result = jobs.import_policy_file(store=db_location(ctx), path=path, branch=selected_branch(ctx), create=create)
+    if as_json:
+        print_json(result.as_json())
+        return
+    trained = result.trained
+    what = ", ".join(f"{k} {v}" for k, v in trained.items() if k in ("scenarios", "variants", "timesteps", "seed"))
+    message(f"stored policy {result.policy_id} on branch {result.branch} (visible from trial {result.watermark})" + (f"; trained on {what}" if what else ""))

@@ -31,12 +31,10 @@ from sb3_contrib.common.maskable.policies import MaskableMultiInputActorCriticPo
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-from llcps.cps.observation import CANDIDATE_FEATURES, FAILURE_FEATURES, MAX_CANDIDATES, action_space, observation_space
+from llcps.cps.observation import CANDIDATE_FEATURES, FAILURE_FEATURES, MAX_CANDIDATES, POLICY_NAME, action_space, observation_space
 from llcps.errors import LlcpsError
 from llcps.models.artifact import pack_arrays, unpack_arrays
 
-#: The name a policy is stored under, beside the world models of a branch.
-POLICY_NAME = "rl-policy"
 #: ``meta["format"]`` of a stored policy, and the version this code reads.
 POLICY_FORMAT = "llcps-policy"
 POLICY_VERSION = 1

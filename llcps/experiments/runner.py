@@ -96,6 +96,8 @@ def run_experiment(
     check_run_options(engine, workers, ray_address)
     shared = cache_url(store, remote_workers=ray_address is not None) if cache else None
     tasks = plan_tasks(grid, seeds, variants=variants, cache_url=shared)
+    if grid.ordering == "rl":
+        check_policies(store, tasks)
     seed_list = tuple(dict.fromkeys(task_seed(t) for t in tasks))
     summary = RunSummary(
         preset=grid.name, seeds=seed_list, variants=variants, engine=engine, workers=workers, tasks=len(tasks)
@@ -118,6 +120,30 @@ def run_experiment(
     return run_tasks(
         store, tasks, summary, command=command, config=config, engine=engine, ray_address=ray_address, progress=progress, cache=cache
     )
+
+
+def check_policies(store: Store, tasks: Iterable[Task]) -> None:
+    """Every sequence still to run under the ``rl`` ordering finds a trained policy on
+    its pretraining branch (a worker carries the one that branch sees)."""
+    from llcps.cps.observation import POLICY_NAME
+
+    existing = existing_branches(store)
+    to_run = [t for t in tasks if isinstance(t, SequenceTask) and not all(b in existing for b in t.branches)]
+    missing = sorted({t.pretrain_branch for t in to_run if t.pretrain_branch not in existing})
+    if missing:
+        raise LlcpsError(
+            f"the rl ordering needs the pretraining branches first; {len(missing)} are missing ({', '.join(missing[:3])}"
+            f"{', ...' if len(missing) > 3 else ''})",
+            hint="run the grid once with another ordering (it pretrains), then store a policy on each pretraining branch: "
+            "`llcps --branch NAME rl import policy.npz`",
+        )
+    without = sorted({t.pretrain_branch for t in to_run if store.latest_world_model(t.pretrain_branch, POLICY_NAME, 0) is None})
+    if without:
+        raise LlcpsError(
+            f"the rl ordering needs a trained policy on every pretraining branch; {len(without)} have none "
+            f"({', '.join(without[:3])}{', ...' if len(without) > 3 else ''})",
+            hint="store one on each: `llcps --branch NAME rl import policy.npz` (a policy `llcps rl train --out` wrote)",
+        )
 
 
 def run_tasks(

@@ -204,7 +204,7 @@ def schedule(
             if not isinstance(task, PretrainTask) and task.pretrain_branch is not None:
                 base = bases.get(task.pretrain_branch)
                 if base is None:
-                    base = export_branches(store, [task.pretrain_branch], snapshots=False, provenance=False)
+                    base = export_branches(store, [task.pretrain_branch], snapshots=False, provenance=False, policies=True)
                     bases[task.pretrain_branch] = base
                 task = replace(task, base=base)
             in_flight[runner.submit(task)] = task

@@ -16,12 +16,15 @@ does not carry (the pretraining trials a branch forked from): ``external`` maps
 those ids to ids of the destination store.
 
 World models are not carried: they are caches of a fit, refitted (identically,
-for a seed) where they are missing.
+for a seed) where they are missing. A trained exploration policy is not a cache (the
+``rl`` ordering cannot refit it), so a worker's seed carries the policy its branch
+sees (``policies``).
 """
 
 from __future__ import annotations
 
 import bisect
+import hashlib
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from typing import Any, Mapping, Sequence
@@ -30,9 +33,11 @@ from sqlalchemy import insert, select, update
 
 from llcps.trial_records import TrialChange, TrialRecord
 from llcps.errors import StoreError
+from llcps.cps.observation import POLICY_NAME
 from llcps.store import EpisodeRecord, ExecutionRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
 from llcps.store.trial_changes import change_row
-from llcps.store.tables import Branch, Episode, Operator, OperatorExecution, Run, Snapshot, Trial, TrialChangeRow
+from llcps.store.records import ModelArtifact
+from llcps.store.tables import Branch, Episode, Operator, OperatorExecution, Run, Snapshot, Trial, TrialChangeRow, WorldModel
 from llcps.store.runs import run_provenance_values
 from llcps.store.trials import trial_row
 
@@ -64,6 +69,8 @@ class Payload:
             does not carry, mapped to ids of the destination store.
         executions: the branches' own operator executions as plan steps (what costs
             K's operators on them), in id order.
+        policies: trained exploration policies (``rl-policy``), each written to the
+            branch it names with its watermark mapped like an operator's.
     """
 
     branches: tuple[BranchLink, ...]
@@ -75,6 +82,7 @@ class Payload:
     external: Mapping[int, int] = field(default_factory=dict)
     changes: tuple[TrialChange, ...] = ()
     executions: tuple[ExecutionRecord, ...] = ()
+    policies: tuple[ModelArtifact, ...] = ()
 
     @property
     def branch_names(self) -> tuple[str, ...]:
@@ -104,6 +112,7 @@ def export_branches(
     snapshots: bool = True,
     provenance: bool = True,
     external: Mapping[int, int] | None = None,
+    policies: bool = False,
 ) -> Payload:
     """Everything ``branches`` own in ``store``, ready for :func:`import_payload`.
 
@@ -114,6 +123,9 @@ def export_branches(
         provenance: carry runs and episodes (off: trials lose ``run_id`` and
             ``episode_id``, and operators their ``episode_id``).
         external: see :class:`Payload`.
+        policies: carry the newest exploration policy each branch sees, wherever it is
+            stored (its own or an ancestor's), as that branch's (a worker's seed: the
+            ``rl`` ordering reads it there).
     """
     names = list(dict.fromkeys(branches))
     links: list[BranchLink] = []
@@ -164,7 +176,18 @@ def export_branches(
         external=dict(external or {}),
         changes=tuple(changes),
         executions=tuple(sorted(executions, key=lambda e: e.id)),
+        policies=tuple(_policies(store, names)) if policies else (),
     )
+
+
+def _policies(store: Store, names: Sequence[str]) -> list[ModelArtifact]:
+    """The newest policy each branch sees, as that branch's own."""
+    found = []
+    for name in names:
+        policy = store.latest_world_model(name, POLICY_NAME, 0)
+        if policy is not None:
+            found.append(replace(policy, branch=name))
+    return found
 
 
 def _now() -> datetime:
@@ -352,6 +375,21 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                     for e in payload.executions
                 ],
             )
+        for policy in payload.policies:
+            if hashlib.sha256(policy.artifact).hexdigest() != policy.sha256:
+                raise StoreError(f"the payload's policy {policy.id} does not match its checksum", hint="the payload is corrupt")
+            conn.execute(
+                insert(WorldModel).values(
+                    branch_id=branch_id(policy.branch),
+                    name=policy.name,
+                    seed=policy.seed,
+                    watermark=trial_ids.bound(policy.watermark),
+                    artifact=bytes(policy.artifact),
+                    sha256=policy.sha256,
+                    meta=dict(policy.meta),
+                    created_at=_time(policy.created_at) or _now(),
+                )
+            )
         for link in payload.branches:
             conn.execute(
                 update(Branch).where(Branch.id == branch_ids[link.name]).values(fork_point=trial_ids.bound(link.fork_point))
@@ -385,6 +423,7 @@ def count_rows(payload: Payload) -> dict[str, int]:
         "changes": len(payload.changes),
         "operators": len(payload.operators),
         "executions": len(payload.executions),
+        "policies": len(payload.policies),
     }
 
 

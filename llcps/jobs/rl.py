@@ -201,3 +201,53 @@ def train(
         out=None if out is None else os.fspath(out),
         episodes=[TrainedEpisode(e["scenario"], int(e["variant"]), int(e["trials"]), bool(e["resolved"])) for e in history],
     )
+
+
+@dataclass(frozen=True)
+class ImportResult:
+    """A policy file stored on a branch: where, and what the file says it was trained on."""
+
+    branch: str
+    policy_id: int
+    path: str
+    watermark: int
+    trained: dict[str, Any]
+
+    def as_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+#: What a training run records in a policy's meta (shown by ``rl import``).
+TRAINING_KEYS: tuple[str, ...] = ("scenarios", "variants", "seed", "budget", "trial_cost", "timesteps", "episodes", "wall_seconds")
+
+
+def import_policy_file(*, store: StoreRef, path: str | os.PathLike[str], branch: str | None = None, create: bool = False) -> ImportResult:
+    """Store a policy written by ``rl train --out`` on ``branch``, where the ``rl`` ordering
+    (and an experiment's sequences forked from it) will use it.
+
+    The file is checked as a policy of this llcps's observation shapes before anything is
+    stored; its weights are loaded as plain arrays, never unpickled.
+
+    Raises:
+        LlcpsError: not a readable, intact policy file (nothing is stored), or the rl extra missing.
+    """
+    from llcps.inputs import read_user_file
+    from llcps.store.model_artifacts import MAX_MODEL_BYTES
+
+    hint = "give a file `llcps rl train --out FILE` wrote"
+    data = read_user_file(path, what="policy file", max_bytes=MAX_MODEL_BYTES, hint=hint)
+    try:
+        from llcps.cps.policy import POLICY_NAME, import_policy, read_policy_file
+    except ImportError as exc:
+        raise LlcpsError(f"a policy needs the rl extra ({exc.name} is missing)", hint="pip install 'llcps[rl]'") from None
+    try:
+        artifact = read_policy_file(data)
+        import_policy(artifact.data, artifact.meta)  # refuses a damaged or foreign policy
+    except LlcpsError as exc:
+        raise LlcpsError(f"{os.fspath(path)}: {exc.message}", hint=exc.hint or hint) from None
+    with opened(store, create=create) as s:
+        name = s.resolve_branch(branch).name
+        watermark = s.max_visible_trial_id(name)
+        policy_id = s.save_world_model(branch=name, name=POLICY_NAME, seed=0, watermark=watermark, artifact=artifact.data, meta=artifact.meta)
+    trained = {k: artifact.meta[k] for k in TRAINING_KEYS if k in artifact.meta}
+    return ImportResult(branch=name, policy_id=int(policy_id), path=os.fspath(path), watermark=int(watermark), trained=trained)
