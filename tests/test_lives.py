@@ -404,3 +404,14 @@ def test_scratch_starts_from_nothing_and_needs_no_pretraining(tmp_path: Path) ->
         assert (branch.parent, branch.fork_point) == ("main", 0)
         assert not [t for t in store.visible_trials("life-tiny-scratch-l0") if t.source == "pretrain"]
         assert len([e for e in store.list_episodes() if e.summary.get("life", {}).get("phase") == "life"]) == 2
+
+
+def test_a_life_in_the_rl_ordering_wants_a_policy_where_it_starts_before_anything_runs(sqlite_store: Store) -> None:
+    life = load_life("default").with_episodes(2).with_conditions(["rl"])
+    with pytest.raises(LlcpsError, match="pretraining branches first"):
+        run_lives(sqlite_store, life, lives=1)
+    sqlite_store.create_branch(pretrain_branch(life, 0), from_branch="main", at=0)
+    with pytest.raises(LlcpsError, match="needs a trained policy") as refused:
+        run_lives(sqlite_store, life, lives=1)
+    assert "rl import" in (refused.value.hint or "")
+    assert sqlite_store.list_runs() == [] and not any(b.startswith("life-") for b in sqlite_store.branch_names())

@@ -96,8 +96,7 @@ def run_experiment(
     check_run_options(engine, workers, ray_address)
     shared = cache_url(store, remote_workers=ray_address is not None) if cache else None
     tasks = plan_tasks(grid, seeds, variants=variants, cache_url=shared)
-    if grid.ordering == "rl":
-        check_policies(store, tasks)
+    check_policies(store, tasks)
     seed_list = tuple(dict.fromkeys(task_seed(t) for t in tasks))
     summary = RunSummary(
         preset=grid.name, seeds=seed_list, variants=variants, engine=engine, workers=workers, tasks=len(tasks)
@@ -123,21 +122,26 @@ def run_experiment(
 
 
 def check_policies(store: Store, tasks: Iterable[Task]) -> None:
-    """Every sequence still to run under the ``rl`` ordering finds a trained policy on
-    its pretraining branch (a worker carries the one that branch sees)."""
+    """Every sequence or life still to run in the ``rl`` ordering finds a trained policy
+    on the branch it starts from (a worker carries the one that branch sees); checked
+    before anything runs."""
     from llcps.cps.observation import POLICY_NAME
 
     existing = existing_branches(store)
-    to_run = [t for t in tasks if isinstance(t, SequenceTask) and not all(b in existing for b in t.branches)]
-    missing = sorted({t.pretrain_branch for t in to_run if t.pretrain_branch not in existing})
+    to_run = [
+        t for t in tasks
+        if isinstance(t, (SequenceTask, LifeTask)) and t.ordering == "rl" and not all(b in existing for b in t.branches)
+    ]  # fmt: skip
+    starts = sorted({t.pretrain_branch or MAIN_BRANCH for t in to_run})
+    missing = [b for b in starts if b not in existing]
     if missing:
         raise LlcpsError(
             f"the rl ordering needs the pretraining branches first; {len(missing)} are missing ({', '.join(missing[:3])}"
             f"{', ...' if len(missing) > 3 else ''})",
-            hint="run the grid once with another ordering (it pretrains), then store a policy on each pretraining branch: "
-            "`llcps --branch NAME rl import policy.npz`",
+            hint="run once with another ordering or condition (it pretrains), then store a policy on each pretraining "
+            "branch: `llcps --branch NAME rl import policy.npz`",
         )
-    without = sorted({t.pretrain_branch for t in to_run if store.latest_world_model(t.pretrain_branch, POLICY_NAME, 0) is None})
+    without = [b for b in starts if store.latest_world_model(b, POLICY_NAME, 0) is None]
     if without:
         raise LlcpsError(
             f"the rl ordering needs a trained policy on every pretraining branch; {len(without)} have none "
@@ -222,6 +226,7 @@ def run_lives(
     chosen = tuple(dict.fromkeys(task_seed(t) for t in tasks if isinstance(t, LifeTask)))
     summary = RunSummary(preset=life.name, seeds=chosen, engine=engine, workers=workers, tasks=len(tasks))
     check_lives(store, [t for t in tasks if isinstance(t, LifeTask)])
+    check_policies(store, tasks)
     config = {
         "life": life.name,
         "source": life.source,
