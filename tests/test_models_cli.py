@@ -115,9 +115,27 @@ def test_inspect_shows_scenario2_s_subgoal_and_ranks_by_resolving(db):
     ranked = point["rankings"]["nb"]["goal-directed"]
     assert all(set(c["subgoals"]) == set(point["subgoals"]) for c in ranked)
     assert all(c["resolve"] >= c["joint"] - 1e-6 for c in ranked)
-    resolve = [c["resolve"] for c in ranked]
-    assert resolve == sorted(resolve, reverse=True)  # the order is by P(resolve), ties aside
+    resolve = [c["resolve"] for c in ranked if not c["refused"]]
+    assert resolve == sorted(resolve, reverse=True)  # the order is by P(resolve), ties aside, refused calls last
     assert any(c["resolve"] > c["joint"] + 1e-3 for c in ranked)  # the subgoal counts
+
+
+def test_inspect_lists_last_what_the_arm_would_refuse_as_the_agent_tries_it(db):
+    """In scenario2 the bin stands beyond the arm's top-down reach: every placement into it
+    and removal from it is refused. The reach check lists those after every other candidate, in candidate
+    order, as `llcps solve` tries them; without it, the measure's order alone."""
+    on = json.loads(run(db, "--scenario", "scenario2", "--limit", "1000", "--model", "nb", "--json").stdout)["scenario"]
+    off = json.loads(run(db, "--scenario", "scenario2", "--limit", "1000", "--model", "nb", "--no-reach-check", "--json").stdout)["scenario"]
+    assert off["refused"] == 0 and not any(c["refused"] for c in off["rankings"]["nb"]["goal-directed"])
+    ranked = on["rankings"]["nb"]["goal-directed"]
+    refused = [c for c in ranked if c["refused"]]
+    assert len(refused) == on["refused"] > 0 and ranked[-len(refused) :] == refused
+    assert all(c["trial"].startswith(("place_in_container(", "remove_from_container(")) and ", bin)" in c["trial"] for c in refused)
+    tried_first = [c["trial"] for c in off["rankings"]["nb"]["goal-directed"] if c["trial"] not in {r["trial"] for r in refused}]
+    assert [c["trial"] for c in ranked[: -len(refused)]] == tried_first  # the rest keep the measure's order
+    assert [c["position"] for c in ranked] == list(range(1, len(ranked) + 1))
+    text = run(db, "--scenario", "scenario2", "--limit", "3", "--model", "nb")
+    assert f"{on['refused']} the arm would refuse here (tried last)" in " ".join(text.output.split())
 
 
 def test_a_failure_without_subgoals_ranks_by_its_missing_atoms(db):

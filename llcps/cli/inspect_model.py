@@ -64,6 +64,14 @@ def model_cli(
         typer.Option("--model-seed", min=0, max=MAX_SEED, help="Seed of the world models (default: --seed).", show_default=False),
     ] = None,
     test_fraction: Annotated[float, typer.Option("--test-fraction", min=0.01, max=0.99, help="Share of trials held out.")] = 0.25,
+    reach_check: Annotated[
+        bool,
+        typer.Option(
+            "--reach-check/--no-reach-check",
+            help="List last, as `llcps solve` tries them, the candidates the arm would refuse at the failure point "
+            "(marked refused); --no-reach-check: the measure's order alone.",
+        ),
+    ] = True,
     as_json: JsonFlag = False,
 ) -> None:
     """Evaluate world models on the branch's trials (held-out split) next to the majority baseline.
@@ -84,6 +92,7 @@ def model_cli(
             seed=seed,
             model_seed=model_seed,
             test_fraction=test_fraction,
+            reach_check=reach_check,
             progress=progress,
         )
     if as_json:
@@ -137,7 +146,8 @@ def show(report: "ModelInspection") -> None:
         return
     failure = report.failure
     where = f" (variant {report.variant})" if report.variant else ""
-    notice(f"{failure.scenario}{where}: {failure.missing_effects}; {len(failure.candidates)} candidates")
+    refused = f", {len(failure.refused)} the arm would refuse here (tried last)" if failure.refused else ""
+    notice(f"{failure.scenario}{where}: {failure.missing_effects}; {len(failure.candidates)} candidates{refused}")
     for k, subgoal in enumerate(failure.subgoals, start=1):
         notice(f"subgoal S{k}: {subgoal.label} (a trial that meets it lets K's step finish the job)")
     for model, by_measure in report.rankings.items():
@@ -151,7 +161,7 @@ def show(report: "ModelInspection") -> None:
                 [
                     (
                         c.position,
-                        c.trial,
+                        c.trial + (" (refused)" if c.refused else ""),
                         " ".join(c.claimed) or "-",
                         f"{c.score:.3f}",
                         *(f"{c.goal[a]:.3f}" for a in atoms),

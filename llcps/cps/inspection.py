@@ -49,6 +49,8 @@ class RankedCandidate:
             step of K and the preconditions it lacks, :mod:`llcps.cps.exploration`).
         resolve: the probability ``goal-directed`` ranks by: the missing atoms, or a
             subgoal and K's step after it.
+        refused: the arm would refuse the call here (the reach check): the agent tries
+            it after every other candidate, whatever its score.
     """
 
     position: int
@@ -60,6 +62,7 @@ class RankedCandidate:
     claimed: tuple[str, ...] = ()
     subgoals: dict[str, float] = field(default_factory=dict)
     resolve: float | None = None
+    refused: bool = False
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,7 @@ class ModelInspection:
                 "subgoals": [subgoal.label for subgoal in self.failure.subgoals],
                 "desired": dict(zip(OUTCOME_NAMES, self.failure.desired.round(4).tolist())),
                 "candidates": len(self.failure.candidates),
+                "refused": len(self.failure.refused),
                 "rankings": {
                     model: {measure: [asdict(c) for c in ranked] for measure, ranked in by_measure.items()}
                     for model, by_measure in self.rankings.items()
@@ -117,8 +121,11 @@ class ModelInspection:
 
 
 def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top: int, seed: int) -> list[RankedCandidate]:
-    """The ``top`` best candidates of a failure point under ``measure``, with their predictions."""
+    """The first ``top`` candidates of a failure point in the order the agent tries them
+    under ``measure`` (those the arm would refuse, :attr:`FailurePoint.refused`, after the
+    rest in candidate order), with their predictions."""
     ranking = rank_candidates(model, point, measure=measure, seed=seed)
+    order = [int(i) for i in ranking.order if i not in point.refused] + sorted(point.refused)
     goal = ranking.goal if ranking.goal is not None else model.predict_goal(point.query())
     atoms = [atom.label for atom in point.query([]).atoms]
     joint = joint_probability(goal)
@@ -134,14 +141,18 @@ def top_candidates(model: WorldModel, point: FailurePoint, *, measure: str, top:
             claimed=tuple(a.label for a in point.query([i]).atoms if (a.atom, a.add) in (point.claimed[i] if point.claimed else ())),
             subgoals={} if ranking.subgoals is None else {s: round(float(p), 4) for s, p in zip(subgoals, ranking.subgoals[i])},
             resolve=None if ranking.resolve is None else round(float(ranking.resolve[i]), 6),
+            refused=i in point.refused,
         )
-        for position, i in enumerate(ranking.order[:top])
+        for position, i in enumerate(order[:top])
     ]
 
 
-def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, variant: int = 0) -> FailurePoint:
+def reach_failure(
+    store: Store, *, branch: str, scenario: str, seed: int, variant: int = 0, reach_check: bool = True
+) -> FailurePoint:
     """Run ``scenario``'s novelty plan and its repairs (nothing stored) in scene ``variant``
-    to the failure exploration starts from, as the agent does.
+    to the failure exploration starts from, as the agent does (``reach_check``: find the
+    candidates the arm would refuse there, as the agent does by default).
 
     Raises:
         LlcpsError: unknown scenario or no plan; :class:`PlanSucceeds` for a plan (or a
@@ -179,8 +190,9 @@ def reach_failure(store: Store, *, branch: str, scenario: str, seed: int, varian
             )
         world.restore_serialized(failure.physics)  # candidates start where a_f did
         return failure_point(
-            executor, failure.monitor, failure.state, kb, grid=config.candidate_grid(spec), known=experience.costed(kb)
-        )
+            executor, failure.monitor, failure.state, kb, grid=config.candidate_grid(spec), known=experience.costed(kb),
+            reach_check=reach_check,
+        )  # fmt: skip
     finally:
         world.close()
 
@@ -196,6 +208,7 @@ def inspect_models(
     top: int = 5,
     model_seed: int | None = None,
     variant: int = 0,
+    reach_check: bool = True,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> ModelInspection:
     """Evaluate ``models`` on the branch's trials and, with a scenario, rank its candidates.
@@ -210,6 +223,7 @@ def inspect_models(
         top: candidates shown per measure.
         model_seed: seed of the world models (None: ``seed``).
         variant: the scene variant of ``scenario`` (0: the canonical scene).
+        reach_check: list the candidates the arm would refuse last, as the agent tries them.
         progress: called as ``progress(phase, done, total)`` as the work goes on.
     """
     check_seed(seed)
@@ -228,7 +242,7 @@ def inspect_models(
     if scenario is not None:  # before any fit: a plan that succeeds has nothing to rank
         say(f"{scenario}: running the plan to its failure")
         try:
-            failure = reach_failure(store, branch=branch, scenario=scenario, seed=seed, variant=variant)
+            failure = reach_failure(store, branch=branch, scenario=scenario, seed=seed, variant=variant, reach_check=reach_check)
         except PlanSucceeds as exc:
             ranking_note, ranking_hint = exc.message, exc.hint
     say("loading trials")

@@ -300,12 +300,13 @@ def inspect_model(
     seed: int = 0,
     model_seed: int | None = None,
     test_fraction: float = 0.25,
+    reach_check: bool = True,
     progress: Progress | None = None,
 ) -> ModelInspection:
     """Evaluate ``models`` (default: the paper's nb and nn) on the trials ``branch`` (None: the
     current branch) sees, on a held-out split, next to the majority baseline; with ``scenario``
     (and its ``variant``), also rank its failure-state candidates under every measure (``limit``
-    per measure)."""
+    per measure), those the arm would refuse last unless ``reach_check`` is off."""
     from llcps.models import PAPER_MODELS
 
     names = list(models) if models else list(PAPER_MODELS)
@@ -326,5 +327,6 @@ def inspect_model(
             scenario=scenario,
             top=limit,
             variant=variant,
+            reach_check=reach_check,
             progress=progress,
         )
