@@ -26,9 +26,36 @@ def test_the_environment_passes_gymnasiums_checker(scenario: str, tmp_path: Path
         obs, info = env.reset(seed=1)
         assert obs["candidates"].shape == (MAX_CANDIDATES, len(CANDIDATE_FEATURE_NAMES))
         mask = env.unwrapped.action_masks()
-        assert mask.sum() == info["candidates"] > 0 and not mask[info["candidates"] :].any()
+        assert mask.sum() == info["candidates"] - info["refused"] > 0 and not mask[info["candidates"] :].any()
     finally:
         env.close()
+
+
+def test_the_reach_check_masks_what_the_arm_would_refuse_as_the_agent_leaves_it_out(tmp_path: Path) -> None:
+    """scenario2's bin is beyond the arm's top-down reach: every placement into it and removal
+    from it is refused. Masked and shown as unavailable with the reach check (the default, as
+    the agent's); offered without it. Choosing one anyway costs a trial and runs nothing."""
+    from llcps.cps.observation import CANDIDATE_FEATURE_NAMES
+
+    valid = CANDIDATE_FEATURE_NAMES.index("valid")
+    seen = {}
+    for check in (True, False):
+        env = llcps.gym.ExploreEnv("scenario2", db=str(tmp_path / f"{check}.db"), budget=5, reach_check=check)
+        try:
+            obs, info = env.reset(seed=0)
+            refused = sorted(env._site.point.refused)
+            mask = env.action_masks()
+            seen[check] = (info["candidates"], refused, int(mask.sum()), float(obs["candidates"][refused, valid].sum()) if refused else 0.0)
+            if check:
+                _, _, _, _, step = env.step(refused[0])
+                assert step["valid"] is False and env.last_trial_id is None
+        finally:
+            env.close()
+    (n, refused, offered, shown), (n_off, refused_off, offered_off, _) = seen[True], seen[False]
+    assert n == n_off and len(refused) == 143 and refused_off == []
+    assert (offered, shown) == (n - len(refused), 0.0) and offered_off == n
+    with Store.open(str(tmp_path / "True.db")) as store:
+        assert not [t for t in store.visible_trials(None) if t.source == "gym"]
 
 
 def _rollout(db: Path, seed: int, steps: int) -> list[tuple[object, ...]]:

@@ -39,6 +39,14 @@ def train_cli(
     budget: Annotated[int, typer.Option("--budget", metavar="N", min=1, max=512, help="Trials per training episode before it is cut off.")] = 50,
     trial_cost: Annotated[float, typer.Option("--trial-cost", metavar="X", min=0.0, max=1.0, help="Reward subtracted per trial (a resolve earns 1).")] = 0.01,
     seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Run seed: seeds the training (PPO's network and draws, and which scenario and variant each episode takes).")] = 0,
+    reach_check: Annotated[
+        bool,
+        typer.Option(
+            "--reach-check/--no-reach-check",
+            help="Mask the candidates the arm would refuse at the failure point, as the agent leaves them out of its "
+            "ordering (the default); --no-reach-check offers every candidate.",
+        ),
+    ] = True,
     out: Annotated[
         Optional[Path],
         typer.Option("--out", metavar="FILE", help="Also write the policy to FILE (.npz: plain arrays, no pickle).", dir_okay=False, show_default=False),
@@ -60,6 +68,7 @@ def train_cli(
             budget=budget,
             trial_cost=trial_cost,
             seed=seed,
+            reach_check=reach_check,
             branch=selected_branch(ctx),
             out=out,
             create=create,

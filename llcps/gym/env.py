@@ -14,11 +14,14 @@ resets of the same pair start from the stored failure snapshot at once.
 - **Action**: the index of the candidate to try (``Discrete(MAX_CANDIDATES)``);
   :meth:`ExploreEnv.action_masks` is True for the candidates not tried yet (sb3-contrib's
   ``MaskablePPO`` convention). A masked action (a padding row, or a candidate tried
-  already) costs a trial and does nothing.
+  already) costs a trial and does nothing. With ``reach_check`` (the default, as the
+  agent's), the candidates the arm would refuse at the failure point (a pick-and-place
+  waypoint out of reach: they move nothing) are masked from the start and show as
+  unavailable in the observation, as the ``rl`` ordering shows them to the policy.
 - **Reward**: ``+1`` when the trial resolves the novelty
   (:func:`llcps.cps.plan_execution.resolves`), minus ``trial_cost`` for every trial.
 - **End**: ``terminated`` when the novelty is resolved; ``truncated`` when the budget
-  is spent or every candidate was tried.
+  is spent or every candidate was tried (every one the arm would not refuse).
 
 Every trial goes to the store with ``source = "gym"`` (the re-plans that check whether
 it resolved the novelty as ``plan`` trials), in one store episode per RL episode, so the
@@ -106,6 +109,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         trial_cost: reward subtracted per trial.
         seed: the seed recorded with the trials and the world model's fit seed.
         cache: answer trials simulated before from the store's physics cache.
+        reach_check: mask the candidates the arm would refuse at the failure point.
     """
 
     metadata = {"render_modes": []}
@@ -123,6 +127,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         trial_cost: float = DEFAULT_TRIAL_COST,
         seed: int = 0,
         cache: bool = True,
+        reach_check: bool = True,
     ) -> None:
         super().__init__()
         names = [scenario] if isinstance(scenario, (str, os.PathLike)) else list(scenario)
@@ -135,12 +140,13 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
             raise LlcpsError(f"trial_cost must be a finite number >= 0, got {trial_cost}")
         # Every name and number is checked as an episode's config is, before anything runs.
         self.configs = [
-            SolveConfig(scenario=str(name), model=model, measure=measure, seed=seed, budget=budget, variant=v)
+            SolveConfig(scenario=str(name), model=model, measure=measure, seed=seed, budget=budget, variant=v, reach_check=reach_check)
             for name in names
             for v in variants
         ]
         self.scenarios = [config.validate().name for config in self.configs]
         self.budget = budget
+        self.reach_check = bool(reach_check)
         self.trial_cost = float(trial_cost)
         self.seed_value = seed
         self.observation_space = observation_space()
@@ -200,6 +206,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
                     "measure": config.measure,
                     "budget": self.budget,
                     "trial_cost": self.trial_cost,
+                    "reach_check": self.reach_check,
                 },
                 branch=self.branch,
             )
@@ -239,7 +246,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
                     hint="the environment explores a novelty: pick a scenario whose plan fails on this branch",
                 )
             grid = config.candidate_grid(scenario)
-            point = start_exploration(executor, experience, kb, failure, grid=grid)
+            point = start_exploration(executor, experience, kb, failure, grid=grid, reach_check=self.reach_check)
             ranking = rank_candidates(model, point, measure=config.measure, seed=config.seed)
             observation = FailureObservation.of(point, ranking)
         except BaseException:
@@ -280,7 +287,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         index = int(action)
         self.trials += 1
         reward = -self.trial_cost
-        valid = 0 <= index < site.observation.n and index not in self.tried
+        valid = 0 <= index < site.observation.n and index not in self.tried and index not in site.point.refused
         trial_id = None
         if valid:
             self.tried.append(index)
@@ -292,7 +299,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
                 reward += 1.0
                 self._resolving = trial_id
         terminated = self.resolved
-        truncated = not terminated and (self.trials >= self.budget or len(self.tried) >= site.observation.n)
+        truncated = not terminated and (self.trials >= self.budget or len(self._unavailable()) >= site.observation.n)
         if terminated or truncated:
             self._finish_episode("solved" if terminated else "budget_exhausted")
         self.last_trial_id = trial_id
@@ -301,10 +308,10 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         return self._observation(), reward, terminated, truncated, info
 
     def action_masks(self) -> np.ndarray:
-        """True for each candidate not tried yet (sb3-contrib's MaskablePPO calls this)."""
+        """True for each candidate not tried yet and not refused (sb3-contrib's MaskablePPO calls this)."""
         if self._site is None:
             return np.zeros(MAX_CANDIDATES, dtype=bool)
-        return self._site.observation.mask(self.tried)
+        return self._site.observation.mask(self._unavailable())
 
     def close(self) -> None:
         self._finish_episode("interrupted")
@@ -325,9 +332,14 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         super().close()
 
     # -- helpers ---------------------------------------------------------------------
+    def _unavailable(self) -> list[int]:
+        """The candidates not to try (any more): those tried, and those the arm would refuse."""
+        assert self._site is not None
+        return self.tried + sorted(self._site.point.refused)
+
     def _observation(self) -> dict[str, np.ndarray]:
         assert self._site is not None
-        return self._site.observation.observe(self.tried, self.trials, self.budget)
+        return self._site.observation.observe(self._unavailable(), self.trials, self.budget)
 
     def _info(self) -> dict[str, Any]:
         config = self.configs[self._config_index]
@@ -336,6 +348,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
             "scenario": self.scenarios[self._config_index],
             "variant": config.variant,
             "candidates": site.observation.n if site is not None else 0,
+            "refused": len(site.point.refused) if site is not None else 0,
             "trials": self.trials,
             "resolved": self.resolved,
             "action_mask": self.action_masks(),
@@ -357,6 +370,8 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
             "exploration_trials": self.trials,
             "plan_trials": 0,
             "candidates": self._site.observation.n if self._site is not None else 0,
+            "refused": len(self._site.point.refused) if self._site is not None else 0,
+            "reach_check": self.reach_check,
             "failed_action": self._site.failure.step.label if self._site is not None else None,
             "missing_effects": self._site.failure.monitor.describe() if self._site is not None else None,
             "resolving_trial_id": self._resolving,

@@ -101,6 +101,7 @@ def train(
     hidden: Sequence[int] | None = None,
     model: str | None = None,
     measure: str | None = None,
+    reach_check: bool = True,
     branch: str | None = None,
     out: str | os.PathLike[str] | None = None,
     create: bool = False,
@@ -141,7 +142,8 @@ def train(
     settings = {k: v for k, v in {"model": model, "measure": measure}.items() if v is not None}
     started = time.perf_counter()
     with opened(store, create=create) as s:
-        env = ExploreEnv(list(scenarios), variant=list(variants), db=s, branch=branch, budget=budget, trial_cost=trial_cost, seed=seed, **settings)
+        env = ExploreEnv(list(scenarios), variant=list(variants), db=s, branch=branch, budget=budget, trial_cost=trial_cost, seed=seed,
+                         reach_check=reach_check, **settings)  # fmt: skip
         try:
             torch.set_num_threads(1)
             agent = MaskablePPO(
@@ -176,6 +178,7 @@ def train(
             "seed": seed,
             "budget": budget,
             "trial_cost": trial_cost,
+            "reach_check": reach_check,
             "timesteps": int(agent.num_timesteps),
             "episodes": len(history),
             "wall_seconds": round(wall, 3),
@@ -218,7 +221,7 @@ class ImportResult:
 
 
 #: What a training run records in a policy's meta (shown by ``rl import``).
-TRAINING_KEYS: tuple[str, ...] = ("scenarios", "variants", "seed", "budget", "trial_cost", "timesteps", "episodes", "wall_seconds")
+TRAINING_KEYS: tuple[str, ...] = ("scenarios", "variants", "seed", "budget", "trial_cost", "reach_check", "timesteps", "episodes", "wall_seconds")
 
 
 def import_policy_file(*, store: StoreRef, path: str | os.PathLike[str], branch: str | None = None, create: bool = False) -> ImportResult:

@@ -4,14 +4,15 @@ The policy (:mod:`llcps.cps.policy`) is the newest one trained on the branch
 (``llcps rl train``, in the Gymnasium environment ``llcps/Explore-v0``). At every
 trial it sees the failure point as the environment shows it (:mod:`llcps.cps.observation`,
 the world model's predictions included, the trials used counted against the budget it
-was trained with) and the candidates tried so far; the untried candidate it gives the
-largest probability is tried next (greedy: the same trials give the same order; exact
+was trained with) and the candidates tried so far, those taken out of its order (the
+reach check's refused calls) shown as unavailable, as the environment shows them; the
+untried candidate it gives the largest probability is tried next (greedy: the same trials give the same order; exact
 ties go to the lower index). Needs the ``rl`` extra.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Collection
 
 import numpy as np
 
@@ -46,13 +47,15 @@ class Learned(Ordering):
         ranking = rank_candidates(exploration.model, point, measure=exploration.measure, seed=exploration.seed)
         self.observation = FailureObservation.of(point, ranking)
         self.tried: list[int] = []
+        self.excluded: list[int] = []
 
     def probabilities(self) -> np.ndarray:
         """The policy's probability of each candidate row now (0 for the tried and the padding)."""
         from llcps.cps.policy import action_probabilities
 
-        obs = self.observation.observe(self.tried, len(self.tried), self.budget)
-        return action_probabilities(self.policy, obs, self.observation.mask(self.tried))
+        unavailable = self.tried + self.excluded
+        obs = self.observation.observe(unavailable, len(self.tried), self.budget)
+        return action_probabilities(self.policy, obs, self.observation.mask(unavailable))
 
     def choose(self) -> int:
         probs = self.probabilities()
@@ -60,3 +63,7 @@ class Learned(Ordering):
 
     def learn(self, index: int, after: State) -> None:
         self.tried.append(index)
+
+    def exclude(self, indices: Collection[int]) -> None:
+        super().exclude(indices)
+        self.excluded = sorted(set(self.excluded) | {int(i) for i in indices})
