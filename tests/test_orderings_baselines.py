@@ -123,12 +123,13 @@ def test_uncertainty_tries_the_candidate_the_ensemble_disagrees_on_first(site: A
 
 
 def test_case_based_tries_a_past_resolving_candidate_first_then_the_default(site: Any) -> None:
-    """A past episode on the branch resolved the same failure with candidate 40: a fresh
-    episode tries candidate 40 first, then the default ordering's choices."""
+    """A past episode on the branch resolved the same failure with a candidate (the first
+    from 40 on that the arm would not refuse): a fresh episode tries it first, then the
+    default ordering's choices."""
     env = site
     env.reset(seed=0)
     point = env._site_of(0).point
-    target = 40
+    target = next(i for i in range(40, len(point.candidates)) if i not in point.refused)
     env.step(target)  # stored as a gym trial
     trial_id = env.last_trial_id
     episode_id = env._episode_id
