@@ -137,7 +137,7 @@ def test_payload_round_trip_remaps_ids_and_dedups_snapshots(store: Store, dest_u
     _source_store(store, new_trial)
     payload = export_branches(store, ["base", "child"])
     assert count_rows(payload) == {
-        "branches": 2, "runs": 1, "episodes": 1, "snapshots": 2, "trials": 9, "operators": 1, "changes": 0, "executions": 2
+        "branches": 2, "runs": 1, "episodes": 1, "snapshots": 2, "trials": 9, "operators": 1, "changes": 0, "executions": 2, "policies": 0
     }  # fmt: skip
     with Store.open(dest_url, create=True) as dest:
         # Ids in the destination start elsewhere, and one snapshot is there already.

@@ -38,9 +38,6 @@ from llcps.models.features import CONTINUOUS_COLUMNS, ENCODED_FEATURE_NAMES, Fea
 
 from llcps.cps.exploration import candidate_probability
 
-#: The name a trained policy is stored under, beside the world models of a branch.
-POLICY_NAME = "rl-policy"
-
 if TYPE_CHECKING:
     from llcps.cps.exploration import FailurePoint, Ranking
 

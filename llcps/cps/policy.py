@@ -31,9 +31,10 @@ from sb3_contrib.common.maskable.policies import MaskableMultiInputActorCriticPo
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-from llcps.cps.observation import CANDIDATE_FEATURES, FAILURE_FEATURES, MAX_CANDIDATES, POLICY_NAME, action_space, observation_space
+from llcps.cps.observation import CANDIDATE_FEATURES, FAILURE_FEATURES, MAX_CANDIDATES, action_space, observation_space
 from llcps.errors import LlcpsError
 from llcps.models.artifact import pack_arrays, unpack_arrays
+from llcps.store.model_artifacts import POLICY_NAME
 
 #: ``meta["format"]`` of a stored policy, and the version this code reads.
 POLICY_FORMAT = "llcps-policy"

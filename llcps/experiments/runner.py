@@ -31,6 +31,7 @@ from llcps.experiments.tasks import (
 )
 from llcps.experiments.worker import COMMAND, LIFE_COMMAND, execute_task
 from llcps.store import MAIN_BRANCH, Store
+from llcps.store.model_artifacts import POLICY_NAME
 from llcps.store import physics_cache
 
 
@@ -125,8 +126,6 @@ def check_policies(store: Store, tasks: Iterable[Task]) -> None:
     """Every sequence or life still to run in the ``rl`` ordering finds a trained policy
     on the branch it starts from (a worker carries the one that branch sees); checked
     before anything runs."""
-    from llcps.cps.observation import POLICY_NAME
-
     existing = existing_branches(store)
     to_run = [
         t for t in tasks

@@ -33,9 +33,9 @@ from sqlalchemy import insert, select, update
 
 from llcps.trial_records import TrialChange, TrialRecord
 from llcps.errors import StoreError
-from llcps.cps.observation import POLICY_NAME
 from llcps.store import EpisodeRecord, ExecutionRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
 from llcps.store.trial_changes import change_row
+from llcps.store.model_artifacts import POLICY_NAME
 from llcps.store.records import ModelArtifact
 from llcps.store.tables import Branch, Episode, Operator, OperatorExecution, Run, Snapshot, Trial, TrialChangeRow, WorldModel
 from llcps.store.runs import run_provenance_values

@@ -22,6 +22,10 @@ from llcps.store.transactions import CHANGED_HINT, utc_now
 from llcps.store.trials import iso_timestamp
 
 
+#: The name a trained exploration policy (``llcps rl train``) is stored under, beside the
+#: world models of a branch; unlike theirs, its row is no cache of a fit.
+POLICY_NAME = "rl-policy"
+
 #: Largest world model artifact stored or read back (bytes); a larger row is refused
 #: unread, as a physics state larger than :data:`llcps.store.snapshots.MAX_SNAPSHOT_BYTES` is.
 MAX_MODEL_BYTES = 64 * 2**20
