@@ -57,6 +57,7 @@ class TrainResult:
     seed: int
     budget: int
     trial_cost: float
+    reach_check: bool
     timesteps: int
     hidden: list[int]
     branch: str
@@ -196,6 +197,7 @@ def train(
         seed=seed,
         budget=budget,
         trial_cost=trial_cost,
+        reach_check=reach_check,
         timesteps=int(agent.num_timesteps),
         hidden=list(layers),
         branch=branch_name,
