@@ -115,8 +115,13 @@ def test_a_smoke_training_run_stores_a_policy_that_loads_without_pickle(tmp_path
     from llcps.cps import policy as policies
     from llcps.jobs.rl import train
 
-    db, out = tmp_path / "rl.db", tmp_path / "policy.npz"
+    import tempfile
+
+    db, out, scratch = tmp_path / "rl.db", tmp_path / "policy.npz", tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))  # where a library would leave its files
     result = train(store=str(db), scenarios=["scenario2"], timesteps=192, budget=10, seed=0, out=out, create=True)
+    assert not list(scratch.glob("SB3-*")), "training leaves no log folder behind"
     assert result.timesteps >= 192 and result.episodes and all(1 <= e.trials <= 10 for e in result.episodes)
     assert sum(e.trials for e in result.episodes) <= result.timesteps
 

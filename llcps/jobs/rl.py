@@ -132,6 +132,7 @@ def train(
         import torch
         from sb3_contrib import MaskablePPO
         from stable_baselines3.common.callbacks import BaseCallback
+        from stable_baselines3.common.logger import Logger
 
         from llcps.cps.policy import DEFAULT_HIDDEN, POLICY_NAME, CandidatePolicy, export_policy, policy_kwargs, write_policy_file
         from llcps.gym.env import ExploreEnv
@@ -160,6 +161,8 @@ def train(
                 policy_kwargs=policy_kwargs(layers),
                 verbose=0,
             )
+            # Without a logger of its own, every learn() leaves an empty SB3-<time> folder in the temporary directory.
+            agent.set_logger(Logger(folder=None, output_formats=[]))
 
             class _Report(BaseCallback):
                 def _on_step(self) -> bool:
