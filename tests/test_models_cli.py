@@ -76,6 +76,16 @@ def test_unknown_scenario_is_one_line_and_exit_2(db):
     assert "unknown scenario" in result.output and "Traceback" not in result.output
 
 
+def test_a_scenario_file_is_ranked_like_a_shipped_scenario(db, tmp_path):
+    """A scenario given as a file is read from it (not looked up by the name inside it)."""
+    path = tmp_path / "mine.toml"
+    path.write_text(SCENARIOS["scenario2"].source.text.replace('name = "scenario2"', 'name = "mine"').replace('alias = "container"', ""))
+    result = run(db, "--scenario", str(path), "--limit", "3", "--model", "nb", "--json")
+    assert result.exit_code == 0, result.output
+    ranked = json.loads(result.stdout)["scenario"]
+    assert ranked["name"] == "mine" and ranked["candidates"] > 3
+
+
 @pytest.mark.parametrize("scenario", list(SCENARIOS))
 def test_scenario_candidates_are_ranked_under_every_measure(db, scenario):
     result = run(db, "--scenario", scenario, "--limit", "4", "--model", "nb", "--json")

@@ -312,7 +312,7 @@ def inspect_model(
     names = list(models) if models else list(PAPER_MODELS)
     if variant and scenario is None:
         raise LlcpsError("--variant needs --scenario", hint="e.g. `llcps inspect model --scenario scenario3 --variant 7`")
-    scenario = _scenario_name(scenario)
+    _scenario_name(scenario)  # an unknown name or a bad file fails here, before the store opens; a file is read again by path
     from llcps.cps.inspection import inspect_models  # sklearn loads only when used
 
     with opened(store) as s:
