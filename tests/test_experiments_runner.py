@@ -530,6 +530,21 @@ def test_rerun_skips_every_stored_task(reference: tuple[Store, Any]) -> None:
     assert store_signature(store) == before
 
 
+def test_a_run_in_another_ordering_is_refused_where_the_grid_is_stored(reference: tuple[Store, Any]) -> None:
+    """Branch names do not say the ordering: a run in another ordering would skip every
+    stored sequence and report the stored ordering's episodes as its own."""
+    store, _ = reference
+    before = store_signature(store)
+    with pytest.raises(LlcpsError, match="explored in the 'ranked' ordering") as refused:
+        run_experiment(store, preset="smoke", ordering="hedged")
+    assert "store of its own" in (refused.value.hint or "")
+    assert store_signature(store) == before
+    db = store.url.split("///", 1)[1]
+    result = CliRunner().invoke(app, ["--db", db, "experiment", "run", "--preset", "smoke", "--ordering", "hedged"])
+    assert result.exit_code == 2 and "Traceback" not in result.output and "'ranked' ordering" in result.output
+    assert store_signature(store) == before
+
+
 def test_the_rl_ordering_runs_a_grid_with_the_policy_of_each_pretraining_branch(reference: tuple[Store, Any], tmp_path: Path) -> None:
     """Seed 0's sequences again, exploring in the rl ordering with a policy stored on its
     pretraining branch; first refused while that branch holds none."""

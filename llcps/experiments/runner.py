@@ -14,6 +14,8 @@ import time
 from typing import Any, Iterable
 
 from llcps.errors import LlcpsError, UnknownNameError
+from llcps.cps.orderings import PAPER_ORDERING
+from llcps.experiments.design import RANDOM_ORDER_MODEL
 from llcps.experiments.executors import ENGINES, EngineError, LocalEngine, RayEngine, make_engine
 from llcps.experiments.presets import Preset, get_preset, validate_preset
 from llcps.experiments.scheduler import ProgressCallback, RunSummary, check_partial, check_scenarios, existing_branches, schedule
@@ -97,6 +99,7 @@ def run_experiment(
     check_run_options(engine, workers, ray_address)
     shared = cache_url(store, remote_workers=ray_address is not None) if cache else None
     tasks = plan_tasks(grid, seeds, variants=variants, cache_url=shared)
+    check_orderings(store, tasks)
     check_policies(store, tasks)
     seed_list = tuple(dict.fromkeys(task_seed(t) for t in tasks))
     summary = RunSummary(
@@ -120,6 +123,33 @@ def run_experiment(
     return run_tasks(
         store, tasks, summary, command=command, config=config, engine=engine, ray_address=ray_address, progress=progress, cache=cache
     )
+
+
+def check_orderings(store: Store, tasks: Iterable[Task]) -> None:
+    """A sequence the store holds already was explored in the ordering asked for now.
+
+    Branch names do not say the ordering, so a run in another ordering would find every
+    sequence stored and report the stored ordering's episodes as if they were its own.
+    The random order's sequences are every ordering's baseline and are not checked.
+    """
+    existing = existing_branches(store)
+    for t in tasks:
+        if not isinstance(t, SequenceTask) or t.sequence.cell.model == RANDOM_ORDER_MODEL:
+            continue
+        if not all(b in existing for b in t.branches):
+            continue
+        for branch in t.branches:
+            episodes = store.list_episodes(branch=branch, limit=1)
+            stored = str(episodes[0].summary.get("ordering") or PAPER_ORDERING) if episodes and isinstance(episodes[0].summary, dict) else None
+            if stored is not None and stored != t.ordering:
+                raise LlcpsError(
+                    f"this store holds the sequences of this grid explored in the {stored!r} ordering ({branch}, ...), "
+                    f"not {t.ordering!r}: experiment branch names do not say the ordering, so nothing would run",
+                    hint="run each ordering into a store of its own (another --db; a copy of this SQLite file keeps its "
+                    "pretraining and random order, once `llcps db delete` took the stored ordering's sequences out of it), "
+                    "then merge the reports: `llcps experiment report DIR1 DIR2 --out-dir DIR`",
+                )
+            break
 
 
 def check_policies(store: Store, tasks: Iterable[Task]) -> None:
