@@ -427,3 +427,25 @@ def test_a_check_of_some_positions_must_include_the_first() -> None:
 
     with pytest.raises(ValueError, match="include 0"):
         check_variant(SCENARIOS[NAMES[0]], NAMES[0], 0, quick=False, positions=(5, 9))
+
+
+HELD_OUT = sorted((Path(__file__).parent.parent / "docs" / "heldout").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", HELD_OUT, ids=lambda p: p.stem)
+def test_held_out_families_are_valid_files_of_twenty_variants(path: Path) -> None:
+    """The families kept out of the library to judge changes (docs/scenarios.md, "Held-out
+    families") load from their files, take no shipped name, draw twenty distinct valid
+    scenes in both conditions, and build in pybullet."""
+    scenario = get_scenario(str(path))
+    assert scenario.name not in shipped_names() and scenario.name == path.stem
+    for condition in CONDITIONS:
+        scenes = {json.dumps(scenario.scene(condition, v).to_dict(), sort_keys=True) for v in range(20)}
+        assert len(scenes) == 20
+        scene = scenario.scene(condition, 0)
+        with World.from_scene(scene) as world:
+            assert sorted(world.entities) == sorted(e.name for e in scene.entities)
+
+
+def test_there_are_held_out_families() -> None:
+    assert len(HELD_OUT) >= 2
