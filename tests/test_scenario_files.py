@@ -168,6 +168,10 @@ BAD: dict[str, tuple[Callable[[dict[str, Any]], None], str]] = {
         lambda d: d["conditions"]["novelty"].update(robot={"grip_force": "weak"}),
         "conditions.novelty.robot.grip_force: must be a positive number",
     ),
+    "a condition puts an entity into a container and gives it a y too": (
+        lambda d: d["conditions"]["novelty"]["entities"].update(block={"inside": "bin", "y": 0.1}),
+        "conditions.novelty.entities.block.y: an entity inside 'bin' takes its place from it",
+    ),
     "unreachable entity within reach": (
         lambda d: d["conditions"]["novelty"]["entities"]["bin"].update(x=0.45, y=0.3, on="table", size=[0.2, 0.2, 0.1]),
         "entities[1] (bin): is 0.54 m from the robot base, within",
@@ -225,6 +229,29 @@ def test_friction_reaches_the_engine_and_default_scenes_keep_their_description()
         for condition in CONDITIONS:
             described = json.dumps(SCENARIOS[name].scene(condition).to_dict())
             assert "friction" not in described
+
+
+def test_a_condition_moves_an_entity_between_the_table_and_another_entity() -> None:
+    """A condition that puts an entity inside (or on top of) another replaces the base's
+    x and y; one that gives x and y takes it out again: one condition may stand on the
+    table what the other puts in a container."""
+    data = copy.deepcopy(BASE)
+    data.update(name="mine")
+    data.pop("alias", None)
+    data["conditions"]["novelty"]["entities"]["block"] = {"inside": "bin"}
+    source = read_text(tomli_w.dumps(data), where="mine.toml")
+    original, novelty = source.scene("original", 0), source.scene("novelty", 0)
+    bin_ = novelty.entity("bin")
+    assert original.entity("block").position[:2] == pytest.approx((0.35, -0.3))
+    assert novelty.entity("block").position[:2] == pytest.approx(bin_.position[:2])
+    emptied = tomllib.loads(SCENARIOS["scenario3"].source.text)  # type: ignore[union-attr]
+    emptied.update(name="mine")
+    emptied.pop("alias", None)
+    emptied["conditions"]["novelty"]["entities"]["ball"] = {"x": 0.62, "y": 0.0}
+    scene = read_text(tomli_w.dumps(emptied), where="mine.toml").scene("novelty", 0)
+    assert scene.entity("ball").position[:2] == pytest.approx((0.62, 0.0))
+    with World.from_scene(scene) as world:
+        assert "ball" in world.entities
 
 
 def test_a_condition_weakens_the_grip_of_the_robot_it_builds() -> None:

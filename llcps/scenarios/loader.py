@@ -419,6 +419,27 @@ def read_file(path: str | Path, *, reserved: Mapping[str, str] | None = None) ->
     return read_text(text, where=str(path), path=path, reserved=reserved)
 
 
+#: How an entity's place is given: on a surface at (x, y), or inside / on top of another entity.
+_ON_SURFACE, _ON_ENTITY = ("x", "y"), ("inside", "on_top_of", "offset")
+
+
+def _placement_replaced(raw: Mapping[str, Any], patch: Mapping[str, Any]) -> dict[str, Any]:
+    """The base entity's fields without the placement a condition's patch gives anew: a
+    patch that puts the entity inside or on top of another drops the base's ``x``/``y``
+    (and its other ``inside``/``on_top_of``), one that gives ``x`` or ``y`` drops the base's
+    ``inside``/``on_top_of``/``offset``, so one condition may stand on the table what the
+    other puts in a container."""
+    base = dict(raw)
+    if any(key in patch for key in ("inside", "on_top_of")):
+        for key in (*_ON_SURFACE, *_ON_ENTITY):
+            if key not in patch:
+                base.pop(key, None)
+    elif any(key in patch for key in _ON_SURFACE):
+        for key in _ON_ENTITY:
+            base.pop(key, None)
+    return base
+
+
 def _merged_entities(where: str, data: Mapping[str, Any], model: ScenarioModel, condition: str) -> tuple[EntityModel, ...]:
     """The base entities with one condition's changes applied, each checked again."""
     changes = model.conditions.get(condition)
@@ -435,9 +456,10 @@ def _merged_entities(where: str, data: Mapping[str, Any], model: ScenarioModel, 
         if not patch:
             merged.append(entity)
             continue
-        blame: dict[str, tuple[Any, ...]] = {k: ("entities", index, k) for k in raw}
+        base = _placement_replaced(raw, patch)
+        blame: dict[str, tuple[Any, ...]] = {k: ("entities", index, k) for k in base}
         blame.update({k: ("conditions", condition, "entities", entity.name, k) for k in patch})
-        merged.append(file_format.validate_entity(where, {**raw, **patch}, blame))
+        merged.append(file_format.validate_entity(where, {**base, **patch}, blame))
     return tuple(merged)
 
 
