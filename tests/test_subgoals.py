@@ -13,7 +13,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from llcps.cps.exploration import MAX_SUBGOAL_ATOMS, SUBGOAL_TRUST, Subgoal, resolve_probability, subgoals
+from llcps.cps.exploration import MAX_SUBGOAL_ATOMS, SUBGOAL_TRUST, Subgoal, clearances, resolve_probability, subgoals
 from llcps.domain import fluent
 from llcps.models.measures import GOAL_FLOOR, rank
 from llcps.symbolic.knowledge_base import KnowledgeBase
@@ -52,6 +52,27 @@ def test_a_step_applicable_at_the_failure_is_no_subgoal() -> None:
     near = STATE | {fluent("near", "can", "bin")}
     task, failure = _failure(kb, "place_in_container", near)
     assert not any(label == "(push can bin)" for label, _ in subgoals(kb, task, failure, near))
+
+
+def test_a_body_in_contact_with_an_argument_of_the_failed_step_is_a_clearance() -> None:
+    """What touches, carries or holds an argument of a_f may be why it failed: ending the
+    closest contact of each other body is a way K's step may work again. The support
+    and the ground, and contacts between two arguments or two other bodies, are not."""
+    kb = KnowledgeBase.default()
+    kinds = {"can": "object", "bin": "container", "board": "object", "shelf": "fixture", "box": "object", "table": "table", "floor": "floor"}
+    state = STATE | {
+        fluent("on", "board", "bin"), fluent("touching", "board", "bin"), fluent("touching", "bin", "board"),
+        fluent("touching", "can", "shelf"), fluent("touching", "board", "box"), fluent("touching", "bin", "floor"),
+        fluent("touching", "can", "bin"),
+    }  # fmt: skip
+    _, failure = _failure(kb, "place_in_container", state)
+    found = clearances(failure, state, kinds)
+    assert found == [
+        ("(place_in_container can bin)", ((fluent("on", "board", "bin"), False),)),
+        ("(place_in_container can bin)", ((fluent("touching", "can", "shelf"), False),)),
+    ]
+    assert all(Subgoal(label, atoms).met(STATE) for label, atoms in found)  # both ended: met
+    assert not clearances(failure, STATE, kinds)  # nothing but the support touches the can
 
 
 def test_a_subgoal_is_met_when_every_atom_holds_with_its_sign() -> None:

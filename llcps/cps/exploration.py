@@ -21,6 +21,15 @@ way (:func:`resolve_probability`):
 belief that K's step works once its preconditions hold, starts at
 :data:`SUBGOAL_TRUST` and halves each time a trial met the subgoal and K's plan from
 there still failed.
+
+**Clearances: what is in the way.** a_f may have failed because of a body in contact
+with its arguments: a board lying across the container's opening, a box standing on the
+object. Each body other than a_f's arguments, the support and the ground that touches,
+carries or holds one of them at the failure gives one more subgoal of a_f itself
+(:func:`clearances`): ending that contact (the closest one: ``in``, then ``on``, then
+``touching``). It is valued and distrusted as K's subgoals are, so a contact whose end
+did not let K's plan work stops mattering after a few trials. A failure with no such
+contact ranks as without clearances.
 """
 
 from __future__ import annotations
@@ -32,7 +41,7 @@ import numpy as np
 
 from llcps.cps.candidates import Grid, enumerate_candidates
 from llcps.cps.outcomes import desired_outcome
-from llcps.domain import Fluent, State, format_fluent
+from llcps.domain import GROUND_KIND, SUPPORT_KIND, Fluent, State, format_fluent
 from llcps.trial_records import Body, TrialSpec, WorldModelInput
 from llcps.models.base import WorldModel
 from llcps.models.goal import joint_probability
@@ -53,6 +62,8 @@ if TYPE_CHECKING:
 MAX_SUBGOAL_ATOMS = 2
 #: Belief, before any evidence, that a step of K works once a trial met its preconditions.
 SUBGOAL_TRUST = 0.5
+#: Predicates of contact: a body that touches, carries or holds an argument of a_f (see :func:`clearances`).
+CONTACT_PREDICATES = ("in", "on", "touching")
 
 
 @dataclass(frozen=True)
@@ -77,6 +88,28 @@ class Subgoal:
     def met(self, state: State) -> bool:
         """Whether every atom holds as the step needs in ``state``."""
         return all((atom in state) == add for atom, add in self.atoms)
+
+
+def clearances(failure: StepFailure, state: State, kinds: Mapping[str, str]) -> list[tuple[str, tuple[tuple[Fluent, bool], ...]]]:
+    """(a_f's label, one contact to end) for each contact of an argument of a_f with a body
+    that is not one (see the module docstring): a_f may have failed because of what
+    touches, carries or holds its arguments, so ending that contact is a way K's own
+    step may work again. The support and the ground, which everything stands on, are
+    left out. One clearance per pair of bodies, of its closest contact (``in`` before
+    ``on`` before ``touching``: ending it ends the looser ones too as a rule)."""
+    arguments = set(failure.step.args)
+    closest: dict[frozenset[str], Fluent] = {}
+    for atom in sorted(state):
+        if len(atom) != 3 or atom[0] not in CONTACT_PREDICATES or atom in failure.missing_del:
+            continue
+        bodies = frozenset(atom[1:])
+        others = bodies - arguments
+        if len(bodies) != 2 or len(others) != 1 or kinds.get(next(iter(others))) in (None, SUPPORT_KIND, GROUND_KIND):
+            continue
+        held = closest.get(bodies)
+        if held is None or CONTACT_PREDICATES.index(atom[0]) < CONTACT_PREDICATES.index(held[0]):
+            closest[bodies] = atom
+    return [(failure.step.label, ((atom, False),)) for atom in sorted(closest.values())]
 
 
 def subgoals(kb: KnowledgeBase, task: Task, failure: StepFailure, state: State) -> list[tuple[str, tuple[tuple[Fluent, bool], ...]]]:
@@ -235,8 +268,12 @@ def failure_point(
 
     claimed = claimed_by(_signed_missing(failure))
     steps_of = kb if known is None else known
-    routes = tuple(Subgoal(step, atoms, claimed_by(atoms)) for step, atoms in subgoals(steps_of, task, failure, state))
     bodies = scene_bodies(world)
+    kinds = {body.name: body.kind for body in bodies}
+    routes = tuple(
+        Subgoal(step, atoms, claimed_by(atoms))
+        for step, atoms in (*subgoals(steps_of, task, failure, state), *clearances(failure, state, kinds))
+    )
     refused = frozenset(i for i, spec in enumerate(specs) if refuses(world, spec)) if reach_check else frozenset()
     return FailurePoint(
         scenario=site.scenario.name,
