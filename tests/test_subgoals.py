@@ -13,7 +13,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from llcps.cps.exploration import MAX_SUBGOAL_ATOMS, SUBGOAL_TRUST, Subgoal, clearances, resolve_probability, subgoals
+from llcps.cps.exploration import MAX_CLEARANCES, MAX_SUBGOAL_ATOMS, SUBGOAL_TRUST, Subgoal, clearances, resolve_probability, subgoals
 from llcps.domain import fluent
 from llcps.models.measures import GOAL_FLOOR, rank
 from llcps.symbolic.knowledge_base import KnowledgeBase
@@ -73,6 +73,9 @@ def test_a_body_in_contact_with_an_argument_of_the_failed_step_is_a_clearance() 
     ]
     assert all(Subgoal(label, atoms).met(STATE) for label, atoms in found)  # both ended: met
     assert not clearances(failure, STATE, kinds)  # nothing but the support touches the can
+    crowd = {f"b{i}": "object" for i in range(10)}
+    crowded = STATE | {fluent("touching", "can", name) for name in crowd}
+    assert len(clearances(failure, crowded, {**kinds, **crowd})) == MAX_CLEARANCES
 
 
 def test_a_subgoal_is_met_when_every_atom_holds_with_its_sign() -> None:

@@ -64,6 +64,8 @@ MAX_SUBGOAL_ATOMS = 2
 SUBGOAL_TRUST = 0.5
 #: Predicates of contact: a body that touches, carries or holds an argument of a_f (see :func:`clearances`).
 CONTACT_PREDICATES = ("in", "on", "touching")
+#: Most clearances a failure point gets (each is one more goal-head question per ranking).
+MAX_CLEARANCES = 4
 
 
 @dataclass(frozen=True)
@@ -96,7 +98,8 @@ def clearances(failure: StepFailure, state: State, kinds: Mapping[str, str]) -> 
     touches, carries or holds its arguments, so ending that contact is a way K's own
     step may work again. The support and the ground, which everything stands on, are
     left out. One clearance per pair of bodies, of its closest contact (``in`` before
-    ``on`` before ``touching``: ending it ends the looser ones too as a rule)."""
+    ``on`` before ``touching``: ending it ends the looser ones too as a rule); at most
+    :data:`MAX_CLEARANCES`, in atom order."""
     arguments = set(failure.step.args)
     closest: dict[frozenset[str], Fluent] = {}
     for atom in sorted(state):
@@ -109,7 +112,7 @@ def clearances(failure: StepFailure, state: State, kinds: Mapping[str, str]) -> 
         held = closest.get(bodies)
         if held is None or CONTACT_PREDICATES.index(atom[0]) < CONTACT_PREDICATES.index(held[0]):
             closest[bodies] = atom
-    return [(failure.step.label, ((atom, False),)) for atom in sorted(closest.values())]
+    return [(failure.step.label, ((atom, False),)) for atom in sorted(closest.values())[:MAX_CLEARANCES]]
 
 
 def subgoals(kb: KnowledgeBase, task: Task, failure: StepFailure, state: State) -> list[tuple[str, tuple[tuple[Fluent, bool], ...]]]:
