@@ -42,8 +42,10 @@ def test_preset_size_and_default_seeds(name: str) -> None:
     preset = PRESETS[name]
     cells, seeds = EXPECTED_SIZES[name]
     assert len(preset.cells()) == len(set(preset.cells())) == cells
-    assert len(preset.sequences()) == cells * seeds
-    assert len(preset.sequences(3)) == cells * 3
+    # per seed, one sequence per cell and one more per further draw of the random order
+    per_seed = cells + sum(preset.random_draws - 1 for c in preset.cells() if c.model == "random")
+    assert len(preset.sequences()) == per_seed * seeds
+    assert len(preset.sequences(3)) == per_seed * 3
     assert {s.seed for s in preset.sequences([5, 9])} == {5, 9}
 
 
@@ -187,11 +189,13 @@ def test_results_written_before_the_ordering_column_read_as_the_papers_ordering(
     hedged = ResultsTable(dataclasses.replace(r, ordering="hedged") for r in table)
     assert ResultsTable.read(hedged.write_csv(tmp_path / "h.csv")) == hedged  # the column round-trips
     lines = table.write_csv(tmp_path / "r.csv").read_text().splitlines()
-    assert lines[0].endswith(",ordering") and all(line.endswith(",ranked") for line in lines[1:])
-    (tmp_path / "old.csv").write_text("\n".join(line.rsplit(",", 1)[0] for line in lines) + "\n")
-    assert "ordering" not in (tmp_path / "old.csv").read_text()
+    assert lines[0].endswith(",ordering,draw") and all(line.endswith(",ranked,0") for line in lines[1:])
+    (tmp_path / "old.csv").write_text("\n".join(line.rsplit(",", 2)[0] for line in lines) + "\n")
+    assert "ordering" not in (tmp_path / "old.csv").read_text() and "draw" not in (tmp_path / "old.csv").read_text()
     old = ResultsTable.read(tmp_path / "old.csv")
-    assert old == table and old.unique("ordering") == ("ranked",)
+    assert old == table and old.unique("ordering") == ("ranked",) and old.unique("draw") == (0,)
+    drawn = ResultsTable(dataclasses.replace(r, draw=2) for r in table)
+    assert ResultsTable.read(drawn.write_csv(tmp_path / "d.csv")) == drawn  # the draw column round-trips
     records = json.loads(hedged.write_json(tmp_path / "h.json").read_text())
     for record in records["rows"]:
         del record["ordering"]

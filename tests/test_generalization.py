@@ -58,7 +58,7 @@ def test_sequences_over_any_scenarios_name_parseable_branches() -> None:
     preset = PRESETS["generalization"].with_scenarios(["scenario4", "scenario1"])
     tasks = [t for t in plan_tasks(preset, [3], variants=True)]
     branches = [b for t in tasks[1:] for b in t.branches]  # type: ignore[union-attr]
-    assert len(branches) == len(set(branches)) == 2 * 2
+    assert len(branches) == len(set(branches)) == (1 + preset.random_draws) * 2  # the default, and each random draw
     for name in branches:
         parsed = parse_branch(name)
         assert parsed is not None and parsed.scenario in ("scenario4", "scenario1") and parsed.sequence.variant == 3
@@ -71,6 +71,27 @@ def test_sequences_over_any_scenarios_name_parseable_branches() -> None:
     }
     with pytest.raises(LlcpsError, match="no reset condition"):
         replace(PRESETS["lifelong"], conditions=("update",)).with_others()
+
+
+def test_the_random_order_runs_in_several_draws_that_name_their_branch_and_seed_its_permutation() -> None:
+    preset = PRESETS["generalization"].with_scenarios(["scenario1"])
+    assert preset.random_draws == 3 and PRESETS["paper"].random_draws == 1
+    sequences = preset.sequences([3], variants=True)
+    random = [s for s in sequences if s.cell.model == "random"]
+    assert [s.draw for s in random] == [0, 1, 2] and all(s.draw == 0 for s in sequences if s.cell.model != "random")
+    assert [s.branch_name.rsplit("-", 2)[1:] for s in random] == [["s3", "v3"], ["v3", "d1"], ["v3", "d2"]]
+    for seq in random:
+        parsed = parse_branch(seq.episode_branch("scenario1"))
+        assert parsed is not None and parsed.sequence == seq and parsed.sequence.draw == seq.draw
+    seeds = [s.model_seed for s in random]
+    assert seeds[0] is None  # draw 0 is the sequence's own seed: the runs before draws existed
+    assert len(set(seeds[1:])) == 2 and all(0 <= x < 2**32 and x != 3 for x in seeds[1:])  # type: ignore[operator]
+    assert preset.with_random_draws(1).sequences([3], variants=True) == tuple(s for s in sequences if s.draw == 0)
+    assert preset.with_random_draws(None) == preset
+    with pytest.raises(LlcpsError, match="random_draws"):
+        preset.with_random_draws(0)
+    with pytest.raises(LlcpsError, match="cannot name an experiment branch"):
+        Sequence("generalization", Cell("random", DEFAULT[1], 200, "reset"), 0, 0, ("d2",))
 
 
 def test_scenario_order_puts_the_papers_first_then_the_rest_by_name() -> None:
@@ -96,13 +117,13 @@ def test_bad_scenarios_are_one_error_line_and_create_no_store(tmp_path: Path, ar
 
 
 # -- the statistics on hand-worked numbers ---------------------------------------------------
-def _row(model: str, family: str, variant: int, trials: int, solved: bool = True, condition: str = "reset") -> ResultRow:
+def _row(model: str, family: str, variant: int, trials: int, solved: bool = True, condition: str = "reset", draw: int = 0) -> ResultRow:
     measure = DEFAULT[1]
-    seq = Sequence("generalization", Cell(model, measure, 200, condition), variant, variant, (family,))
+    seq = Sequence("generalization", Cell(model, measure, 200, condition), variant, variant, (family,), draw=draw)
     return ResultRow(
         preset="generalization", model=model, measure=measure, pretrain_size=200, condition=condition, seed=variant,
         scenario=family, solved=solved, exploration_trials=trials, sim_seconds=1.0, wall_seconds=1.0, episode_id=None,
-        branch=seq.episode_branch(family), variant=variant,
+        branch=seq.episode_branch(family), variant=variant, draw=draw,
     )  # fmt: skip
 
 
@@ -138,6 +159,21 @@ def test_family_ratios_tests_and_overall_on_hand_worked_numbers(table: ResultsTa
     (overall,) = generalization_summary(results)
     assert overall.families == 2 and overall.worse_than_random == 1
     assert overall.geomean_ratio == pytest.approx(math.sqrt(1.0 * 3.0))
+
+
+def test_the_random_order_of_a_variant_is_the_mean_of_its_draws(table: ResultsTable) -> None:
+    """Two more draws of the random order in family a: 4, 4, 3, 16, 5 (draw 0), 8, 2, 3, 2, 7
+    and 6, 6, 3, 3, 9 give means 6, 4, 3, 7, 7 -> ratios 1/3, 1, 2, 8/7, 10/7 against 2, 4, 6, 8, 10."""
+    more = [_row("random", "scenario1", v, t, draw=1) for v, t in enumerate([8, 2, 3, 2, 7])]
+    more += [_row("random", "scenario1", v, t, draw=2, solved=v != 3) for v, t in enumerate([6, 6, 3, 3, 9])]
+    a, b = family_results(ResultsTable([*table, *more]))
+    assert (a.random_draws, b.random_draws) == (3, 1)
+    assert a.median_random == 6.0  # the median of the per-variant means
+    assert a.median_ratio == pytest.approx(8 / 7)  # median of 1/3, 1, 2, 8/7, 10/7
+    assert a.p_value == pytest.approx(sps.wilcoxon([2, 4, 6, 8, 10], [6, 4, 3, 7, 7]).pvalue)
+    # The unsolved draw is censored: Kaplan-Meier and log-rank over every draw's episode.
+    assert a.unsolved_random == 1 and a.logrank_p is not None
+    assert replace(b, p_holm=0.0) == replace(family_results(table)[1], p_holm=0.0)  # one draw: as before
 
 
 def _hedged(table: ResultsTable) -> list[ResultRow]:
@@ -234,7 +270,7 @@ def test_a_report_of_two_orderings_names_them_in_every_row_group(table: ResultsT
     model, measure = DEFAULT
     text = paths.report_md.read_text()
     assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 |" in text
-    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 8.0 | 4.0 | 2.00 | 2.00 |" in text
+    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 1 | 8.0 | 4.0 | 2.00 | 2.00 |" in text
     assert f"| {model} / {measure} / hedged / p200 / reset | 2 | 1.41 | 1 of 2 |" in text
     assert "Orderings: ranked, hedged;" in text and "every other section covers the ranked ordering" in text
     assert f"{model} / {measure} / hedged / p200 / reset" in paths.report_html.read_text()  # type: ignore[union-attr]
@@ -280,8 +316,8 @@ def test_experiment_report_merges_the_results_of_two_orderings_into_one_report(t
     assert len(merged) == len(table) + len(table) // 2 and merged.unique("ordering") == ("ranked", "hedged")
     text = (out / "report.md").read_text()
     model, measure = DEFAULT
-    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 8.0 | 4.0 | 2.00 |" in text
-    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 | 6.0 | 4.0 | 1.00 |" in text
+    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 1 | 8.0 | 4.0 | 2.00 |" in text
+    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 | 1 | 6.0 | 4.0 | 1.00 |" in text
     # where the runs ran: every directory's environments, each marked with its directory
     provenance = json.loads((out / "provenance.json").read_text())
     assert sorted((p["host"], p["results"]) for p in provenance) == [("first", str(ranked)), ("second", str(hedged))]
@@ -325,12 +361,16 @@ def test_a_tiny_generalization_grid_reports_every_family(tiny: tuple[Store, Path
     store, out, result = tiny
     assert result.summary.status == "ok"  # type: ignore[attr-defined]
     table = table_from_episodes(store.list_episodes()).table
-    assert {(r.scenario, r.model, r.variant) for r in table} == {
-        (f, m, v) for f in ("scenario1", "scenario4") for m in (DEFAULT[0], "random") for v in (0, 1)
-    }
+    assert {(r.scenario, r.model, r.variant, r.draw) for r in table} == {
+        (f, m, v, d) for f in ("scenario1", "scenario4") for m in (DEFAULT[0], "random") for v in (0, 1) for d in range(3 if m == "random" else 1)
+    }  # fmt: skip
     assert all(r.condition == "reset" for r in table)
     families = result.analysis["generalization"]["families"]  # type: ignore[attr-defined]
-    assert [r["family"] for r in families] == ["scenario1", "scenario4"] and all(r["n"] == 2 for r in families)
+    assert [r["family"] for r in families] == ["scenario1", "scenario4"] and all(r["n"] == 2 and r["random_draws"] == 3 for r in families)
+    # Each draw of the random order explored with a world model seeded apart: three permutations per variant.
+    random = [e for e in store.list_episodes() if e.summary.get("model") == "random"]
+    seeds = {(e.branch, store.get_run(e.run_id).config["model_seed"]) for e in random}  # type: ignore[arg-type]
+    assert len(seeds) == 2 * 2 * 3 and len({s for _, s in seeds}) == 2 * 3
     assert "## Leave one family out" in (out / "report" / "report.md").read_text()
     assert (out / "report" / "generalization.csv").is_file()
     # The pretraining of each seed holds every family out: no trial of it starts from their scenes.
@@ -356,7 +396,8 @@ def test_with_others_solves_the_other_families_first_and_a_new_list_is_refused(t
     branch = f"exp-generalization-{DEFAULT[0]}-{DEFAULT[1]}-p8-others-s0-scenario4"
     assert [e.scenario for e in sorted(store.list_episodes(branch=branch), key=lambda e: e.id)] == ["scenario1", "scenario4"]
     rows = [r for r in table_from_episodes(store.list_episodes()).table if r.condition == "others"]
-    assert sorted((r.scenario, r.model) for r in rows) == sorted((f, m) for f in ("scenario1", "scenario4") for m in (DEFAULT[0], "random"))
+    models = (DEFAULT[0],) + ("random",) * TINY.random_draws  # the random order in each of its draws
+    assert sorted((r.scenario, r.model) for r in rows) == sorted((f, m) for f in ("scenario1", "scenario4") for m in models)
     families = result.analysis["generalization"]["families"]  # type: ignore[index]
     assert {(r["family"], r["condition"]) for r in families} >= {("scenario1", "others"), ("scenario4", "others")}
     # The same branch names over another list would pass for its results: refused before anything runs.

@@ -9,7 +9,9 @@ group (a model x measure other than the random order, explored in one ordering o
 variant (seed N solves variant N, the same variants for every row group) with the
 random order's rows:
 
-- the median exploration trials of the ordering and of the random order;
+- the median exploration trials of the ordering and of the random order, whose cost in
+  a variant is the mean over its draws (permutations: the preset's ``random_draws``),
+  since one permutation is a noisy estimate of what random order costs;
 - the ratio ordering / random two ways: the **median of the per-variant ratios**
   ``median_v(t_model(v) / t_random(v))`` (paired: the headline number) and the
   **ratio of the medians** ``median_v t_model(v) / median_v t_random(v)``; a ratio
@@ -59,10 +61,13 @@ class FamilyResult:
         ordering: the exploration ordering of the row group's episodes.
         condition: ``reset`` (pretraining only) or ``others`` (also the other families' episodes).
         n: variants both orderings solved or gave up on (the pairs).
+        random_draws: the fewest permutations of the random order behind a pair (the
+            random order's cost in a variant is their mean).
         median_ratio: median over variants of trials(ordering) / trials(random); 0/0 counts as 1.
         ratio_of_medians: median trials(ordering) / median trials(random).
         p_value, p_reason, p_holm: paired Wilcoxon over variants; Holm across this row group's families.
-        unsolved_model, unsolved_random: episodes that ended unsolved (censored at the budget).
+        unsolved_model, unsolved_random: episodes that ended unsolved (censored at the budget;
+            the random order's over all its draws).
         km_median_model, km_median_random: Kaplan–Meier medians (None: not reached, or no censoring).
         logrank_p, logrank_reason: log-rank test, only when some episode was censored.
         default: the row group is the registries' default world model, measure and ordering.
@@ -75,6 +80,7 @@ class FamilyResult:
     pretrain_size: int
     condition: str
     n: int
+    random_draws: int
     median_model: float
     median_random: float
     median_ratio: float
@@ -151,23 +157,27 @@ def family_results(table: ResultsTable, *, metric: str = "exploration_trials") -
     out: list[FamilyResult] = []
     for (model, measure, ordering, size, condition, family), mine in groups.items():
         baseline = random.get((family, condition, size, PAPER_ORDERING)) or random.get((family, condition, size, ordering), [])
-        theirs = {(r.seed, r.variant): r for r in baseline}
+        theirs = _group(baseline, lambda r: (r.seed, r.variant))
         pairs = [(r, theirs[(r.seed, r.variant)]) for r in mine if (r.seed, r.variant) in theirs]
         if not pairs:
             continue
         a = np.array([m.metric(metric) for m, _ in pairs])
-        b = np.array([t.metric(metric) for _, t in pairs])
+        # The random order's cost in a variant: the mean over its draws (an unsolved
+        # draw counts at what it tried, so the mean is then a lower bound).
+        b = np.array([np.mean([t.metric(metric) for t in draws]) for _, draws in pairs])
         p, reason = paired_wilcoxon(a, b)
         med_a, med_b = float(np.median(a)), float(np.median(b))
         solved_a = np.array([m.solved for m, _ in pairs])
-        solved_b = np.array([t.solved for _, t in pairs])
+        every_draw = [t for _, draws in pairs for t in draws]
+        solved_b = np.array([t.solved for t in every_draw])
         km_a = km_b = lr = None
         lr_reason = "every episode resolved: no censoring"
         if not (solved_a.all() and solved_b.all()):
-            tau = budget([m for m, _ in pairs] + [t for _, t in pairs])
+            tau = budget([m for m, _ in pairs] + every_draw)
+            b_all = np.array([t.metric(metric) for t in every_draw])
             km_a = kaplan_meier(a, solved_a, tau=tau).median
-            km_b = kaplan_meier(b, solved_b, tau=tau).median
-            lr_value, lr_reason = logrank(a, solved_a, b, solved_b)
+            km_b = kaplan_meier(b_all, solved_b, tau=tau).median
+            lr_value, lr_reason = logrank(a, solved_a, b_all, solved_b)
             lr = None if math.isnan(lr_value) else lr_value
         out.append(
             FamilyResult(
@@ -178,6 +188,7 @@ def family_results(table: ResultsTable, *, metric: str = "exploration_trials") -
                 pretrain_size=size,
                 condition=condition,
                 n=len(pairs),
+                random_draws=min(len(draws) for _, draws in pairs),
                 median_model=med_a,
                 median_random=med_b,
                 median_ratio=float(np.median([ratio(x, y) for x, y in zip(a, b)])),

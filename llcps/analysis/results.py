@@ -57,6 +57,7 @@ _PARSERS: dict[str, Callable[[Any], Any]] = {
     "pretrain_size": _integer,
     "seed": _integer,
     "variant": _integer,
+    "draw": _integer,
     "exploration_trials": _integer,
     "sim_seconds": _real,
     "wall_seconds": _real,
@@ -81,9 +82,9 @@ def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
 
     Results written before scene variants existed have no ``variant`` column: variant 0;
     before orderings were recorded, no ``ordering`` column: the paper's ordering, the
-    only one runs had.
+    only one runs had; before draws of the random order, no ``draw`` column: draw 0.
     """
-    data = {"variant": 0, "ordering": PAPER_ORDERING, **data}
+    data = {"variant": 0, "ordering": PAPER_ORDERING, "draw": 0, **data}
     missing = [c for c in COLUMNS if c not in data]
     if missing:
         raise LlcpsError(
@@ -166,7 +167,7 @@ class ResultsTable:
         if name not in COLUMNS:
             raise LlcpsError(f"unknown column {name!r}", hint=f"columns: {', '.join(COLUMNS)}")
         values = [getattr(r, name) for r in self._rows]
-        if name in METRICS or name in ("pretrain_size", "seed", "variant"):
+        if name in METRICS or name in ("pretrain_size", "seed", "variant", "draw"):
             return np.asarray(values, dtype=float if name in METRICS else int)
         if name == "solved":
             return np.asarray(values, dtype=bool)
@@ -359,6 +360,7 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
                 branch=str(summary["branch"]),
                 variant=seq.variant,
                 ordering=str(summary.get("ordering") or PAPER_ORDERING),
+                draw=seq.draw,
             )
         except (KeyError, TypeError, ValueError):
             skip("malformed summary")
@@ -382,8 +384,12 @@ def group_rows(rows: Iterable[ResultRow], key: Callable[[ResultRow], K]) -> dict
 
 
 def by_seed(rows: Iterable[ResultRow], metric: str) -> dict[int, float]:
-    """seed -> the metric's value (one row per seed)."""
-    return {row.seed: row.metric(metric) for row in rows}
+    """seed -> the metric's value: the mean over the seed's rows, which are one row, or
+    the draws of the random order (:attr:`~llcps.experiments.rows.ResultRow.draw`)."""
+    values: dict[int, list[float]] = {}
+    for row in rows:
+        values.setdefault(row.seed, []).append(row.metric(metric))
+    return {seed: sum(v) / len(v) for seed, v in values.items()}
 
 
 def table_budget(table: ResultsTable) -> int | None:

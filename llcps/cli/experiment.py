@@ -16,6 +16,7 @@ from llcps.errors import LlcpsError
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
 from llcps.cps.orderings import ORDERINGS
+from llcps.experiments.design import MAX_DRAW
 from llcps.experiments.executors import ENGINES
 from llcps.experiments.presets import MAX_SEEDS, PRESETS
 from llcps.scenarios.variants import parse_range
@@ -115,6 +116,18 @@ def run_cli(
             show_default=False,
         ),
     ] = None,
+    random_draws: Annotated[
+        Optional[int],
+        typer.Option(
+            "--random-draws",
+            metavar="N",
+            min=1,
+            max=MAX_DRAW + 1,
+            help="Permutations of the random order per seed (default: the preset's, 3 for generalization, else 1); "
+            "leave one family out compares each ordering with their mean per variant.",
+            show_default=False,
+        ),
+    ] = None,
     workers: Annotated[
         Optional[int],
         typer.Option("--workers", metavar="N", min=1, max=MAX_WORKERS, help="Worker processes or Ray tasks at once (default: one per CPU core).", show_default=False),
@@ -153,7 +166,7 @@ def run_cli(
     chosen = None if scenarios is None else [s.strip() for s in scenarios.split(",") if s.strip()]
     target = check_output_dir(out_dir if out_dir is not None else default_out_dir(name), what="--out-dir")
     # The seeds and scenarios are checked before the store opens, so bad options create no store file.
-    grid = get_preset(name).with_scenarios(chosen).with_ordering(ordering)
+    grid = get_preset(name).with_scenarios(chosen).with_ordering(ordering).with_random_draws(random_draws)
     if with_others:
         grid.with_others()
     run_seeds(grid, seeds=seeds, first_seed=first_seed, variants=scenes)
@@ -173,6 +186,7 @@ def run_cli(
                     scenarios=chosen,
                     with_others=with_others,
                     ordering=ordering,
+                    random_draws=random_draws,
                     workers=workers if workers is not None else cpu_count(),
                     engine=str(engine.value),  # type: ignore[attr-defined]
                     ray_address=ray_address,
@@ -400,12 +414,13 @@ def show_generalization(analysis: dict[str, Any]) -> None:
     print_table(
         "leave one family out: median exploration trials per held-out family, row group vs random order "
         "(ratio > 1: the row group explored more)",
-        ("family", "row group", "n", "median", "median random", "median of ratios", "ratio of medians", "Wilcoxon p", "Holm p", "unsolved", "log-rank p"),
+        ("family", "row group", "n", "random draws", "median", "median random", "median of ratios", "ratio of medians", "Wilcoxon p", "Holm p", "unsolved", "log-rank p"),
         [
             (
                 r["family"],
                 r["label"] + (" (default)" if r["default"] else ""),
                 r["n"],
+                r["random_draws"],
                 _num(r["median_model"]),
                 _num(r["median_random"]),
                 _ratio(r["median_ratio"]),

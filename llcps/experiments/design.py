@@ -16,6 +16,7 @@ cells a run crosses is a preset's choice (:mod:`llcps.experiments.presets`).
 
 from __future__ import annotations
 
+import hashlib
 import re
 from dataclasses import dataclass, field
 
@@ -35,6 +36,9 @@ PAPER_CONDITIONS: tuple[str, ...] = ("update", "reset")
 #: The conditions that solve each scenario on its own branch (named after the scenario).
 OWN_BRANCH_CONDITIONS: tuple[str, ...] = ("reset", "others")
 
+#: Most repeats (draws) of one sequence a grid may ask for.
+MAX_DRAW = 100
+
 #: Prefix of every experiment branch; nothing else in a store starts with it.
 BRANCH_PREFIX = "exp"
 #: Separator of the fields of a branch name ("/" is not allowed in branch names).
@@ -46,19 +50,27 @@ _FIELD = re.compile(r"^[a-z0-9_]+$")
 _MEASURE = re.compile(r"^[a-z0-9_]+(-[a-z0-9_]+)*$")
 _BRANCH_CHARS = re.compile(r"^[A-Za-z0-9_.:-]+$")
 # A scenario's name is the last field of an episode branch: a PDDL-like name that cannot
-# be read as the variant field (``v3``).
+# be read as the variant or the draw field (``v3``, ``d2``).
 _SCENARIO = re.compile(r"^[a-z][a-z0-9_]*$")
-_VARIANT_FIELD = re.compile(r"^v\d+$")
+_NUMBERED_FIELD = re.compile(r"^[vd]\d+$")
 
 
 def check_scenario_name(name: str) -> str:
     """``name`` if it can end an experiment branch, else an error saying why."""
-    if not _SCENARIO.match(name) or _VARIANT_FIELD.match(name):
+    if not _SCENARIO.match(name) or _NUMBERED_FIELD.match(name):
         raise LlcpsError(
             f"scenario name {name!r} cannot name an experiment branch",
-            hint="use lower-case letters, digits and '_', starting with a letter (not v<digits>)",
+            hint="use lower-case letters, digits and '_', starting with a letter (not v<digits> or d<digits>)",
         )
     return name
+
+
+def draw_seed(seed: int, draw: int) -> int:
+    """The world model's seed of draw ``draw`` > 0 of a sequence at ``seed``: 32 bits of a
+    hash of both, so each draw of the random order is another permutation of the same
+    episode (draw 0 is the sequence's own seed)."""
+    digest = hashlib.blake2b(f"llcps-draw:{seed}:{draw}".encode(), digest_size=4).digest()
+    return int.from_bytes(digest, "little")
 
 
 @dataclass(frozen=True, order=True)
@@ -123,6 +135,10 @@ class Sequence:
     canonical scenes). A run over scene variants pairs them with seeds: seed N solves
     variant N (:meth:`~llcps.experiments.presets.Preset.sequences`), so each seed draws both its pretraining and its
     scenes, and update/reset or model/random stay paired by seed.
+
+    ``draw`` numbers repeats of one sequence that differ only in the world model's seed
+    (:attr:`model_seed`): the random order's further permutations of the same episodes,
+    which the ``generalization`` preset averages (0: the sequence itself).
     """
 
     preset: str
@@ -130,6 +146,7 @@ class Sequence:
     seed: int
     variant: int = 0
     scenarios: tuple[str, ...] = field(default=PAPER_SCENARIOS, compare=False)
+    draw: int = 0
 
     def __post_init__(self) -> None:
         if not _FIELD.match(self.preset):
@@ -141,6 +158,8 @@ class Sequence:
             raise LlcpsError(f"seed must be a non-negative integer, not {self.seed!r}")
         if isinstance(self.variant, bool) or not isinstance(self.variant, int) or self.variant < 0:
             raise LlcpsError(f"variant must be a non-negative integer, not {self.variant!r}")
+        if isinstance(self.draw, bool) or not isinstance(self.draw, int) or not 0 <= self.draw <= MAX_DRAW:
+            raise LlcpsError(f"draw must be an integer from 0 to {MAX_DRAW}, not {self.draw!r}")
         if not self.scenarios or len(set(self.scenarios)) != len(self.scenarios):
             raise LlcpsError(f"a sequence needs distinct scenarios, not {self.scenarios!r}")
         # Fail at construction, not halfway through a run, if a name would be too long.
@@ -154,13 +173,21 @@ class Sequence:
         """The sequence's branch, e.g. ``exp-paper-nb-most-changes-p200-update-s3``.
 
         A sequence on scene variant N > 0 ends in ``-vN`` (``...-update-s3-v3``); variant 0
-        is the canonical scene, so its sequences keep the plain name.
+        is the canonical scene, so its sequences keep the plain name. Draw D > 0 adds
+        ``-dD`` after them (``...-reset-s3-v3-d1``).
         """
         c = self.cell
         fields = [BRANCH_PREFIX, self.preset, c.model, c.measure, f"p{c.pretrain_size}", c.condition, f"s{self.seed}"]
         if self.variant:
             fields.append(f"v{self.variant}")
+        if self.draw:
+            fields.append(f"d{self.draw}")
         return SEP.join(fields)
+
+    @property
+    def model_seed(self) -> int | None:
+        """The world model's seed when it is not the sequence's (a draw > 0), else None."""
+        return draw_seed(self.seed, self.draw) if self.draw else None
 
     def episode_branch(self, scenario: str) -> str:
         """The branch one scenario of this sequence is solved on.
@@ -200,7 +227,8 @@ class ParsedBranch:
 
 
 _TAIL = re.compile(
-    r"^p(?P<pretrain>\d+)-(?P<condition>[a-z]+)-s(?P<seed>\d+)(?:-v(?P<variant>\d+))?(?:-(?P<scenario>[a-z0-9_]+))?$"
+    r"^p(?P<pretrain>\d+)-(?P<condition>[a-z]+)-s(?P<seed>\d+)(?:-v(?P<variant>\d+))?(?:-d(?P<draw>\d+))?"
+    r"(?:-(?P<scenario>[a-z0-9_]+))?$"
 )
 
 
@@ -231,7 +259,7 @@ def parse_branch(name: str) -> ParsedBranch | None:
         return None
     try:
         cell = Cell(model, measure, int(match["pretrain"]), condition)
-        sequence = Sequence(preset, cell, int(match["seed"]), int(match["variant"] or 0))
+        sequence = Sequence(preset, cell, int(match["seed"]), int(match["variant"] or 0), draw=int(match["draw"] or 0))
         # Only names this module would write round-trip (no leading zeros, etc.).
         expected = sequence.branch_name if scenario is None else sequence.episode_branch(scenario)
     except LlcpsError:

@@ -154,7 +154,7 @@ def twin_key(task: Task) -> tuple[object, ...] | None:
     if not isinstance(task, SequenceTask):
         return None
     cell = task.sequence.cell
-    return (task.sequence.preset, task.sequence.seed, cell.model, cell.measure, cell.pretrain_size)
+    return (task.sequence.preset, task.sequence.seed, cell.model, cell.measure, cell.pretrain_size, task.sequence.draw)
 
 
 def schedule(

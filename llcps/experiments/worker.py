@@ -192,6 +192,7 @@ def _solve(store: Store, task: SequenceTask, branch: str, source: str) -> str:
         measure=seq.cell.measure,
         seed=seq.seed,
         variant=seq.variant,
+        model_seed=seq.model_seed,
         budget=task.budget,
         refit_every=task.refit_every,
         ordering=task.ordering,

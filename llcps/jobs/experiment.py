@@ -50,6 +50,7 @@ def run_experiment_job(
     scenarios: Iterable[str] | None = None,
     with_others: bool = False,
     ordering: str | None = None,
+    random_draws: int | None = None,
     workers: int = 1,
     engine: str = "local",
     ray_address: str | None = None,
@@ -74,6 +75,7 @@ def run_experiment_job(
         with_others: give each held-out scenario the other scenarios' episodes first
             (the preset's ``reset`` becomes ``others``).
         ordering: the exploration ordering (None: the preset's; :mod:`llcps.cps.orderings`).
+        random_draws: permutations of the random order per seed (None: the preset's).
         workers, engine, ray_address, cache, progress: see
             :func:`~llcps.experiments.runner.run_experiment`.
         out_dir: the report's directory (default: ``results/<preset>``).
@@ -81,6 +83,7 @@ def run_experiment_job(
         report_progress: called as ``(phase, done, total)`` while the report is built.
     """
     grid = (get_preset(preset) if isinstance(preset, str) else preset).with_scenarios(scenarios).with_ordering(ordering)
+    grid = grid.with_random_draws(random_draws)
     if with_others:
         grid = grid.with_others()
     chosen = run_seeds(grid, seeds=seeds, first_seed=first_seed, variants=variants)
