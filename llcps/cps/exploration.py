@@ -26,9 +26,10 @@ there still failed.
 with its arguments: a board lying across the container's opening, a box standing on the
 object. Each body other than a_f's arguments, the support and the ground that touches,
 carries or holds one of them at the failure gives one more subgoal of a_f itself
-(:func:`clearances`): ending that contact (the closest one: ``in``, then ``on``, then
-``touching``). It is valued and distrusted as K's subgoals are, so a contact whose end
-did not let K's plan work stops mattering after a few trials. A failure with no such
+(:func:`clearances`): ending that contact, every relation of it that holds (``in``,
+``on``, ``touching``): a board pushed off the bin's top that still leans on its rim is
+not out of the way. It is valued and distrusted as K's subgoals are, so a contact whose
+end did not let K's plan work stops mattering after a few trials. A failure with no such
 contact ranks as without clearances.
 """
 
@@ -97,11 +98,11 @@ def clearances(failure: StepFailure, state: State, kinds: Mapping[str, str]) -> 
     that is not one (see the module docstring): a_f may have failed because of what
     touches, carries or holds its arguments, so ending that contact is a way K's own
     step may work again. The support and the ground, which everything stands on, are
-    left out. One clearance per pair of bodies, of its closest contact (``in`` before
-    ``on`` before ``touching``: ending it ends the looser ones too as a rule); at most
-    :data:`MAX_CLEARANCES`, in atom order."""
+    left out. One clearance per pair of bodies, ending every contact relation of the pair
+    that holds (``in``, ``on``, ``touching``: ending the closest alone may leave the body
+    leaning where it was); at most :data:`MAX_CLEARANCES`, in atom order."""
     arguments = set(failure.step.args)
-    closest: dict[frozenset[str], Fluent] = {}
+    contacts: dict[frozenset[str], list[Fluent]] = {}
     for atom in sorted(state):
         if len(atom) != 3 or atom[0] not in CONTACT_PREDICATES or atom in failure.missing_del:
             continue
@@ -109,10 +110,9 @@ def clearances(failure: StepFailure, state: State, kinds: Mapping[str, str]) -> 
         others = bodies - arguments
         if len(bodies) != 2 or len(others) != 1 or kinds.get(next(iter(others))) in (None, SUPPORT_KIND, GROUND_KIND):
             continue
-        held = closest.get(bodies)
-        if held is None or CONTACT_PREDICATES.index(atom[0]) < CONTACT_PREDICATES.index(held[0]):
-            closest[bodies] = atom
-    return [(failure.step.label, ((atom, False),)) for atom in sorted(closest.values())[:MAX_CLEARANCES]]
+        contacts.setdefault(bodies, []).append(atom)
+    ends = sorted(tuple(sorted(atoms)) for atoms in contacts.values())
+    return [(failure.step.label, tuple((atom, False) for atom in atoms)) for atoms in ends[:MAX_CLEARANCES]]
 
 
 def subgoals(kb: KnowledgeBase, task: Task, failure: StepFailure, state: State) -> list[tuple[str, tuple[tuple[Fluent, bool], ...]]]:
