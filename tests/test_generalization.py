@@ -90,6 +90,9 @@ def test_the_random_order_runs_in_several_draws_that_name_their_branch_and_seed_
     assert preset.with_random_draws(None) == preset
     with pytest.raises(LlcpsError, match="random_draws"):
         preset.with_random_draws(0)
+    with pytest.raises(LlcpsError, match="no random-order cell"):  # nothing there to draw again
+        PRESETS["paper"].with_random_draws(3)
+    assert PRESETS["paper"].with_random_draws(1).random_draws == 1
     with pytest.raises(LlcpsError, match="cannot name an experiment branch"):
         Sequence("generalization", Cell("random", DEFAULT[1], 200, "reset"), 0, 0, ("d2",))
 

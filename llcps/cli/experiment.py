@@ -16,7 +16,7 @@ from llcps.errors import LlcpsError
 from llcps.outputs import check_output_dir
 from llcps.provenance import cpu_count
 from llcps.cps.orderings import ORDERINGS
-from llcps.experiments.design import MAX_DRAW
+from llcps.experiments.design import MAX_DRAWS
 from llcps.experiments.executors import ENGINES
 from llcps.experiments.presets import MAX_SEEDS, PRESETS
 from llcps.scenarios.variants import parse_range
@@ -122,7 +122,7 @@ def run_cli(
             "--random-draws",
             metavar="N",
             min=1,
-            max=MAX_DRAW + 1,
+            max=MAX_DRAWS,
             help="Permutations of the random order per seed (default: the preset's, 3 for generalization, else 1); "
             "leave one family out compares each ordering with their mean per variant.",
             show_default=False,

@@ -36,8 +36,8 @@ PAPER_CONDITIONS: tuple[str, ...] = ("update", "reset")
 #: The conditions that solve each scenario on its own branch (named after the scenario).
 OWN_BRANCH_CONDITIONS: tuple[str, ...] = ("reset", "others")
 
-#: Most repeats (draws) of one sequence a grid may ask for.
-MAX_DRAW = 100
+#: Most repeats (draws) of one sequence a grid may ask for: draws are numbered 0..MAX_DRAWS-1.
+MAX_DRAWS = 100
 
 #: Prefix of every experiment branch; nothing else in a store starts with it.
 BRANCH_PREFIX = "exp"
@@ -158,8 +158,8 @@ class Sequence:
             raise LlcpsError(f"seed must be a non-negative integer, not {self.seed!r}")
         if isinstance(self.variant, bool) or not isinstance(self.variant, int) or self.variant < 0:
             raise LlcpsError(f"variant must be a non-negative integer, not {self.variant!r}")
-        if isinstance(self.draw, bool) or not isinstance(self.draw, int) or not 0 <= self.draw <= MAX_DRAW:
-            raise LlcpsError(f"draw must be an integer from 0 to {MAX_DRAW}, not {self.draw!r}")
+        if isinstance(self.draw, bool) or not isinstance(self.draw, int) or not 0 <= self.draw < MAX_DRAWS:
+            raise LlcpsError(f"draw must be an integer from 0 to {MAX_DRAWS - 1}, not {self.draw!r}")
         if not self.scenarios or len(set(self.scenarios)) != len(self.scenarios):
             raise LlcpsError(f"a sequence needs distinct scenarios, not {self.scenarios!r}")
         # Fail at construction, not halfway through a run, if a name would be too long.

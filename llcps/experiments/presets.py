@@ -22,7 +22,7 @@ from llcps.cps.orderings import ORDERINGS, PAPER_ORDERING
 from llcps.domain import MAX_SEED
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.experiments.design import (
-    MAX_DRAW,
+    MAX_DRAWS,
     PAPER_CONDITIONS,
     PAPER_SCENARIOS,
     RANDOM_ORDER_MODEL,
@@ -89,9 +89,9 @@ class Preset:
             )
 
         draws = self.random_draws
-        if isinstance(draws, bool) or not isinstance(draws, int) or not 1 <= draws <= MAX_DRAW + 1:
+        if isinstance(draws, bool) or not isinstance(draws, int) or not 1 <= draws <= MAX_DRAWS:
             raise LlcpsError(
-                f"preset {self.name!r}: random_draws must be a whole number from 1 to {MAX_DRAW + 1}, not {draws!r}",
+                f"preset {self.name!r}: random_draws must be a whole number from 1 to {MAX_DRAWS}, not {draws!r}",
                 hint="pass --random-draws 1 or more",
             )
 
@@ -133,8 +133,16 @@ class Preset:
 
     def with_random_draws(self, draws: int | None) -> Preset:
         """This preset running ``draws`` permutations of the random order per seed
-        (``experiment run --random-draws``); None: unchanged."""
-        return self if draws is None else replace(self, random_draws=draws)
+        (``experiment run --random-draws``); None: unchanged. Refused where the grid has
+        no random-order cell, where more than one draw would change nothing."""
+        if draws is None:
+            return self
+        if draws > 1 and RANDOM_ORDER_MODEL not in self.models:
+            raise LlcpsError(
+                f"preset {self.name!r} has no random-order cell for --random-draws {draws} to draw again",
+                hint="--random-draws goes with a preset that runs the random order (e.g. generalization, vs_random)",
+            )
+        return replace(self, random_draws=draws)
 
     def with_others(self) -> Preset:
         """This preset with ``reset`` replaced by ``others``: each held-out scenario is solved

@@ -22,7 +22,7 @@ from llcps.cps.orderings import ORDERINGS, PAPER_ORDERING
 from llcps.domain import MAX_ID, MAX_PRETRAIN_TRIALS, MAX_SEED
 from llcps.errors import LlcpsError
 from llcps.outputs import replaced_atomically, write_text
-from llcps.experiments.design import MAX_DRAW, Cell, Sequence, rank_by
+from llcps.experiments.design import MAX_DRAWS, Cell, Sequence, rank_by
 from llcps.tabular import csv_value
 
 #: Columns that can be analysed as "exploration" (the paper's Figure 2 uses time).
@@ -85,7 +85,7 @@ class ResultRow:
             value = getattr(self, name)
             if not isinstance(value, str) or not value or len(value) > MAX_TEXT_VALUE or not value.isprintable():
                 raise ColumnError(name, f"must be a printable name of at most {MAX_TEXT_VALUE} characters, got {value!r}")
-        for name, high in (("pretrain_size", MAX_PRETRAIN_TRIALS), ("seed", MAX_SEED), ("variant", MAX_SEED), ("draw", MAX_DRAW), ("exploration_trials", MAX_ID)):
+        for name, high in (("pretrain_size", MAX_PRETRAIN_TRIALS), ("seed", MAX_SEED), ("variant", MAX_SEED), ("draw", MAX_DRAWS - 1), ("exploration_trials", MAX_ID)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= high:
                 raise ColumnError(name, f"must be a whole number from 0 to {high}, got {value!r}")
