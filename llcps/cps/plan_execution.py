@@ -224,12 +224,16 @@ def resolves(
     A trial resolves it if the goal now holds, or if K (costed by experience) plans from
     the new state and that plan, executed, reaches the goal: a plan K made from the
     failure point itself started with a_f, which failed there, so a plan that works now
-    works because of the trial. Only a trial that changed a fact about an entity of a_f
-    or of the goal is followed by a re-plan: other changes cannot have made a plan work
-    that did not before. The steps of a re-plan that works count as executions of their
-    operators where they ran (a_f working after the trial, in the trial's context), so
-    that the planner knows the chain of the learned operator and the plan it enabled;
-    those of a re-plan that fails count nothing (exploration is not K's plan failing).
+    works because of the trial. The plan is repaired as K's first plan was
+    (:func:`plan_and_repair`): a step that fails is left out and K plans again from where
+    it left the world, up to :data:`MAX_PLAN_REPAIRS` times, so a trial that clears the
+    way for a step K reaches only by a repair resolves the novelty too. Only a trial that
+    changed a fact about an entity of a_f or of the goal is followed by a re-plan: other
+    changes cannot have made a plan work that did not before. The steps of a re-plan that
+    works count as executions of their operators where they ran (a_f working after the
+    trial, in the trial's context; a step a repair left out, failing), so that the planner
+    knows the chain of the learned operator and the plan it enabled; those of a re-plan
+    that fails count nothing (exploration is not K's plan failing).
     ``count=False`` counts nothing at all (a sweep judges every candidate alone).
     """
     scenario = executor.scenario
@@ -240,14 +244,21 @@ def resolves(
     if not any(focus.intersection(atom[1:]) for atom in changed):
         return False
     known = experience.costed(kb)
-    steps = plan(known, executor.task(trial.after))
-    if not steps:
-        return False
-    executor.report("re-plan")
     executed: list[tuple[str, Context, bool, int | None]] = []
-    run = run_plan(executor, steps, record=known, executed=executed)
+    excluded: set[tuple[str, tuple[str, ...]]] = set()
+    state = trial.after
+    for _ in range(1 + MAX_PLAN_REPAIRS):
+        steps = plan(known, executor.task(state), exclude=excluded)
+        if not steps:
+            return False
+        executor.report("re-plan")
+        run = run_plan(executor, steps, record=known, executed=executed)
+        if run.failure is None:
+            break
+        excluded.add((run.failure.step.name, run.failure.step.args))
+        state = run.state
     resolved = run.failure is None and scenario.goal_reached(run.state)
-    if resolved and count:  # the plan the trial enabled worked: K's steps count where they ran
+    if resolved and count:  # the plan the trial enabled worked: K's steps count where they ran, failed steps of its repairs too
         for execution in executed:
             experience.record(*execution)
     return resolved
