@@ -16,6 +16,7 @@ import pytest
 
 from scenario_sweeps import FIRST_RESOLVING, slices
 
+from llcps.cps import plan_execution
 from llcps.cps.candidates import candidate_space_size
 from llcps.cps.episode import SolveConfig, solve
 from llcps.cps.sweep import sweep
@@ -23,6 +24,11 @@ from llcps.scenarios import SCENARIOS, get_scenario
 from llcps.store import Store
 
 SCENARIO_NAMES = tuple(SCENARIOS)
+#: A held-out family (docs/scenarios.md): a board lies over the bin K places the can in.
+LID = Path(__file__).parent.parent / "docs" / "heldout" / "lid.toml"
+#: The 0-based position, in lid's default order at variant 0, of a stroke that slides
+#: the board off the bin: push_together(board, bin) at 0.4 m/s, 0.3 m, from the right.
+BOARD_OFF = 384
 SLICES = [
     pytest.param(name, part, id=f"{name}-{part.start}:{part.stop}")
     for name in SCENARIO_NAMES
@@ -86,3 +92,17 @@ def test_sweep_finds_a_resolving_candidate_after_the_first(name: str, part: rang
     assert found.candidates == candidate_space_size(name) and found.tried == len(part)
     expected = [first - 1] if first - 1 in part else []
     assert found.resolving == expected, f"resolving positions (1-based) {[i + 1 for i in found.resolving]}, recorded first {first}"
+
+
+def test_a_trial_s_re_plan_is_repaired_as_k_s_first_plan_is(monkeypatch: pytest.MonkeyPatch) -> None:
+    """In the lid family K plans to push the can over into the bin, which fails in every
+    layout, and repairs the plan with its placement, which the board defeats. Once a
+    trial slides the board off, K plans the push again, and only the repair (the
+    placement) reaches the goal: the trial resolves the novelty because the re-plan after
+    it is repaired as K's first plan was."""
+    scenario = get_scenario(str(LID))
+    found = sweep(scenario, positions=[BOARD_OFF])
+    assert found.failed_action == "(push can bin)"
+    assert found.labels == ["push_together(board, bin) rate=0.4 magnitude=0.3 orientation=right"]
+    monkeypatch.setattr(plan_execution, "MAX_PLAN_REPAIRS", 0)
+    assert sweep(scenario, positions=[BOARD_OFF]).resolving == []
