@@ -17,10 +17,15 @@ import pytest
 from scenario_sweeps import FIRST_RESOLVING, slices
 
 from llcps.cps import plan_execution
-from llcps.cps.candidates import candidate_space_size
+from llcps.cps.branch_knowledge import BranchExperience, load_knowledge
+from llcps.cps.candidates import candidate_space_size, enumerate_candidates
 from llcps.cps.episode import SolveConfig, solve
+from llcps.cps.executor import TrialExecutor
+from llcps.cps.plan_execution import PlanLog, plan_and_repair, resolves
 from llcps.cps.sweep import sweep
 from llcps.scenarios import SCENARIOS, get_scenario
+from llcps.sim.perception import perceive
+from llcps.sim.world import SETTLE_STEPS, World
 from llcps.store import Store
 
 SCENARIO_NAMES = tuple(SCENARIOS)
@@ -106,3 +111,38 @@ def test_a_trial_s_re_plan_is_repaired_as_k_s_first_plan_is(monkeypatch: pytest.
     assert found.labels == ["push_together(board, bin) rate=0.4 magnitude=0.3 orientation=right"]
     monkeypatch.setattr(plan_execution, "MAX_PLAN_REPAIRS", 0)
     assert sweep(scenario, positions=[BOARD_OFF]).resolving == []
+
+
+def test_a_repaired_re_plan_that_resolves_counts_the_step_it_left_out_and_its_own_steps(tmp_path: Path) -> None:
+    """When the re-plan after a trial reaches the goal only through a repair, the step the
+    repair left out counts as a failure of its operator there, and the plan that worked
+    as successes: K learns that the push fails after the board is gone, and the placement works."""
+    scenario = get_scenario(str(LID))
+    config = SolveConfig(scenario=str(LID))
+    with Store.open(str(tmp_path / "r.db"), create=True) as store:
+        branch = store.current_branch()
+        world = World.from_scene(scenario.scene("novelty", 0))
+        try:
+            world.settle(max_steps=SETTLE_STEPS)
+            executor = TrialExecutor(store=store, branch=branch, world=world, scenario=scenario, seed=config.seed)
+            experience = BranchExperience(store, branch)
+            kb = load_knowledge(store, branch)
+            failure = plan_and_repair(executor, experience, kb, perceive(world), PlanLog())
+            assert failure is not None and failure.snapshot is not None
+
+            def counts() -> dict[str, tuple[int, int]]:
+                total: dict[str, tuple[int, int]] = {}
+                for c in store.operator_experience(branch):
+                    won, lost = total.get(c.operator, (0, 0))
+                    total[c.operator] = (won + c.successes, lost + c.failures)
+                return total
+
+            assert counts() == {"push": (0, 1), "place_in_container": (0, 1)}  # K's plan and its repair
+            spec = enumerate_candidates(
+                failed=executor.controller_call(failure.step), entities=executor.kinds, grid=config.candidate_grid(scenario)
+            )[BOARD_OFF]
+            trial, _ = executor.execute(spec, source="exploration", snapshot_id=failure.snapshot, start=failure.snapshot)
+            assert resolves(executor, experience, kb, trial, failure)
+        finally:
+            world.close()
+        assert counts() == {"push": (0, 2), "place_in_container": (1, 1)}
