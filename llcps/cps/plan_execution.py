@@ -225,9 +225,12 @@ def resolves(
     the new state and that plan, executed, reaches the goal: a plan K made from the
     failure point itself started with a_f, which failed there, so a plan that works now
     works because of the trial. The plan is repaired as K's first plan was
-    (:func:`plan_and_repair`): a step that fails is left out and K plans again from where
-    it left the world, up to :data:`MAX_PLAN_REPAIRS` times, so a trial that clears the
-    way for a step K reaches only by a repair resolves the novelty too. Only a trial that
+    (:func:`plan_and_repair`): a step that fails is left out and K plans again, up to
+    :data:`MAX_PLAN_REPAIRS` times, so a trial that clears the way for a step K reaches
+    only by a repair resolves the novelty too. Each repaired plan starts from the state
+    the trial left (restored), not from where the failed step left the world: what
+    resolves is the trial followed by that plan, the lesson K' records, and not a side
+    effect of a step that failed. Only a trial that
     changed a fact about an entity of a_f or of the goal is followed by a re-plan: other
     changes cannot have made a plan work that did not before. The steps of a re-plan that
     works count as executions of their operators where they ran (a_f working after the
@@ -246,17 +249,18 @@ def resolves(
     known = experience.costed(kb)
     executed: list[tuple[str, Context, bool, int | None]] = []
     excluded: set[tuple[str, tuple[str, ...]]] = set()
-    state = trial.after
-    for _ in range(1 + MAX_PLAN_REPAIRS):
-        steps = plan(known, executor.task(state), exclude=excluded)
+    left = executor.snapshot()  # the state the trial left: every repaired plan starts there
+    for attempt in range(1 + MAX_PLAN_REPAIRS):
+        steps = plan(known, executor.task(trial.after), exclude=excluded)
         if not steps:
             return False
+        if attempt:
+            executor.restore(left)
         executor.report("re-plan")
         run = run_plan(executor, steps, record=known, executed=executed)
         if run.failure is None:
             break
         excluded.add((run.failure.step.name, run.failure.step.args))
-        state = run.state
     resolved = run.failure is None and scenario.goal_reached(run.state)
     if resolved and count:  # the plan the trial enabled worked: K's steps count where they ran, failed steps of its repairs too
         for execution in executed:
