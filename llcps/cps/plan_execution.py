@@ -230,13 +230,14 @@ def resolves(
     only by a repair resolves the novelty too. Each repaired plan starts from the state
     the trial left (restored), not from where the failed step left the world: what
     resolves is the trial followed by that plan, the lesson K' records, and not a side
-    effect of a step that failed. Only a trial that
-    changed a fact about an entity of a_f or of the goal is followed by a re-plan: other
-    changes cannot have made a plan work that did not before. The steps of a re-plan that
-    works count as executions of their operators where they ran (a_f working after the
-    trial, in the trial's context; a step a repair left out, failing), so that the planner
-    knows the chain of the learned operator and the plan it enabled; those of a re-plan
-    that fails count nothing (exploration is not K's plan failing).
+    effect of a step that failed (the snapshot is the one the plan's first step takes:
+    the store keeps a state once). Only a trial that changed a fact about an entity of
+    a_f or of the goal is followed by a re-plan: other changes cannot have made a plan
+    work that did not before. The steps of a re-plan that works count as executions of
+    their operators where they ran (a_f working after the trial, in the trial's context;
+    a step a repair left out, failing), so that the planner knows the chain of the
+    learned operator and the plan it enabled; those of a re-plan that fails count nothing
+    (exploration is not K's plan failing).
     ``count=False`` counts nothing at all (a sweep judges every candidate alone).
     """
     scenario = executor.scenario
