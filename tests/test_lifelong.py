@@ -338,7 +338,7 @@ def test_a_life_solves_every_episode_and_no_original_needs_exploration(pretraine
 #: repeat). Strict: the mark goes once the agent can tell. (After scenario6's novelty,
 #: which bans K's placement in a context scenario12's resolving trial reaches too,
 #: scenario12's novelty tried all 467 candidates without resolving it until the re-plan
-#: after a trial was repaired; its push of the bin now resolves, the placement repairing K's push.)
+#: after a trial was repaired; since then that life keeps every original condition at 0.)
 UNSHOWN = "a novelty no fact shows: K' and bans learned there are used where they do not hold"
 
 
