@@ -128,11 +128,13 @@ def test_an_ordering_runs_as_a_condition() -> None:
 
 
 def test_every_ordering_runs_as_a_condition_under_a_branch_safe_name() -> None:
-    from llcps.cps.orderings import ORDERINGS
-    from llcps.experiments.life import condition_names
+    from llcps.cps.orderings import ORDERINGS, PAPER_ORDERING
+    from llcps.experiments.life import LIFE_CONDITIONS, condition_names
 
-    named = {n: life_condition(n).ordering for n in condition_names() if life_condition(n).ordering}
+    named = {n: life_condition(n).ordering for n in condition_names() if n not in LIFE_CONDITIONS}
     assert sorted(named.values()) == sorted(ORDERINGS)  # case-based and trial-and-error too
+    # The random order is the random model ranked, whatever the default ordering is.
+    assert life_condition("random").ordering == PAPER_ORDERING
     life = load_life("default").with_conditions(["update", "case_based", "trial_and_error"])
     tasks = {t.condition.name: t for t in plan_life_tasks(life, [0]) if isinstance(t, LifeTask)}
     assert tasks["case_based"].ordering == "case-based" and tasks["trial_and_error"].ordering == "trial-and-error"

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from llcps.cps.orderings import PAPER_ORDERING
 from llcps.errors import LlcpsError, UnknownNameError
 from llcps.experiments.design import RANDOM_ORDER_MODEL, check_scenario_name
 from llcps.registry import Registry
@@ -85,7 +86,10 @@ LIFE_CONDITIONS: Registry[LifeCondition] = Registry(
         "update": LifeCondition("update", "update", description="the world model and K' carry over"),
         "reset": LifeCondition("reset", "reset", description="every episode from the pretraining point"),
         "scratch": LifeCondition("scratch", "update", pretrained=False, description="update without pretraining"),
-        "random": LifeCondition("random", "update", model=RANDOM_ORDER_MODEL, description="update, exploring in a random order"),
+        # The random model ranked: the random order, whatever the default ordering.
+        "random": LifeCondition(
+            "random", "update", model=RANDOM_ORDER_MODEL, ordering=PAPER_ORDERING, description="update, exploring in a random order"
+        ),
     },
     default="update",
 )
