@@ -23,7 +23,7 @@ from llcps.experiments.holdout import pretraining_leaks
 from llcps.experiments.presets import PRESETS, resolve_scenarios
 from llcps.experiments.rows import ResultRow
 from llcps.experiments.scheduler import expected_scenarios
-from llcps.experiments.tasks import plan_tasks
+from llcps.experiments.tasks import SequenceTask, plan_tasks
 from llcps.jobs.experiment import run_experiment_job
 from llcps.models.measures import MEASURES
 from llcps.models.registry import WORLD_MODELS
@@ -97,6 +97,17 @@ def test_the_random_order_runs_in_several_draws_that_name_their_branch_and_seed_
         Sequence("generalization", Cell("random", DEFAULT[1], 200, "reset"), 0, 0, ("d2",))
 
 
+def test_the_random_order_explores_in_the_papers_ordering_whatever_the_preset_explores_in() -> None:
+    from llcps.cps.orderings import PAPER_ORDERING
+
+    for ordering in (None, "hedged", "trial-and-error"):
+        preset = PRESETS["generalization"].with_scenarios(["scenario1"]).with_ordering(ordering)
+        tasks = [t for t in plan_tasks(preset, [3], variants=True) if isinstance(t, SequenceTask)]
+        by_model = {(t.sequence.cell.model, t.sequence.draw): t.ordering for t in tasks}
+        assert {o for (m, _), o in by_model.items() if m == "random"} == {PAPER_ORDERING}  # one baseline for all
+        assert {o for (m, _), o in by_model.items() if m != "random"} == {preset.ordering}
+
+
 def test_scenario_order_puts_the_papers_first_then_the_rest_by_name() -> None:
     assert sorted(["zeta", "scenario4", "scenario2", "scenario1"], key=scenario_rank) == ["scenario1", "scenario2", "scenario4", "zeta"]
 
@@ -147,7 +158,8 @@ def table() -> ResultsTable:
 def test_family_ratios_tests_and_overall_on_hand_worked_numbers(table: ResultsTable) -> None:
     results = family_results(table)
     a, b = results
-    assert (a.family, b.family) == ("scenario1", "scenario2") and a.default
+    # The paper's ordering: default is model, measure and the default ordering (hedged).
+    assert (a.family, b.family) == ("scenario1", "scenario2") and not a.default
     assert (a.median_model, a.median_random) == (6.0, 4.0)
     assert a.median_ratio == 1.0  # median of .5, 1, 2, .5, 2
     assert a.ratio_of_medians == 1.5
@@ -193,22 +205,23 @@ def _hedged(table: ResultsTable) -> list[ResultRow]:
 def test_two_orderings_against_one_random_set_are_two_row_groups(table: ResultsTable) -> None:
     both = ResultsTable([*table, *_hedged(table)])
     results = family_results(both)
+    # The default's row group first.
     assert [(r.ordering, r.family) for r in results] == [
-        ("ranked", "scenario1"), ("ranked", "scenario2"), ("hedged", "scenario1"), ("hedged", "scenario2"),
+        ("hedged", "scenario1"), ("hedged", "scenario2"), ("ranked", "scenario1"), ("ranked", "scenario2"),
     ]  # fmt: skip
     ranked = [r for r in results if r.ordering == "ranked"]
     assert ranked == list(family_results(table))  # the ranked numbers do not change beside another ordering
     ha, hb = (r for r in results if r.ordering == "hedged")
     assert (ha.median_ratio, ha.ratio_of_medians, ha.median_random, ha.n) == (2.0, 2.0, 4.0, 5)
     assert (hb.median_ratio, hb.ratio_of_medians, hb.median_random) == (1.0, 1.0, 1.0)
-    assert all(r.default for r in ranked) and not ha.default and not hb.default  # default: model, measure and ordering
+    assert ha.default and hb.default and not any(r.default for r in ranked)  # default: model, measure and ordering
     # Holm within each ordering's families, not across the three tests made: hedged's only test
     # (b has no differences) keeps its p-value
     assert ha.p_value == pytest.approx(sps.wilcoxon([8, 8, 6, 32, 10], [4, 4, 3, 16, 5]).pvalue)
     assert ha.p_holm == ha.p_value and math.isnan(hb.p_value) and math.isnan(hb.p_holm)
     overall = {r.ordering: r for r in generalization_summary(results)}
     assert overall["hedged"].geomean_ratio == pytest.approx(math.sqrt(2.0)) and overall["hedged"].worse_than_random == 1
-    assert overall["ranked"].geomean_ratio == pytest.approx(math.sqrt(3.0)) and overall["ranked"].default
+    assert overall["ranked"].geomean_ratio == pytest.approx(math.sqrt(3.0)) and overall["hedged"].default
 
 
 def test_random_rows_of_the_papers_ordering_are_every_orderings_baseline(table: ResultsTable) -> None:
@@ -248,7 +261,7 @@ def test_the_report_writes_the_family_table_json_and_plot(table: ResultsTable, t
     assert {p.suffix for p in paths.plots["generalization"]} == {".png", ".svg"}
     assert 'id="generalization-1"' in paths.report_html.read_text()  # type: ignore[union-attr]
     # One ranked run reads as before orderings were recorded: its labels do not name the ordering.
-    label = f"{DEFAULT[0]} / {DEFAULT[1]} / p200 / reset (default)"
+    label = f"{DEFAULT[0]} / {DEFAULT[1]} / p200 / reset"  # the paper's ordering, not the default one
     assert f"| scenario1 | {label} |" in text and "ranked" not in text.split("## Leave one family out")[1]
     assert "Orderings:" not in text
 
@@ -272,21 +285,21 @@ def test_a_report_of_two_orderings_names_them_in_every_row_group(table: ResultsT
         plots.save = original  # type: ignore[assignment]
     model, measure = DEFAULT
     text = paths.report_md.read_text()
-    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 |" in text
-    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 1 | 8.0 | 4.0 | 2.00 | 2.00 |" in text
-    assert f"| {model} / {measure} / hedged / p200 / reset | 2 | 1.41 | 1 of 2 |" in text
+    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset | 5 |" in text
+    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset (default) | 5 | 1 | 8.0 | 4.0 | 2.00 | 2.00 |" in text
+    assert f"| {model} / {measure} / hedged / p200 / reset (default) | 2 | 1.41 | 1 of 2 |" in text
     assert "Orderings: ranked, hedged;" in text and "every other section covers the ranked ordering" in text
     assert f"{model} / {measure} / hedged / p200 / reset" in paths.report_html.read_text()  # type: ignore[union-attr]
-    # The per-family plot draws one series per ordering (two markers each)
+    # The per-family plot draws one series per ordering (two markers each), the default's first
     legend = next(texts for texts in drawn if any("median of ratios" in t for t in texts))
     assert legend == [
-        f"{model} / {measure} / {o} / p200 / reset: {what}" for o in ("ranked", "hedged") for what in ("median of ratios", "ratio of medians")
+        f"{model} / {measure} / {o} / p200 / reset: {what}" for o in ("hedged", "ranked") for what in ("median of ratios", "ratio of medians")
     ]
     rows = (tmp_path / "r" / "generalization.csv").read_text().splitlines()
     assert rows[0].split(",")[:5] == ["family", "model", "measure", "ordering", "pretrain_size"]
     data = json.loads(paths.generalization_json.read_text())  # type: ignore[union-attr]
     assert [(r["ordering"], r["label"]) for r in data["overall"]] == [
-        ("ranked", f"{model} / {measure} / ranked / p200 / reset"), ("hedged", f"{model} / {measure} / hedged / p200 / reset")
+        ("hedged", f"{model} / {measure} / hedged / p200 / reset"), ("ranked", f"{model} / {measure} / ranked / p200 / reset")
     ]  # fmt: skip
     # Every other section covers one ordering: the random comparison holds the ranked rows only.
     analysis = json.loads(paths.figure2_json.read_text())
@@ -313,14 +326,14 @@ def test_experiment_report_merges_the_results_of_two_orderings_into_one_report(t
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert [(r["ordering"], r["family"], r["median_ratio"]) for r in data["generalization"]["families"]] == [
-        ("ranked", "scenario1", 1.0), ("ranked", "scenario2", 3.0), ("hedged", "scenario1", 2.0), ("hedged", "scenario2", 1.0),
+        ("hedged", "scenario1", 2.0), ("hedged", "scenario2", 1.0), ("ranked", "scenario1", 1.0), ("ranked", "scenario2", 3.0),
     ]  # fmt: skip
     merged = ResultsTable.read(out)
     assert len(merged) == len(table) + len(table) // 2 and merged.unique("ordering") == ("ranked", "hedged")
     text = (out / "report.md").read_text()
     model, measure = DEFAULT
-    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset | 5 | 1 | 8.0 | 4.0 | 2.00 |" in text
-    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset (default) | 5 | 1 | 6.0 | 4.0 | 1.00 |" in text
+    assert f"| scenario1 | {model} / {measure} / hedged / p200 / reset (default) | 5 | 1 | 8.0 | 4.0 | 2.00 |" in text
+    assert f"| scenario1 | {model} / {measure} / ranked / p200 / reset | 5 | 1 | 6.0 | 4.0 | 1.00 |" in text
     # where the runs ran: every directory's environments, each marked with its directory
     provenance = json.loads((out / "provenance.json").read_text())
     assert sorted((p["host"], p["results"]) for p in provenance) == [("first", str(ranked)), ("second", str(hedged))]

@@ -66,9 +66,11 @@ def _run(ordering, resolving: set[int]) -> list[int]:
     return tried
 
 
-def test_the_registry_names_both_orderings_and_ranked_is_the_default():
+def test_the_registry_names_both_orderings_hedged_is_the_default_and_ranked_the_papers():
+    from llcps.cps.orderings import PAPER_ORDERING
+
     assert set(ORDERINGS) >= {"ranked", "hedged"}
-    assert ORDERINGS.default == "ranked"
+    assert ORDERINGS.default == "hedged" and PAPER_ORDERING == "ranked"
     assert get_ordering("hedged").ordering_class() is Hedged
 
 
