@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -133,8 +134,9 @@ def test_every_ordering_runs_as_a_condition_under_a_branch_safe_name() -> None:
 
     named = {n: life_condition(n).ordering for n in condition_names() if n not in LIFE_CONDITIONS}
     assert sorted(named.values()) == sorted(ORDERINGS)  # case-based and trial-and-error too
-    # The random order is the random model ranked, whatever the default ordering is.
-    assert life_condition("random").ordering == PAPER_ORDERING
+    # The random order is the random model ranked, whatever the life explores in.
+    for ordering in (None, "hedged", "trial-and-error"):
+        assert replace(load_life("default"), ordering=ordering).ordering_for(life_condition("random")) == PAPER_ORDERING
     life = load_life("default").with_conditions(["update", "case_based", "trial_and_error"])
     tasks = {t.condition.name: t for t in plan_life_tasks(life, [0]) if isinstance(t, LifeTask)}
     assert tasks["case_based"].ordering == "case-based" and tasks["trial_and_error"].ordering == "trial-and-error"
@@ -165,7 +167,6 @@ def test_the_draw_holds_probes_back_and_marks_first_encounters() -> None:
 
 
 def test_original_condition_episodes_are_drawn_among_recurrences_only() -> None:
-    from dataclasses import replace
 
     life = replace(load_life("default"), original_share=0.5)
     episodes = [e for seed in range(5) for e in draw_life(life, seed).episodes]
@@ -337,7 +338,6 @@ def test_the_paper_life_solves_the_lifelong_presets_episodes(tmp_path: Path) -> 
     """Seed 0 of the `lifelong` preset and life 0 of `paper`, both on their first two scenarios
     and cut to 8 pretraining interactions and 5 trials per episode (the plan above checks the
     real settings): the same trials, episode by episode, update carrying scenario 1 into 2."""
-    from dataclasses import replace
 
     from llcps.experiments.runner import run_experiment
 

@@ -111,6 +111,15 @@ class Cell:
 RANDOM_ORDER_MODEL = "random"
 
 
+def explores_in(model: str, ordering: str) -> str:
+    """The ordering episodes of ``model`` explore in when ``ordering`` is asked for: the
+    random order always in the paper's, so that one set of random-order episodes is the
+    baseline of every ordering, whatever a preset or a life explores in."""
+    from llcps.cps.orderings import PAPER_ORDERING
+
+    return PAPER_ORDERING if model == RANDOM_ORDER_MODEL else ordering
+
+
 def cell_title(model: str, measure: str, pretrain_size: int) -> str:
     """How tables and plots name a cell without its condition: ``nb / goal-directed / p200``.
 

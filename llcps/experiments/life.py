@@ -34,9 +34,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from llcps.cps.orderings import PAPER_ORDERING
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.experiments.design import RANDOM_ORDER_MODEL, check_scenario_name
+from llcps.experiments.design import RANDOM_ORDER_MODEL, check_scenario_name, explores_in
 from llcps.registry import Registry
 
 #: Where the shipped life files are.
@@ -86,10 +85,7 @@ LIFE_CONDITIONS: Registry[LifeCondition] = Registry(
         "update": LifeCondition("update", "update", description="the world model and K' carry over"),
         "reset": LifeCondition("reset", "reset", description="every episode from the pretraining point"),
         "scratch": LifeCondition("scratch", "update", pretrained=False, description="update without pretraining"),
-        # The random model ranked: the random order, whatever the default ordering.
-        "random": LifeCondition(
-            "random", "update", model=RANDOM_ORDER_MODEL, ordering=PAPER_ORDERING, description="update, exploring in a random order"
-        ),
+        "random": LifeCondition("random", "update", model=RANDOM_ORDER_MODEL, description="update, exploring in a random order"),
     },
     default="update",
 )
@@ -295,7 +291,7 @@ class Life:
     def ordering_for(self, condition: LifeCondition) -> str:
         from llcps.cps.orderings import ORDERINGS
 
-        return condition.ordering or self.ordering or ORDERINGS.default
+        return explores_in(self.model_for(condition), condition.ordering or self.ordering or ORDERINGS.default)
 
     def measure_name(self) -> str:
         from llcps.models.measures import MEASURES

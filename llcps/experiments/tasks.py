@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable
 
 from llcps.domain import ACTIONS
-from llcps.experiments.design import RANDOM_ORDER_MODEL, Sequence, pretrain_branch_name
+from llcps.experiments.design import Sequence, explores_in, pretrain_branch_name
 from llcps.cps.orderings import PAPER_ORDERING
 from llcps.experiments.life import Life, LifeCondition, LifeEpisode, after_branch, episode_branch, life_branch
 from llcps.experiments.presets import Preset, resolve_scenarios, seed_list
@@ -191,9 +191,7 @@ def plan_tasks(
                 s,
                 budget,
                 refit_every=preset.refit_every,
-                # The random order is every ordering's baseline: one order, whatever the
-                # preset explores in, so a store's random rows pair with any ordering run later.
-                ordering=PAPER_ORDERING if s.cell.model == RANDOM_ORDER_MODEL else preset.ordering,
+                ordering=explores_in(s.cell.model, preset.ordering),
                 reach_check=preset.reach_check,
                 cache_url=cache_url,
                 sources=sources,
