@@ -333,8 +333,13 @@ class TrialExecutor:
 
     def restore(self, snapshot_id: int) -> None:
         """Return the world to a snapshot taken by :meth:`snapshot`."""
+        self.resume(self._states[snapshot_id])
+
+    def resume(self, state: bytes) -> None:
+        """Return the world to serialized bytes this executor saved (:meth:`checkpoint`,
+        or a snapshot's :meth:`snapshot_state`)."""
         self._pending = self._perceived = None
-        self.world.restore_serialized(self._states[snapshot_id])
+        self.world.restore_serialized(state)
 
     def sync(self) -> None:
         """Bring the world to the serialized end state of the last stored trial (and

@@ -7,6 +7,19 @@ without that ground action (the operator that failed is demoted by its failure, 
 :func:`llcps.symbolic.knowledge_base.experience_cost`), executes the repaired plan, and
 repeats up to :data:`MAX_PLAN_REPAIRS` times. The first step that failed, a_f, is where
 exploration starts (:mod:`llcps.cps.exploration`), from the snapshot stored before it.
+
+A learned step is K' applied where it was learned to apply, and it can mislead: no fact
+may tell the scene from the one it was learned in (an icy table, an arm of shorter reach),
+or its facts can hold while the world differs (the object pushed out of reach). So when a
+learned step fails, or the step right after it does (a learned operator is planned for the
+context it gives the next step), the learned step is *blamed*: it counts as failed where
+it ran, and the repair returns the world to where it started and plans there with K alone
+(:meth:`~llcps.symbolic.knowledge_base.KnowledgeBase.initial`): the experience that made
+K's own steps dear there was gathered where the lesson held, so it is as suspect as the
+lesson. Later repairs use K' again, without the blamed step. A blamed failure is taken
+as a_f only when no other is found: exploration does not start from a state a misleading
+step left, and it starts where the reset agent would, with what was learned in its
+world model.
 """
 
 from __future__ import annotations
@@ -37,6 +50,26 @@ class Failure:
 
     step: GroundAction
     monitor: StepFailure
+    state: State
+    physics: bytes
+    snapshot: int | None
+    #: The learned step blamed for the failure: a_f itself, or the step right before it
+    #: (see the module docstring). The repair returns to where it started, without it.
+    blamed: StepStart | None = None
+
+    @property
+    def left_out(self) -> tuple[str, tuple[str, ...]]:
+        """The ground action a repair plans without: the learned step blamed, else a_f."""
+        step = self.blamed.step if self.blamed is not None else self.step
+        return (step.name, step.args)
+
+
+@dataclass(frozen=True)
+class StepStart:
+    """Where a plan step started: the step, the perceived state, the physics (serialized)
+    and the stored snapshot (None when the plan was not stored)."""
+
+    step: GroundAction
     state: State
     physics: bytes
     snapshot: int | None
@@ -100,6 +133,17 @@ def run_plan(
     """
     scenario = executor.scenario
     state = executor.perceive()
+    counting = record is not None and store and (experience is not None or executed is not None)
+    learned_before: StepStart | None = None  # the previous step, if it was a learned one that worked
+    held: tuple[str, Context, bool, int | None] | None = None  # its execution, counted once the next step shows
+
+    def count(execution: tuple[str, Context, bool, int | None]) -> None:
+        if executed is not None:
+            executed.append(execution)
+        else:
+            assert experience is not None
+            experience.record(*execution)
+
     for index, step in enumerate(steps):
         spec = executor.controller_call(step)
         if store:
@@ -111,17 +155,22 @@ def run_plan(
         reached = scenario.goal_reached(trial.after)
         learned = record is not None and record.is_learned(step.name)
         failure = None if reached else check_step(_relied_on(step, steps[index + 1 :], scenario, learned=learned), trial.after)
-        if record is not None and store and (experience is not None or executed is not None):
+        if held is not None:  # a learned step worked if the step it was planned for did
+            count(held if failure is None else (*held[:2], False, held[3]))
+            held = None
+        if counting:
+            assert record is not None
             execution = (step.name, record.context(step, trial.before), failure is None, trial_record.id if trial_record is not None else None)
-            if executed is not None:
-                executed.append(execution)
+            if learned and failure is None and not reached and index + 1 < len(steps):
+                held = execution
             else:
-                assert experience is not None
-                experience.record(*execution)
+                count(execution)
         if reached:
             return PlanRun(trial.after)
+        start = StepStart(step, trial.before, physics, stored)
         if failure is not None:
-            return PlanRun(trial.after, Failure(step, failure, trial.before, physics, stored))
+            return PlanRun(trial.after, Failure(step, failure, trial.before, physics, stored, blamed=start if learned else learned_before))
+        learned_before = start if learned else None
         state = trial.after
     return PlanRun(state)
 
@@ -160,20 +209,29 @@ def plan_and_repair(
     ``store=False`` nothing is stored or counted (the path ``llcps inspect model`` takes
     to the failure point); the failed steps are still left out of the re-plans.
 
-    Experience never leaves K without a plan (the planner runs again with the steps
-    experience left out allowed, :func:`llcps.symbolic.planner.plan`): a step that
-    failed in a context like this one is planned, dearer, fails again, and gives a_f.
+    Experience never leaves K without a first plan (the planner runs again with the
+    steps experience left out allowed, :func:`llcps.symbolic.planner.plan`): a step
+    that failed in a context like this one is planned, dearer, fails again, and gives a_f.
+
+    A failure blamed on a learned step (:attr:`Failure.blamed`) is repaired from where
+    that step started, with K alone; a_f is the first failure not blamed on a learned
+    step, else the first blamed one.
 
     Returns:
-        The first failure, or None when no step failed. Exploration looks for an
+        a_f's failure, or None when no step failed. Exploration looks for an
         alternative to its step a_f from the state a_f was executed in.
     """
     first: Failure | None = None
+    misled: Failure | None = None  # the first failure blamed on a learned step
     excluded: set[tuple[str, tuple[str, ...]]] = set()
+    blamed: StepStart | None = None
     for attempt in range(1 + MAX_PLAN_REPAIRS):
         executor.report("plan" if attempt == 0 else "re-plan")
-        known = experience.costed(kb)
-        steps = plan(known, executor.task(state), exclude=excluded, last_resort=attempt == 0)
+        # After a blamed learned step, K alone plans first; K' if K has no plan there.
+        for known in ([kb.initial()] if blamed is not None else []) + [experience.costed(kb)]:
+            steps = plan(known, executor.task(state), exclude=excluded, last_resort=attempt == 0)
+            if steps is not None:
+                break
         if steps is None:
             break
         labels = [step.label for step in steps]
@@ -192,13 +250,19 @@ def plan_and_repair(
         if failure is None:
             if executor.scenario.goal_reached(state):
                 log.solved = True
-            return first
-        if first is None:
+            return first or misled
+        excluded.add(failure.left_out)
+        blamed = failure.blamed
+        if blamed is not None:  # back to where the learned step started
+            misled = misled or failure
+            executor.resume(blamed.physics)
+            state = blamed.state
+        elif first is None:
+            first = failure
+        if (first or misled) is failure:
             log.failed_action = failure.step.label
             log.missing_effects = failure.monitor.describe()
-            first = failure
-        excluded.add((failure.step.name, failure.step.args))
-    return first
+    return first or misled
 
 
 def find_failure(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, log: PlanLog) -> Failure | None:
@@ -261,7 +325,7 @@ def resolves(
         run = run_plan(executor, steps, record=known, executed=executed)
         if run.failure is None:
             break
-        excluded.add((run.failure.step.name, run.failure.step.args))
+        excluded.add(run.failure.left_out)
     resolved = run.failure is None and scenario.goal_reached(run.state)
     if resolved and count:  # the plan the trial enabled worked: K's steps count where they ran, failed steps of its repairs too
         for execution in executed:

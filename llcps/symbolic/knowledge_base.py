@@ -231,6 +231,11 @@ class KnowledgeBase:
                 return known
         raise UnknownNameError("learned operator", op.name, [o.name for o in self.learned])
 
+    def initial(self) -> KnowledgeBase:
+        """K as it was before anything was learned: the domain's actions, without the
+        learned operators and the experience that costs them."""
+        return replace(self, learned=(), experience=Experience())
+
     def with_experience(self, experience: Experience) -> KnowledgeBase:
         """K with plan costs set by ``experience`` (it replaces any experience K had)."""
         return replace(self, experience=experience)
