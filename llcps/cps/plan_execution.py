@@ -42,17 +42,22 @@ MAX_PLAN_REPAIRS = 3
 
 
 @dataclass(frozen=True)
-class Failure:
-    """A plan step that failed: the step a_f, what the monitor found missing, and the
-    state it was executed from: perceived, as physics (serialized) and as a stored
-    snapshot (None when the plan was not stored). Exploration looks for an alternative to
-    a_f from that state."""
+class StepStart:
+    """Where a plan step started: the step, the perceived state, the physics (serialized)
+    and the stored snapshot (None when the plan was not stored)."""
 
     step: GroundAction
-    monitor: StepFailure
     state: State
     physics: bytes
     snapshot: int | None
+
+
+@dataclass(frozen=True)
+class Failure(StepStart):
+    """A plan step that failed: where the step a_f started (exploration looks for an
+    alternative to a_f from that state) and what the monitor found missing after it."""
+
+    monitor: StepFailure
     #: The learned step blamed for the failure: a_f itself, or the step right before it
     #: (see the module docstring). The repair returns to where it started, without it.
     blamed: StepStart | None = None
@@ -62,17 +67,6 @@ class Failure:
         """The ground action a repair plans without: the learned step blamed, else a_f."""
         step = self.blamed.step if self.blamed is not None else self.step
         return (step.name, step.args)
-
-
-@dataclass(frozen=True)
-class StepStart:
-    """Where a plan step started: the step, the perceived state, the physics (serialized)
-    and the stored snapshot (None when the plan was not stored)."""
-
-    step: GroundAction
-    state: State
-    physics: bytes
-    snapshot: int | None
 
 
 @dataclass(frozen=True)
@@ -169,7 +163,7 @@ def run_plan(
             return PlanRun(trial.after)
         start = StepStart(step, trial.before, physics, stored)
         if failure is not None:
-            return PlanRun(trial.after, Failure(step, failure, trial.before, physics, stored, blamed=start if learned else learned_before))
+            return PlanRun(trial.after, Failure(step, trial.before, physics, stored, failure, blamed=start if learned else learned_before))
         learned_before = start if learned else None
         state = trial.after
     return PlanRun(state)
