@@ -50,10 +50,17 @@ class BranchExperience:
         self.branch = branch
         self.episode_id = episode_id
         self.experience: Experience = load_experience(store, branch) if experience is None else experience
+        #: This episode's executions alone.
+        self.episode: Experience = Experience()
 
     def costed(self, kb: KnowledgeBase) -> KnowledgeBase:
         """``kb`` costed by the experience the branch has, this episode's included."""
         return kb.with_experience(self.experience)
+
+    def alone(self, kb: KnowledgeBase) -> KnowledgeBase:
+        """K without what earlier episodes taught: no learned operators, costed by this
+        episode's executions alone. The K an agent reset to its pretraining plans with."""
+        return kb.initial().with_experience(self.episode)
 
     def record(self, operator: str, context: Context, success: bool, trial_id: int | None) -> None:
         """Store one execution of ``operator`` as a plan step in ``context``; the
@@ -67,3 +74,4 @@ class BranchExperience:
             trial_id=trial_id,
         )
         self.experience = self.experience.added(operator, context, success)
+        self.episode = self.episode.added(operator, context, success)

@@ -14,12 +14,17 @@ or its facts can hold while the world differs (the object pushed out of reach). 
 learned step fails, or the step right after it does (a learned operator is planned for the
 context it gives the next step), the learned step is *blamed*: it counts as failed where
 it ran, and the repair returns the world to where it started and plans there with K alone
-(:meth:`~llcps.symbolic.knowledge_base.KnowledgeBase.initial`): the experience that made
-K's own steps dear there was gathered where the lesson held, so it is as suspect as the
-lesson. Later repairs use K' again, without the blamed step. A blamed failure is taken
-as a_f only when no other is found: exploration does not start from a state a misleading
-step left, and it starts where the reset agent would, with what was learned in its
-world model.
+(:meth:`~llcps.cps.branch_knowledge.BranchExperience.alone`: no learned operators, costed
+by this episode's executions only): the experience that made K's own steps dear there was
+gathered where the lesson held, so it is as suspect as the lesson. Later repairs use K'
+again, without the blamed step. Experience misleads the same way without a learned step:
+K's own placement, failed in look-alike scenes, is left out where it would work, and K'
+plans a *detour* (a push first). So when K's first plan is not the one K alone makes from
+the start and it fails, the world returns to the start and K alone plans (this plan is not
+counted among the repairs). A failure blamed on a learned step or a detour is taken as a_f
+only when no other is found: exploration does not start from a state a misleading step
+left, and it starts where the reset agent would, with what was learned in its world model.
+The re-plan after an exploration trial (:func:`resolves`) falls back on K alone likewise.
 """
 
 from __future__ import annotations
@@ -72,10 +77,11 @@ class Failure(StepStart):
 @dataclass(frozen=True)
 class PlanRun:
     """How a plan execution ended: the state after the last executed step and, if a step
-    failed, the failure."""
+    failed, the failure; ``started`` is where its first step started."""
 
     state: State
     failure: Failure | None = None
+    started: StepStart | None = None
 
 
 @dataclass
@@ -129,6 +135,7 @@ def run_plan(
     state = executor.perceive()
     counting = record is not None and store and (experience is not None or executed is not None)
     learned_before: StepStart | None = None  # the previous step, if it was a learned one that worked
+    started: StepStart | None = None
     held: tuple[str, Context, bool, int | None] | None = None  # its execution, counted once the next step shows
 
     def count(execution: tuple[str, Context, bool, int | None]) -> None:
@@ -159,14 +166,16 @@ def run_plan(
                 held = execution
             else:
                 count(execution)
-        if reached:
-            return PlanRun(trial.after)
         start = StepStart(step, trial.before, physics, stored)
+        started = started or start
+        if reached:
+            return PlanRun(trial.after, started=started)
         if failure is not None:
-            return PlanRun(trial.after, Failure(step, trial.before, physics, stored, failure, blamed=start if learned else learned_before))
+            failed = Failure(step, trial.before, physics, stored, failure, blamed=start if learned else learned_before)
+            return PlanRun(trial.after, failed, started)
         learned_before = start if learned else None
         state = trial.after
-    return PlanRun(state)
+    return PlanRun(state, started=started)
 
 
 def _relied_on(step: GroundAction, later: Sequence[GroundAction], scenario: Scenario, *, learned: bool = False) -> GroundAction:
@@ -208,35 +217,42 @@ def plan_and_repair(
     that failed in a context like this one is planned, dearer, fails again, and gives a_f.
 
     A failure blamed on a learned step (:attr:`Failure.blamed`) is repaired from where
-    that step started, with K alone; a_f is the first failure not blamed on a learned
-    step, else the first blamed one.
+    that step started, with K alone; a first plan that K alone would not have made (a
+    detour) is, when it fails, followed by K alone's plan from the start. a_f is the
+    first failure not blamed on a learned step or a detour, else the first such one.
 
     Returns:
         a_f's failure, or None when no step failed. Exploration looks for an
         alternative to its step a_f from the state a_f was executed in.
     """
     first: Failure | None = None
-    misled: Failure | None = None  # the first failure blamed on a learned step
+    misled: Failure | None = None  # the first failure blamed on a learned step or on a detour
     excluded: set[tuple[str, tuple[str, ...]]] = set()
-    blamed: StepStart | None = None
-    for attempt in range(1 + MAX_PLAN_REPAIRS):
-        executor.report("plan" if attempt == 0 else "re-plan")
-        # After a blamed learned step, K alone plans first; K' if K has no plan there.
-        for known in ([kb.initial()] if blamed is not None else []) + [experience.costed(kb)]:
+    alone_first = False  # K alone plans first: after a blamed learned step or a detour
+    detour = False  # K' planned otherwise from the start than K alone would
+    rewound = False  # the world was returned to an earlier state before this plan
+    attempt = 0
+    while attempt <= MAX_PLAN_REPAIRS:
+        opening = attempt == 0 and not rewound
+        executor.report("plan" if opening else "re-plan")
+        for known in ([experience.alone(kb)] if alone_first else []) + [experience.costed(kb)]:
             steps = plan(known, executor.task(state), exclude=excluded, last_resort=attempt == 0)
             if steps is not None:
                 break
         if steps is None:
             break
         labels = [step.label for step in steps]
-        if attempt == 0:
+        if opening:
             log.plan = labels
+            alone = plan(experience.alone(kb), executor.task(state), last_resort=True)
+            detour = alone is not None and [step.label for step in alone] != labels
         run = run_plan(executor, steps, store=store, record=known, experience=experience)
         state, failure = run.state, run.failure
-        if attempt > 0:
+        if not opening:
             log.repairs.append(
                 {
                     "plan": labels,
+                    "rewound": rewound,
                     "failed_action": failure.step.label if failure is not None else None,
                     "missing_effects": failure.monitor.describe() if failure is not None else None,
                 }
@@ -245,12 +261,15 @@ def plan_and_repair(
             if executor.scenario.goal_reached(state):
                 log.solved = True
             return first or misled
-        excluded.add(failure.left_out)
-        blamed = failure.blamed
-        if blamed is not None:  # back to where the learned step started
+        back_to = failure.blamed or (run.started if detour else None)
+        detour = rewound = False
+        if failure.blamed is not None or back_to is None:
+            excluded.add(failure.left_out)
+            attempt += 1
+        if back_to is not None:  # back to where the learned step or the detour started
             misled = misled or failure
-            executor.resume(blamed.physics)
-            state = blamed.state
+            executor.resume(back_to.physics)
+            state, alone_first, rewound = back_to.state, True, True
         elif first is None:
             first = failure
         if (first or misled) is failure:
@@ -279,8 +298,10 @@ def resolves(
 ) -> bool:
     """Did this trial resolve the novelty?
 
-    A trial resolves it if the goal now holds, or if K (costed by experience) plans from
-    the new state and that plan, executed, reaches the goal: a plan K made from the
+    A trial resolves it if the goal now holds, or if K' (costed by experience) plans from
+    the new state and that plan, executed, reaches the goal, or, when the plans of K' fail, K
+    alone's (:meth:`~llcps.cps.branch_knowledge.BranchExperience.alone`; a plan already
+    run from there is not run again): a plan K made from the
     failure point itself started with a_f, which failed there, so a plan that works now
     works because of the trial. The plan is repaired as K's first plan was
     (:func:`plan_and_repair`): a step that fails is left out and K plans again, up to
@@ -305,21 +326,29 @@ def resolves(
     changed = trial.after ^ failure.state
     if not any(focus.intersection(atom[1:]) for atom in changed):
         return False
-    known = experience.costed(kb)
     executed: list[tuple[str, Context, bool, int | None]] = []
-    excluded: set[tuple[str, tuple[str, ...]]] = set()
     left = executor.snapshot()  # the state the trial left: every repaired plan starts there
-    for attempt in range(1 + MAX_PLAN_REPAIRS):
-        steps = plan(known, executor.task(trial.after), exclude=excluded)
-        if not steps:
-            return False
-        if attempt:
-            executor.restore(left)
-        executor.report("re-plan")
-        run = run_plan(executor, steps, record=known, executed=executed)
-        if run.failure is None:
+    ran: dict[tuple[str, ...], PlanRun] = {}  # what each plan did from there (the physics is deterministic)
+    for known in (experience.costed(kb), experience.alone(kb)):
+        excluded: set[tuple[str, tuple[str, ...]]] = set()
+        for _ in range(1 + MAX_PLAN_REPAIRS):
+            steps = plan(known, executor.task(trial.after), exclude=excluded)
+            if not steps:
+                break
+            labels = tuple(step.label for step in steps)
+            if labels not in ran:
+                if ran:
+                    executor.restore(left)
+                executor.report("re-plan")
+                ran[labels] = run_plan(executor, steps, record=known, executed=executed)
+            run = ran[labels]
+            if run.failure is None:
+                break
+            excluded.add(run.failure.left_out)
+        if steps and run.failure is None:
             break
-        excluded.add(run.failure.left_out)
+    else:
+        return False
     resolved = run.failure is None and scenario.goal_reached(run.state)
     if resolved and count:  # the plan the trial enabled worked: K's steps count where they ran, failed steps of its repairs too
         for execution in executed:
