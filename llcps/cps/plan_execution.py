@@ -244,8 +244,8 @@ def plan_and_repair(
         labels = [step.label for step in steps]
         if opening:
             log.plan = labels
-            alone = plan(experience.alone(kb), executor.task(state), last_resort=True)
-            detour = alone is not None and [step.label for step in alone] != labels
+            reset_plan = plan(experience.alone(kb), executor.task(state), last_resort=True)
+            detour = reset_plan is not None and [step.label for step in reset_plan] != labels
         run = run_plan(executor, steps, store=store, record=known, experience=experience)
         state, failure = run.state, run.failure
         if not opening:
