@@ -16,8 +16,9 @@ context it gives the next step), the learned step is *blamed*: it counts as fail
 it ran, and the repair returns the world to where it started and plans there with K alone
 (:meth:`~llcps.cps.branch_knowledge.BranchExperience.alone`: no learned operators, costed
 by this episode's executions only): the experience that made K's own steps dear there was
-gathered where the lesson held, so it is as suspect as the lesson. Later repairs use K'
-again, without the blamed step. Experience misleads the same way without a learned step:
+gathered where the lesson held, so it is as suspect as the lesson. Later repairs plan
+with K alone first too, as a reset agent's would (K' where K alone has no plan, without
+the blamed step). Experience misleads the same way without a learned step:
 K's own placement, failed in look-alike scenes, is left out where it would work, and K'
 plans a *detour* (a push first). So when K's first plan is not the one K alone makes from
 the start and it fails, the world returns to the start and K alone plans (this plan is not
