@@ -72,11 +72,11 @@ class _SiteExperience(BranchExperience):
     on each other or on the order of the resets."""
 
     def __init__(self, store: Store, branch: str, experience: Experience) -> None:
-        self.store, self.branch, self.episode_id = store, branch, None
-        self.experience = experience
+        super().__init__(store, branch, experience=experience)
 
     def record(self, operator: str, context: Context, success: bool, trial_id: int | None) -> None:
         self.experience = self.experience.added(operator, context, success)
+        self.episode = self.episode.added(operator, context, success)
 
 
 @dataclass
