@@ -148,6 +148,28 @@ def test_case_based_tries_a_past_resolving_candidate_first_then_the_default(site
     assert CaseBased(Exploration(model=env._world_model(), point=point, measure="goal-directed", seed=1)).reused == []
 
 
+def test_once_its_cases_are_spent_case_based_never_chooses_what_was_excluded(site: Any) -> None:
+    """The episode excludes what the arm would refuse before the first trial; the default
+    ordering case-based falls back on must leave those out too (it chose one, and the
+    episode's observe of a candidate the ordering no longer had failed)."""
+    env = site
+    env.reset(seed=0)
+    point = env._site_of(0).point
+    target = next(i for i in range(40, len(point.candidates)) if i not in point.refused)
+    env.step(target)
+    summary = {"failed_action": point.failure.step.label, "missing_effects": point.failure.describe(), "resolving_trial_id": env.last_trial_id}
+    env.store.finish_episode(env._episode_id, status="solved", summary=summary)
+    env._episode_id = None
+    default = get_ordering(ORDERINGS.default)(_exploration(env, seed=1))
+    default.exclude([target])
+    excluded = _run(default, steps=3)  # what the default would choose next
+    ordering = CaseBased(_exploration(env, seed=1))
+    ordering.exclude(excluded)
+    tried = _run(ordering, steps=6)
+    assert tried[0] == target and len(tried) == 6
+    assert not set(tried) & set(excluded)
+
+
 def test_a_stored_failure_parses_into_role_atoms() -> None:
     parsed = parse_failure("(push can bin)", "(push can bin) failed: missing (in can bin) (near can bin); still (on can table)")
     assert parsed is not None

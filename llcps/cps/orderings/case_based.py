@@ -201,7 +201,10 @@ class CaseBased(Ordering):
             if self._tried:
                 self.exploration.update(self._tried)
             self.fallback = get_ordering(ORDERINGS.default)(self.exploration)
-            self.fallback.exclude(self._tried)
+            # What this ordering no longer has: the candidates tried, and those excluded
+            # before a trial (the ones the arm would refuse, tried last by the episode).
+            left = set(self.remaining)
+            self.fallback.exclude([i for i in range(len(self.exploration.point.candidates)) if i not in left])
         choice = self.fallback.next()
         assert choice is not None  # it has every candidate still untried
         return choice
