@@ -50,6 +50,8 @@ class BranchExperience:
         self.branch = branch
         self.episode_id = episode_id
         self.experience: Experience = load_experience(store, branch) if experience is None else experience
+        #: Whether the branch had executions before this episode (see :meth:`taught`).
+        self.inherited = bool(self.experience.entries)
         #: This episode's executions alone.
         self.episode: Experience = Experience()
 
@@ -62,6 +64,15 @@ class BranchExperience:
         episode's executions alone. The K an agent reset to its pretraining plans with."""
         return kb.initial().with_experience(self.episode)
 
+    def taught(self, kb: KnowledgeBase) -> bool:
+        """Whether earlier episodes taught ``kb`` anything (learned operators, or executions
+        before this episode): if not, :meth:`alone` and :meth:`costed` are the same K."""
+        return bool(kb.learned) or self.inherited
+
+    def knowledge(self, kb: KnowledgeBase) -> tuple[KnowledgeBase, ...]:
+        """K' costed by experience, then K alone if earlier episodes made them differ."""
+        return (self.costed(kb), self.alone(kb)) if self.taught(kb) else (self.costed(kb),)
+
     def record(self, operator: str, context: Context, success: bool, trial_id: int | None) -> None:
         """Store one execution of ``operator`` as a plan step in ``context``; the
         operator's cost follows from the counts."""
@@ -73,5 +84,9 @@ class BranchExperience:
             episode_id=self.episode_id,
             trial_id=trial_id,
         )
+        self.count(operator, context, success)
+
+    def count(self, operator: str, context: Context, success: bool) -> None:
+        """Count one execution in memory (the branch's experience and this episode's)."""
         self.experience = self.experience.added(operator, context, success)
         self.episode = self.episode.added(operator, context, success)

@@ -245,7 +245,7 @@ def plan_and_repair(
         labels = [step.label for step in steps]
         if opening:
             log.plan = labels
-            reset_plan = plan(experience.alone(kb), executor.task(state), last_resort=True)
+            reset_plan = plan(experience.alone(kb), executor.task(state), last_resort=True) if experience.taught(kb) else None
             detour = reset_plan is not None and [step.label for step in reset_plan] != labels
         run = run_plan(executor, steps, store=store, record=known, experience=experience)
         state, failure = run.state, run.failure
@@ -330,7 +330,7 @@ def resolves(
     executed: list[tuple[str, Context, bool, int | None]] = []
     left = executor.snapshot()  # the state the trial left: every repaired plan starts there
     ran: dict[tuple[str, ...], PlanRun] = {}  # what each plan did from there (the physics is deterministic)
-    for known in (experience.costed(kb), experience.alone(kb)):
+    for known in experience.knowledge(kb):
         excluded: set[tuple[str, tuple[str, ...]]] = set()
         for _ in range(1 + MAX_PLAN_REPAIRS):
             steps = plan(known, executor.task(trial.after), exclude=excluded)

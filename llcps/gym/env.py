@@ -75,8 +75,7 @@ class _SiteExperience(BranchExperience):
         super().__init__(store, branch, experience=experience)
 
     def record(self, operator: str, context: Context, success: bool, trial_id: int | None) -> None:
-        self.experience = self.experience.added(operator, context, success)
-        self.episode = self.episode.added(operator, context, success)
+        self.count(operator, context, success)
 
 
 @dataclass
