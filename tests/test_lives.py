@@ -103,6 +103,21 @@ def test_the_shipped_lives_load_and_default_uses_every_shipped_family() -> None:
     assert paper.family_names == ("scenario1", "scenario2", "scenario3")
 
 
+def test_the_held_out_judge_holds_the_five_held_out_families_back_as_probes(monkeypatch: pytest.MonkeyPatch) -> None:
+    from llcps.scenarios import shipped_names
+
+    root = Path(__file__).parent.parent
+    monkeypatch.chdir(root)  # the file names its families from the repository's root
+    life = load_life("docs/lives/heldout.toml")
+    held_out = {path.stem for path in (root / "docs" / "heldout").glob("*.toml")}
+    assert set(life.family_names) == set(shipped_names()) | held_out and set(life.probes) == held_out
+    quarter = life.episodes - life.episodes // 4
+    for seed in range(10):
+        draw = draw_life(life, seed)
+        firsts = {e.family: e.index for e in draw.episodes if e.first_encounter}
+        assert set(firsts) >= held_out and all(firsts[f] >= quarter for f in held_out)
+
+
 # -- the draws -----------------------------------------------------------------------------
 def test_a_lifes_seed_fixes_its_episodes_and_every_condition_gets_the_same_list() -> None:
     life = load_life("default")
