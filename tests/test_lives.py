@@ -432,3 +432,19 @@ def test_a_life_in_the_rl_ordering_wants_a_policy_where_it_starts_before_anythin
         run_lives(sqlite_store, life, lives=1)
     assert "rl import" in (refused.value.hint or "")
     assert sqlite_store.list_runs() == [] and not any(b.startswith("life-") for b in sqlite_store.branch_names())
+
+
+def test_life_report_reports_the_conditions_named_and_refuses_one_not_stored(tiny: tuple[Store, Path], tmp_path: Path) -> None:
+    store, path = tiny
+    db = str(path.parent / "ref.db")
+    runner = CliRunner()
+    only = runner.invoke(app, ["--db", db, "life", "report", str(path), "--conditions", "update", "--out-dir", str(tmp_path / "u"), "--json"])
+    assert only.exit_code == 0, only.output
+    with (tmp_path / "u" / "episodes.csv").open() as fh:
+        assert {r["condition"] for r in csv.DictReader(fh)} == {"update"}
+    assert [c["condition"] for c in json.loads(only.stdout)["conditions"]] == ["update"]
+    before = store_signature(store, "life-")
+    bad = runner.invoke(app, ["--db", db, "life", "report", str(path), "--conditions", "update,case_based", "--out-dir", str(tmp_path / "b")])
+    assert bad.exit_code == 2
+    assert "no episode of life 'tiny' under case_based" in bad.output and "stored conditions: reset, update" in bad.output
+    assert not (tmp_path / "b").exists() and store_signature(store, "life-") == before

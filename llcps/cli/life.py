@@ -137,14 +137,32 @@ def run_cli(
     epilog=examples(
         "llcps --db lives.db life report default --html",
         "llcps --db lives.db life report paper --out-dir results/life_paper --json",
+        "llcps --db lives.db life report default --conditions update,reset,case_based   # the lives these three hold",
     ),
 )
-def report_cli(ctx: typer.Context, life: LifeArg, out_dir: OutDir = None, html: HtmlFlag = False, as_json: JsonFlag = False) -> None:
+def report_cli(
+    ctx: typer.Context,
+    life: LifeArg,
+    out_dir: OutDir = None,
+    html: HtmlFlag = False,
+    conditions: Annotated[
+        Optional[str],
+        typer.Option(
+            "--conditions",
+            metavar="A,B",
+            help="Report only these stored conditions (default: all). The metrics cover the lives every reported "
+            "condition holds, so name reset beside the others for the transfer figures.",
+            show_default=False,
+        ),
+    ] = None,
+    as_json: JsonFlag = False,
+) -> None:
     """Rebuild a life's report from the store's episodes (every life and condition stored), running nothing."""
     from llcps.jobs.life import report_life_job
 
+    chosen_conditions = None if conditions is None else [c.strip() for c in conditions.split(",") if c.strip()]
     with open_store(ctx) as store:
-        result = report_life_job(store=store, life=life, out_dir=out_dir, html=html)
+        result = report_life_job(store=store, life=life, out_dir=out_dir, html=html, conditions=chosen_conditions)
     if as_json:
         print_json({"report_dir": str(result.report.directory), **result.metrics})
         return

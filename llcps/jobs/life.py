@@ -110,8 +110,21 @@ def _report(rows: list[LifeRow], life: Life, out_dir: str | Path | None, html: b
     return paths, {"life": life.name, **metrics.as_json()}
 
 
-def report_life_job(*, store: Store, life: str | Life, out_dir: str | Path | None = None, html: bool = False) -> LifeReport:
-    """Rebuild the report of a life file from the store's episodes, running nothing."""
+def report_life_job(
+    *,
+    store: Store,
+    life: str | Life,
+    out_dir: str | Path | None = None,
+    html: bool = False,
+    conditions: Iterable[str] | None = None,
+) -> LifeReport:
+    """Rebuild the report of a life file from the store's episodes, running nothing.
+
+    Args:
+        conditions: report only these conditions (the metrics cover the lives every
+            reported condition holds, so a condition run on fewer lives does not cut the
+            others' short); None: every condition stored.
+    """
     chosen = load_life(life) if isinstance(life, str) else life
     rows = read_rows(store, chosen)
     if not rows:
@@ -119,6 +132,16 @@ def report_life_job(*, store: Store, life: str | Life, out_dir: str | Path | Non
             f"the store holds no episode of life {chosen.name!r}",
             hint=f"run it first: `llcps life run {chosen.name} --lives 2`, or pass the --db it ran on",
         )
+    if conditions is not None:
+        wanted = list(dict.fromkeys(conditions))
+        stored = sorted({row.condition for row in rows})
+        missing = [c for c in wanted if c not in stored]
+        if not wanted or missing:
+            raise LlcpsError(
+                f"the store holds no episode of life {chosen.name!r} under {', '.join(missing) or 'no condition'}",
+                hint=f"stored conditions: {', '.join(stored)}",
+            )
+        rows = [row for row in rows if row.condition in wanted]
     paths, metrics = _report(rows, chosen, out_dir, html)
     return LifeReport(chosen, paths, metrics, len(rows))
 
