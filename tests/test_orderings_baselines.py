@@ -199,9 +199,11 @@ def test_the_rl_ordering_follows_the_policy_and_needs_one(site: Any, policy_stor
 def test_the_default_hedges_a_failure_never_met_and_trusts_the_model_on_one_met_before(tmp_path: Path) -> None:
     """``experienced`` explores a failure the branch never resolved as ``hedged`` does,
     trial for trial; once an episode on the branch resolved the same failure in a scene
-    like this one, as ``trial-and-error`` does. Another failure, or the same one with
-    a_f's arguments elsewhere, is not met before. Case-based reuse falls back on the hedge."""
+    like this one, the hedge's model side is ``trial-and-error``. Another failure, or the
+    same one with a_f's arguments elsewhere, is not met before. Case-based reuse falls
+    back on the hedge."""
     from llcps.cps.orderings.experienced import Experienced
+    from llcps.cps.orderings.hedged import random_order
     from llcps.gym import ExploreEnv
 
     assert ORDERINGS.default == "experienced" and FALLBACK == "hedged"
@@ -223,11 +225,22 @@ def test_the_default_hedges_a_failure_never_met_and_trusts_the_model_on_one_met_
         env.store.finish_episode(env._episode_id, status="solved", summary=summary)
         env._episode_id = None
         met = Experienced(_exploration(env, seed=3))
-        assert met.met_before and isinstance(met.inner, TrialAndError)
+        assert met.met_before and isinstance(met.thompson, TrialAndError)
         met.exclude([target])
+        tried = _run(met, steps=8)
+        assert met.picks == ["model", "random"] * 4  # the hedge's share: the model keeps half while it is believed
+        # The model's side is trial and error, told of the random side's trials without learning from them.
         te = TrialAndError(_exploration(env, seed=3))
         te.exclude([target])
-        assert _run(met, steps=8) == _run(te, steps=8)
+        for index, side in zip(tried, met.picks):
+            if side == "model":
+                assert te.next() == index
+                te.observe(index, State())
+            else:
+                te.exclude([index])
+        assert [i for i, side in zip(tried, met.picks) if side == "random"] == [
+            i for i in random_order(_exploration(env, seed=3)) if i != target and i not in tried[::2]
+        ][:4]
         x = _exploration(env, seed=3)
 
         def at(p: Any) -> Exploration:

@@ -1,29 +1,28 @@
-"""``experienced``: the hedge for a failure never met, trial and error for one met before.
+"""``experienced``: the hedge, its model side trial and error on a failure met before.
 
-What the branch has lived through decides how far the world model is trusted:
+What the branch has lived through decides how the model's side of the hedge
+(:class:`~llcps.cps.orderings.hedged.Hedged`) chooses:
 
-- a failure the branch never resolved (no past case with the same failed operator and
-  the same missing atoms in roles, :func:`~llcps.cps.orderings.case_based.met_before`)
-  is a novelty the model may point the wrong way in: it is explored in
-  :class:`~llcps.cps.orderings.hedged.Hedged`, which costs at most ``2P + 1`` trials
-  where random order needs ``P``;
-- a failure the branch resolved before (in another scene, on other entities) is one the
-  model has trials of its resolution for: it is explored in
-  :class:`~llcps.cps.orderings.trial_and_error.TrialAndError`, Thompson sampling with the
-  model's prediction as the prior, which keeps to a family the model believes in
-  through a failed member instead of handing half the trials to random order.
+- a failure the branch never resolved (no past case with the same failed operator, the
+  same missing atoms in roles and a_f's arguments of about the same size and place,
+  :func:`~llcps.cps.orderings.case_based.met_before`) is explored by the hedge as it is:
+  the ranking, moved by its own failures, against random order;
+- a failure the branch resolved before in a scene like this one is one the model has
+  trials of its resolution for: the model's side chooses by Thompson sampling with the
+  model's prediction as the prior
+  (:class:`~llcps.cps.orderings.trial_and_error.TrialAndError`), which keeps to a family
+  the model believes in through a failed member; random order keeps its share, so a
+  model wrong even there costs at most ``2P + 1`` trials where random order needs ``P``.
 
-Measured on the ``default`` life (docs/results.md, "Every ordering as a life condition"):
-on recurrences trial and error explored less than the hedge; on first encounters the
-two were level. A branch with no past episodes (pretraining only: the ``generalization``
-preset, a life's ``reset`` condition) explores exactly as the hedge does.
+A branch with no past episodes (pretraining only: the ``generalization`` preset, a
+life's ``reset`` condition) explores exactly as the hedge does.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, ClassVar, Collection
 
-from llcps.cps.orderings.base import Exploration, Ordering
+from llcps.cps.orderings.base import Exploration
 from llcps.cps.orderings.case_based import met_before
 from llcps.cps.orderings.hedged import Hedged
 from llcps.cps.orderings.trial_and_error import TrialAndError
@@ -32,12 +31,13 @@ if TYPE_CHECKING:
     from llcps.domain import State
 
 
-class Experienced(Ordering):
-    """:class:`Hedged` or, for a failure the branch met before, :class:`TrialAndError`.
+class Experienced(Hedged):
+    """:class:`Hedged`; on a failure the branch met before, its model side is
+    :class:`TrialAndError` (see the module docstring).
 
     Attributes:
-        met_before: whether the branch resolved this failure before.
-        inner: the ordering the episode is explored in.
+        met_before: whether the branch resolved this failure before in a like scene.
+        thompson: the model side on a failure met before (None otherwise).
     """
 
     name: ClassVar[str] = "experienced"
@@ -45,22 +45,24 @@ class Experienced(Ordering):
     def __init__(self, exploration: Exploration) -> None:
         super().__init__(exploration)
         self.met_before = met_before(exploration)
-        self.inner: Ordering = (TrialAndError if self.met_before else Hedged)(exploration)
+        self.thompson = TrialAndError(exploration) if self.met_before else None
 
     @property
     def explored_in(self) -> str:
-        return self.inner.name
+        return "hedged trial-and-error" if self.thompson is not None else "hedged"
 
-    def next(self) -> int | None:
-        return self.inner.next()
+    def model_choice(self) -> int:
+        return self.thompson.choose() if self.thompson is not None else super().model_choice()
 
-    def choose(self) -> int:
-        return self.inner.choose()
-
-    def observe(self, index: int, after: State) -> None:
-        self.inner.observe(index, after)
-        self.remaining = self.inner.remaining
+    def model_learn(self, index: int, after: State, own: bool) -> None:
+        if self.thompson is None:
+            super().model_learn(index, after, own)
+        elif own:
+            self.thompson.observe(index, after)
+        else:
+            self.thompson.exclude([index])
 
     def exclude(self, indices: Collection[int]) -> None:
-        self.inner.exclude(indices)
-        self.remaining = self.inner.remaining
+        super().exclude(indices)
+        if self.thompson is not None:
+            self.thompson.exclude(indices)
