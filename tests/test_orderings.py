@@ -66,11 +66,11 @@ def _run(ordering, resolving: set[int]) -> list[int]:
     return tried
 
 
-def test_the_registry_names_the_orderings_experienced_is_the_default_and_ranked_the_papers():
+def test_the_registry_names_both_orderings_hedged_is_the_default_and_ranked_the_papers():
     from llcps.cps.orderings import PAPER_ORDERING
 
-    assert set(ORDERINGS) >= {"ranked", "hedged", "experienced"}
-    assert ORDERINGS.default == "experienced" and PAPER_ORDERING == "ranked"
+    assert set(ORDERINGS) >= {"ranked", "hedged"}
+    assert ORDERINGS.default == "hedged" and PAPER_ORDERING == "ranked"
     assert get_ordering("hedged").ordering_class() is Hedged
 
 

@@ -8,7 +8,6 @@ for physics is which candidates "resolve" (none, unless a test says so).
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -19,7 +18,7 @@ pytest.importorskip("gymnasium")
 
 from llcps.cps.orderings import ORDERINGS, get_ordering  # noqa: E402
 from llcps.cps.orderings.base import Exploration, Ordering  # noqa: E402
-from llcps.cps.orderings.case_based import FALLBACK, CaseBased, met_before, parse_failure, role_atoms  # noqa: E402
+from llcps.cps.orderings.case_based import CaseBased, parse_failure, role_atoms  # noqa: E402
 from llcps.cps.orderings.trial_and_error import TrialAndError  # noqa: E402
 from llcps.cps.orderings.uncertainty import Uncertainty  # noqa: E402
 from llcps.domain import State  # noqa: E402
@@ -123,10 +122,10 @@ def test_uncertainty_tries_the_candidate_the_ensemble_disagrees_on_first(site: A
     assert _run(Flat(_exploration(site, seed=2)), 6) == _run(Flat(_exploration(site, seed=2)), 6)
 
 
-def test_case_based_tries_a_past_resolving_candidate_first_then_the_hedge(site: Any) -> None:
+def test_case_based_tries_a_past_resolving_candidate_first_then_the_default(site: Any) -> None:
     """A past episode on the branch resolved the same failure with a candidate (the first
     from 40 on that the arm would not refuse): a fresh episode tries it first, then the
-    hedge's choices."""
+    default ordering's choices."""
     env = site
     env.reset(seed=0)
     point = env._site_of(0).point
@@ -142,16 +141,16 @@ def test_case_based_tries_a_past_resolving_candidate_first_then_the_hedge(site: 
     assert ordering.reused[:1] == [target]
     tried = _run(ordering, steps=4)
     assert tried[0] == target
-    hedge = get_ordering(FALLBACK)(_exploration(env, seed=1))
-    hedge.exclude([target])
-    assert tried[1:] == _run(hedge, steps=3)
+    default = get_ordering(ORDERINGS.default)(_exploration(env, seed=1))
+    default.exclude([target])
+    assert tried[1:] == _run(default, steps=3)
     # A fresh store has no past: the default order from the first trial.
     assert CaseBased(Exploration(model=env._world_model(), point=point, measure="goal-directed", seed=1)).reused == []
 
 
 def test_once_its_cases_are_spent_case_based_never_chooses_what_was_excluded(site: Any) -> None:
-    """The episode excludes what the arm would refuse before the first trial; the hedge
-    case-based falls back on must leave those out too (it chose one, and the
+    """The episode excludes what the arm would refuse before the first trial; the default
+    ordering case-based falls back on must leave those out too (it chose one, and the
     episode's observe of a candidate the ordering no longer had failed)."""
     env = site
     env.reset(seed=0)
@@ -161,9 +160,9 @@ def test_once_its_cases_are_spent_case_based_never_chooses_what_was_excluded(sit
     summary = {"failed_action": point.failure.step.label, "missing_effects": point.failure.describe(), "resolving_trial_id": env.last_trial_id}
     env.store.finish_episode(env._episode_id, status="solved", summary=summary)
     env._episode_id = None
-    hedge = get_ordering(FALLBACK)(_exploration(env, seed=1))
-    hedge.exclude([target])
-    excluded = _run(hedge, steps=3)  # what the hedge would choose next
+    default = get_ordering(ORDERINGS.default)(_exploration(env, seed=1))
+    default.exclude([target])
+    excluded = _run(default, steps=3)  # what the default would choose next
     ordering = CaseBased(_exploration(env, seed=1))
     ordering.exclude(excluded)
     tried = _run(ordering, steps=6)
@@ -194,66 +193,3 @@ def test_the_rl_ordering_follows_the_policy_and_needs_one(site: Any, policy_stor
         x = _exploration(site)
         with pytest.raises(LlcpsError, match="no trained policy"):
             get_ordering("rl")(Exploration(model=x.model, point=x.point, measure=x.measure, seed=0, store=empty, branch="main"))
-
-
-def test_the_default_hedges_a_failure_never_met_and_trusts_the_model_on_one_met_before(tmp_path: Path) -> None:
-    """``experienced`` explores a failure the branch never resolved as ``hedged`` does,
-    trial for trial; once an episode on the branch resolved the same failure in a scene
-    like this one, the hedge's model side is ``trial-and-error``. Another failure, or the
-    same one with a_f's arguments elsewhere, is not met before. Case-based reuse falls
-    back on the hedge."""
-    from llcps.cps.orderings.experienced import Experienced
-    from llcps.cps.orderings.hedged import random_order
-    from llcps.gym import ExploreEnv
-
-    assert ORDERINGS.default == "experienced" and FALLBACK == "hedged"
-    env = ExploreEnv("scenario2", db=str(tmp_path / "e.db"), budget=20)
-    try:
-        env.reset(seed=0)
-        site = env._site_of(0)
-        point = site.point
-        failure = point.failure
-        fresh = Experienced(_exploration(env, seed=3))
-        assert not fresh.met_before
-        assert _run(fresh, steps=8) == _run(get_ordering("hedged")(_exploration(env, seed=3)), steps=8)
-        # A past episode: a_f's plan trial where it started, then a resolving trial.
-        a_f = next(c for c in point.candidates if c.action == failure.step.name and c.arguments == failure.step.args)
-        site.executor.execute(a_f, source="plan", snapshot_id=site.snapshot, start=site.snapshot)
-        target = next(i for i in range(40, len(point.candidates)) if i not in point.refused)
-        env.step(target)
-        summary = {"failed_action": failure.step.label, "missing_effects": failure.describe(), "resolving_trial_id": env.last_trial_id}
-        env.store.finish_episode(env._episode_id, status="solved", summary=summary)
-        env._episode_id = None
-        met = Experienced(_exploration(env, seed=3))
-        assert met.met_before and isinstance(met.thompson, TrialAndError)
-        met.exclude([target])
-        tried = _run(met, steps=8)
-        assert met.picks == ["model", "random"] * 4  # the hedge's share: the model keeps half while it is believed
-        # The model's side is trial and error, told of the random side's trials without learning from them.
-        te = TrialAndError(_exploration(env, seed=3))
-        te.exclude([target])
-        for index, side in zip(tried, met.picks):
-            if side == "model":
-                assert te.next() == index
-                te.observe(index, State())
-            else:
-                te.exclude([index])
-        assert [i for i, side in zip(tried, met.picks) if side == "random"] == [
-            i for i in random_order(_exploration(env, seed=3)) if i != target and i not in tried[::2]
-        ][:4]
-        x = _exploration(env, seed=3)
-
-        def at(p: Any) -> Exploration:
-            return Exploration(model=x.model, point=p, measure=x.measure, seed=3, store=env.store, branch=env.branch)
-
-        other = replace(point, failure=replace(failure, missing_add=frozenset({("on", "can", "table")}), missing_del=frozenset()))
-        assert not met_before(at(other))
-        # The same failure, a_f's arguments 30 cm further from the robot: another scene.
-        far = tuple(
-            replace(given, features=tuple(replace(f, vector_magnitude=f.vector_magnitude + 0.3) for f in given.features))
-            for given in point.inputs
-        )
-        assert not met_before(at(replace(point, inputs=far)))
-        assert met_before(at(point))
-    finally:
-        env.close()

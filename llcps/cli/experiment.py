@@ -111,7 +111,7 @@ def run_cli(
         typer.Option(
             "--ordering",
             metavar="NAME",
-            help="Exploration ordering of every episode (default: the preset's: experienced, the default, for generalization, the paper's ranked for the others; the random order is always ranked); one of: " + ", ".join(ORDERINGS) + ". Run another ordering into another store "
+            help="Exploration ordering of every episode (default: the preset's: hedged, the default, for generalization, the paper's ranked for the others; the random order is always ranked); one of: " + ", ".join(ORDERINGS) + ". Run another ordering into another store "
             "and compare them in one report: `llcps experiment report DIR DIR --out-dir DIR`.",
             show_default=False,
         ),

@@ -47,9 +47,8 @@ def solve_cli(
         OrderingName,  # type: ignore[valid-type]
         typer.Option(
             "--ordering",
-            help="Order of the exploration trials: the ranking alone (ranked, the paper's); the ranking "
-            "hedged with a random order (hedged: at most 2P+1 trials where random order needs P); hedged for a failure never met and "
-            "trial-and-error for one the branch resolved before in a like scene (experienced, the default); baselines: past solutions first (case-based), "
+            help="Order of the exploration trials: the ranking alone (ranked, the paper's), or the ranking "
+            "hedged with a random order (hedged, the default: at most 2P+1 trials where random order needs P); baselines: past solutions first (case-based), "
             "Thompson sampling with the model as prior (trial-and-error), an ensemble's disagreement (uncertainty), "
             "the policy of `llcps rl train` (rl); see docs/world_models.md.",
         ),
@@ -177,12 +176,7 @@ def show(result: "SolveResult") -> None:
             ("plan", " ".join(result.plan) or "-"),
             ("failed action", result.failed_action or "-"),
             ("failure", result.missing_effects or "-"),
-            (
-                "world model / measure / ordering",
-                f"{result.model} / {result.measure} / {result.ordering}"
-                + (f", explored in {result.explored_in}" if result.explored_in not in (None, result.ordering) else "")
-                + f" (seed {result.seed})",
-            ),
+            ("world model / measure / ordering", f"{result.model} / {result.measure} / {result.ordering} (seed {result.seed})"),
             ("exploration trials", f"{result.exploration_trials} of {result.candidates} candidates"),
             ("plan trials", result.plan_trials),
             ("sim seconds", f"{result.sim_seconds:.1f}"),

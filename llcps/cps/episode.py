@@ -136,9 +136,6 @@ class SolveResult:
     wall_seconds: float = 0.0
     learned_operators: list[str] = field(default_factory=list)
     resolving_trial_id: int | None = None
-    #: The ordering the exploration ran in (``experienced`` chooses ``hedged`` or
-    #: ``trial-and-error`` per failure); None when nothing was explored.
-    explored_in: str | None = None
     episode_id: int | None = None
     run_id: int | None = None
 
@@ -172,7 +169,6 @@ class SolveResult:
             "wall_seconds": round(self.wall_seconds, 4),
             "learned_operators": self.learned_operators,
             "resolving_trial_id": self.resolving_trial_id,
-            "explored_in": self.explored_in,
             "episode_id": self.episode_id,
             "run_id": self.run_id,
         }
@@ -188,7 +184,6 @@ class _Progress:
     candidates: int = 0
     learned_operators: list[str] = field(default_factory=list)
     resolving_trial_id: int | None = None
-    explored_in: str | None = None
 
 
 def solve(
@@ -309,7 +304,6 @@ def solve(
             wall_seconds=time.perf_counter() - started,
             learned_operators=list(found.learned_operators),
             resolving_trial_id=found.resolving_trial_id,
-            explored_in=found.explored_in,
             episode_id=episode_id,
             run_id=run_id,
         )
@@ -375,7 +369,6 @@ def _explore(
             episode_id=executor.episode_id,
         )
     )
-    found.explored_in = ordering.explored_in
     # What the arm would refuse moves nothing, so it cannot resolve the novelty: tried
     # only once every other candidate was, in candidate order, unknown to the ordering.
     refused = sorted(point.refused)

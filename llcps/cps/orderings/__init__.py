@@ -7,14 +7,11 @@ episode runs, learning from each failed trial as it goes:
 - ``ranked`` (the paper's): the measure's ranking of the untried candidates, with the
   world model updated and the candidates ranked again after every ``refit_every``
   failed trials.
-- ``hedged``: the same ranking, interleaved with a seeded random order of
+- ``hedged`` (the default): the same ranking, interleaved with a seeded random order of
   the candidates; the share of trials the ranking gets is the posterior belief that the
   model knows where the resolving candidates are in this scene, never more than
   :data:`~llcps.cps.orderings.hedged.MAX_MODEL_SHARE`. A model that is wrong in a novel
   scene costs at most a bounded multiple of random order (docs/world_models.md).
-- ``experienced`` (the default): ``hedged`` for a failure the branch never resolved,
-  ``trial-and-error`` for one it resolved before (the same failed operator and missing
-  atoms in roles).
 
 - ``case-based``, ``trial-and-error``, ``uncertainty`` and ``rl``: the baselines a claim
   about model-guided exploration is measured against (docs/world_models.md): reuse of
@@ -57,13 +54,11 @@ def _entries(*entries: OrderingEntry) -> dict[str, OrderingEntry]:
     return {entry.name: entry for entry in entries}
 
 
-#: name -> ordering, the one list of exploration orderings. Its default is ``experienced``:
-#: for a failure never met, the hedge (a novel scene may be one where the model points the
-#: wrong way, and the hedge bounds what that costs: at most ``2P + 1`` trials where random
-#: order needs ``P``; measured leave one family out on the families written after it was
-#: designed, it also explored less than the ranking alone); for a failure the branch
-#: resolved before, trial and error, which explored less than the hedge on a life's
-#: recurrences (docs/world_models.md, "Which default").
+#: name -> ordering, the one list of exploration orderings. Its default is ``hedged``: a
+#: novel scene may be one where the model points the wrong way, and the hedge bounds what
+#: that costs (at most ``2P + 1`` trials where random order needs ``P``). Measured leave one
+#: family out on the families written after it was designed, it also explored less than
+#: the ranking alone (docs/world_models.md, "Which default").
 ORDERINGS: Registry[OrderingEntry] = Registry(
     "ordering",
     _entries(
@@ -78,12 +73,6 @@ ORDERINGS: Registry[OrderingEntry] = Registry(
             "llcps.cps.orderings.hedged",
             "Hedged",
             "the ranking interleaved with a random order, by the belief that the model is right here",
-        ),
-        OrderingEntry(
-            "experienced",
-            "llcps.cps.orderings.experienced",
-            "Experienced",
-            "hedged for a failure never met; trial-and-error for one the branch resolved before",
         ),
         OrderingEntry(
             "case-based",
@@ -110,7 +99,7 @@ ORDERINGS: Registry[OrderingEntry] = Registry(
             "the policy trained with MaskablePPO (llcps rl train), most probable first",
         ),
     ),
-    default="experienced",
+    default="hedged",
 )
 
 #: The ordering of the paper's agent: the paper presets run it, so the reproduction stays

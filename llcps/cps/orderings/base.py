@@ -58,12 +58,6 @@ class Ordering(ABC):
         #: Candidate indices (into ``exploration.point.candidates``) not tried yet, in the default order.
         self.remaining: list[int] = list(range(len(exploration.point.candidates)))
 
-    @property
-    def explored_in(self) -> str:
-        """The ordering the trials are chosen in: this one's name, unless it hands the
-        episode to another (:class:`~llcps.cps.orderings.experienced.Experienced`)."""
-        return self.name
-
     def next(self) -> int | None:
         """The candidate to try next (an untried index), or None when every one was tried."""
         return self.choose() if self.remaining else None

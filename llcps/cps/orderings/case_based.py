@@ -1,4 +1,4 @@
-"""``case-based``: try what resolved the most similar past failures first, then the hedge.
+"""``case-based``: try what resolved the most similar past failures first, then the default.
 
 The control every lifelong claim needs: if the world model cannot beat a lookup of
 past solutions, that must show. A *case* is a past episode on the branch (or on a
@@ -17,8 +17,8 @@ missing. Each case is compared with the present failure by
   :data:`GEOMETRY` times that match (1 for the same place and size) is added.
 
 Cases are tried best first (ties: the newest episode first), each as the one candidate
-its resolving trial maps to; then the hedge (:data:`FALLBACK`, the default ordering for a
-failure never met) takes over, told about every trial taken so far. What the store holds about a past episode
+its resolving trial maps to; then the default ordering (``ORDERINGS.default``) takes
+over, told about every trial taken so far. What the store holds about a past episode
 is read as untrusted text: a summary that does not parse is no case.
 """
 
@@ -40,13 +40,6 @@ if TYPE_CHECKING:
 SAME_ACTION = 0.5
 #: Weight of the geometric match of the mapped candidate's arguments.
 GEOMETRY = 0.5
-#: The ordering that takes over once the cases are spent: the hedge, the default for a
-#: failure never met (the default's other half, trial and error for a failure met before,
-#: would make this baseline a second copy of the default's).
-FALLBACK = "hedged"
-#: Least geometric match of a_f's arguments (their product) for a past failure to count
-#: as met before in a scene like the present one (:func:`met_before`): more alike than not.
-SAME_SCENE = 0.5
 #: Most past episodes looked at (the newest).
 MAX_CASES = 500
 #: Longest stored text parsed as a failure.
@@ -105,11 +98,8 @@ class Case:
     trial: TrialRecord
 
 
-def past_cases(
-    store: Store, branch: str, *, exclude: int | None = None, failure: tuple[str, frozenset[SignedAtom]] | None = None
-) -> list[Case]:
-    """The resolved episodes ``branch`` sees, newest first (at most :data:`MAX_CASES`);
-    with ``failure`` (operator, missing atoms in roles), only the cases of that failure."""
+def past_cases(store: Store, branch: str, *, exclude: int | None = None) -> list[Case]:
+    """The resolved episodes ``branch`` sees, newest first (at most :data:`MAX_CASES`)."""
     chain: list[tuple[str, float]] = []
     name: str | None = branch
     limit = math.inf
@@ -130,66 +120,17 @@ def past_cases(
             if parsed is None:
                 continue
             operator, args, atoms = parsed
-            roles = role_atoms(atoms, args)
-            if failure is not None and (operator, roles) != failure:
-                continue
             try:
                 trial = store.get_trial(resolving)
             except Exception:  # noqa: BLE001 - a row that does not load is no case
                 continue
-            cases.append(Case(episode.id, operator, args, roles, trial))
+            cases.append(Case(episode.id, operator, args, role_atoms(atoms, args), trial))
     cases.sort(key=lambda c: -c.episode_id)
     return cases[:MAX_CASES]
 
 
-def failure_roles(exploration: Exploration) -> frozenset[SignedAtom]:
-    """The present failure's missing atoms in roles (:func:`role_atoms`)."""
-    failure = exploration.point.failure
-    signed = [(a, True) for a in failure.missing_add] + [(a, False) for a in failure.missing_del]
-    return role_atoms(signed, failure.step.args)
-
-
-def failed_features(exploration: Exploration) -> tuple[EntityFeatures, ...] | None:
-    """The features of a_f's arguments at the failure point (from a candidate on the
-    same arguments), or None when no candidate has them."""
-    point = exploration.point
-    args = point.failure.step.args
-    for spec, given in zip(point.candidates, point.inputs):
-        if spec.arguments == args:
-            return given.features
-    return None
-
-
-def case_features(store: Store, branch: str, case: Case) -> tuple[EntityFeatures, ...] | None:
-    """The features of a past case's a_f arguments where a_f started: those of its plan
-    trial of a_f (the step that failed; None when the episode stored none)."""
-    for trial in store.visible_trials(branch, episode=case.episode_id, source="plan"):
-        if trial.spec.action == case.operator and trial.spec.arguments == case.failed_args:
-            return trial.features
-    return None
-
-
-def met_before(exploration: Exploration) -> bool:
-    """Whether the branch resolved this failure before, in a scene like this one: a past
-    case (:func:`past_cases`) with the same failed operator, the same missing atoms in
-    roles, and a_f's arguments of about the same size at about the same place (the
-    product of their :func:`geometry_match` at least :data:`SAME_SCENE`)."""
-    store, branch = exploration.store, exploration.branch
-    if store is None or branch is None:
-        return False
-    now = failed_features(exploration)
-    if now is None:
-        return False
-    failure = (exploration.point.failure.step.name, failure_roles(exploration))
-    for case in past_cases(store, branch, exclude=exploration.episode_id, failure=failure):
-        then = case_features(store, branch, case)
-        if then is not None and len(then) == len(now) and math.prod(geometry_match(a, b) for a, b in zip(now, then)) >= SAME_SCENE:
-            return True
-    return False
-
-
 class CaseBased(Ordering):
-    """Past resolving trials of similar failures first, then the hedge.
+    """Past resolving trials of similar failures first, then the default ordering.
 
     Attributes:
         reused: the candidate indices taken from cases, in the order they are tried.
@@ -220,7 +161,7 @@ class CaseBased(Ordering):
         point = self.exploration.point
         failure = point.failure
         failed_args = failure.step.args
-        here = failure_roles(self.exploration)
+        here = role_atoms([(a, True) for a in failure.missing_add] + [(a, False) for a in failure.missing_del], failed_args)
         union = here | case.missing
         similarity = len(here & case.missing) / len(union) if union else 0.0
         similarity += SAME_ACTION * (case.operator == failure.step.name)
@@ -253,13 +194,13 @@ class CaseBased(Ordering):
             if index in self.remaining:
                 return index
         if self.fallback is None:
-            # The cases are spent: the hedge takes over, from the model taken
+            # The cases are spent: the default ordering takes over, from the model taken
             # up to the trials so far, without the candidates tried.
-            from llcps.cps.orderings import get_ordering
+            from llcps.cps.orderings import ORDERINGS, get_ordering
 
             if self._tried:
                 self.exploration.update(self._tried)
-            self.fallback = get_ordering(FALLBACK)(self.exploration)
+            self.fallback = get_ordering(ORDERINGS.default)(self.exploration)
             # What this ordering no longer has: the candidates tried, and those excluded
             # before a trial (the ones the arm would refuse, tried last by the episode).
             left = set(self.remaining)

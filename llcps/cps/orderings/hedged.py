@@ -121,15 +121,11 @@ class Hedged(Ranked):
         """The posterior probability that the model points the right way in this scene."""
         return 1.0 / (1.0 + math.exp(-self.log_odds))
 
-    def model_choice(self) -> int:
-        """The model side's next candidate: the ranking's best untried one."""
-        return self.order[0]
-
     def choose(self) -> int:
         self.beliefs.append(self.belief)
         if self.credit >= 1.0:
             self.picks.append("model")
-            return self.model_choice()
+            return self.order[0]
         self.picks.append("random")
         untried = set(self.remaining)
         while self.permutation[self._cursor] not in untried:
@@ -143,12 +139,7 @@ class Hedged(Ranked):
             self.credit -= 1.0
         self.credit += min(self.belief, MAX_MODEL_SHARE)
         self.order.remove(index)
-        self.model_learn(index, after, chosen_by_model)
-
-    def model_learn(self, index: int, after: State, own: bool) -> None:
-        """The model side takes in a failed trial: the ranking only its own (a failed
-        random trial would lower the whole family of a resolving candidate)."""
-        if own:
+        if chosen_by_model:
             self.evidence(index, after)
 
     def _evidence(self, index: int) -> float:
