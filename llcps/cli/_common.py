@@ -223,6 +223,11 @@ def new_app(help: str, **kwargs: Any) -> typer.Typer:  # noqa: A002 - typer's ow
     return typer.Typer(**settings)
 
 
+def comma_list(text: str | None) -> list[str] | None:
+    """The names of an ``A,B`` option, blanks dropped (None: the option was not given)."""
+    return None if text is None else [part.strip() for part in text.split(",") if part.strip()]
+
+
 def choice_enum(name: str, values: Iterable[str]) -> type[Enum]:
     """A str Enum for a typer choice, built from a registry tuple (the one source of truth)."""
     return Enum(name, {value.replace("-", "_"): value for value in values}, type=str)  # type: ignore[return-value]

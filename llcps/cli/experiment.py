@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
 
-from llcps.cli._common import EXIT_FAILED, EXIT_OK, resumable, settle_run, CreateFlag, JsonFlag, choice_enum, message, new_app, notice, open_store, print_json, print_table
+from llcps.cli._common import EXIT_FAILED, EXIT_OK, resumable, settle_run, CreateFlag, JsonFlag, choice_enum, comma_list, message, new_app, notice, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.cli._progress import progress_display
 from llcps.domain import MAX_SEED
@@ -163,7 +163,7 @@ def run_cli(
 
     name = str(preset.value)  # type: ignore[attr-defined]
     scenes = None if variants is None else parse_range(variants)
-    chosen = None if scenarios is None else [s.strip() for s in scenarios.split(",") if s.strip()]
+    chosen = comma_list(scenarios)
     target = check_output_dir(out_dir if out_dir is not None else default_out_dir(name), what="--out-dir")
     # The seeds and scenarios are checked before the store opens, so bad options create no store file.
     grid = get_preset(name).with_scenarios(chosen).with_ordering(ordering).with_random_draws(random_draws)

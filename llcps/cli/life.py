@@ -8,7 +8,7 @@ from typing import Annotated, Any, Optional
 
 import typer
 
-from llcps.cli._common import EXIT_FAILED, EXIT_OK, resumable, settle_run, CreateFlag, JsonFlag, choice_enum, message, new_app, open_store, print_json, print_table
+from llcps.cli._common import EXIT_FAILED, EXIT_OK, resumable, settle_run, CreateFlag, JsonFlag, choice_enum, comma_list, message, new_app, open_store, print_json, print_table
 from llcps.cli._conventions import examples
 from llcps.domain import MAX_SEED
 from llcps.cli._progress import progress_display
@@ -90,7 +90,7 @@ def run_cli(
     """
     from llcps.jobs.life import default_life_dir, life_seeds, resolve_life, run_life_job  # the runner loads here
 
-    chosen_conditions = None if conditions is None else [c.strip() for c in conditions.split(",") if c.strip()]
+    chosen_conditions = comma_list(conditions)
     # Checked before the store opens: bad options create no store file.
     chosen = resolve_life(life, episodes=episodes, conditions=chosen_conditions)
     life_seeds(lives, first_life)
@@ -160,7 +160,7 @@ def report_cli(
     """Rebuild a life's report from the store's episodes (every life and condition stored), running nothing."""
     from llcps.jobs.life import report_life_job
 
-    chosen_conditions = None if conditions is None else [c.strip() for c in conditions.split(",") if c.strip()]
+    chosen_conditions = comma_list(conditions)
     with open_store(ctx) as store:
         result = report_life_job(store=store, life=life, out_dir=out_dir, html=html, conditions=chosen_conditions)
     if as_json:
