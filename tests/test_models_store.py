@@ -157,6 +157,34 @@ def test_a_process_fits_one_training_set_once_across_stores(tmp_path, candidates
             store.close()
 
 
+def test_a_remembered_fit_is_not_reused_for_other_trials_of_the_same_count_and_ids(tmp_path, candidates, monkeypatch):
+    """The memo compares training sets by digest only when their size and last id agree:
+    two stores with 40 trials of the same ids but other content each get their own fit,
+    and changing the copy a fit hands out leaves the remembered one as it was."""
+    from llcps.models import persistence
+    from llcps.models.registry import world_model_entry
+    from llcps.store import Store
+
+    cls = world_model_entry("nb").model_class()
+    fits = []
+    real_fit = cls.fit
+    monkeypatch.setattr(cls, "fit", lambda self, *a, **k: (fits.append(self.seed), real_fit(self, *a, **k))[1])
+    persistence.clear_fits()
+    with Store.open(str(tmp_path / "a.db"), create=True) as a, Store.open(str(tmp_path / "b.db"), create=True) as b:
+        add_toy_trials(a, 40, seed=1)
+        add_toy_trials(b, 40, seed=3)
+        first = fit_or_load(a, "main", "nb", 0)
+        before = first.predict_proba(candidates)
+        other = fit_or_load(b, "main", "nb", 0)
+        assert fits == [0, 0]
+        assert not np.array_equal(other.predict_proba(candidates), before)
+        first.update(b.visible_trials("main"))  # the caller's copy moves on
+        again = persistence._fit(
+            world_model_entry("nb"), 0, a.visible_trials("main"), a.visible_changes("main"), True
+        )
+        assert fits == [0, 0] and np.array_equal(again.predict_proba(candidates), before)
+
+
 @pytest.mark.parametrize("name", ["nb", "nn"])
 def test_a_model_fitted_without_its_goal_head_predicts_the_same_omega_and_is_refitted_when_the_head_is_asked_for(
     tmp_path, candidates, monkeypatch, name

@@ -189,6 +189,14 @@ class TrialTable:
         self._raw = encode_inputs([])
         self._outcomes = outcome_matrix([])
 
+    def __deepcopy__(self, memo: dict[int, object]) -> TrialTable:
+        """A copy that shares the records and arrays: records are frozen and the arrays are
+        replaced, never changed in place. Copying ten thousand records was a third of a
+        fit's time (a fit is remembered as a copy)."""
+        copied = TrialTable()
+        copied._records, copied._raw, copied._outcomes = self._records, self._raw, self._outcomes
+        return copied
+
     def encode(self, records: Sequence[ModelInput]) -> tuple[np.ndarray, np.ndarray]:
         """Return (raw table, outcome matrix) of ``records``, reusing the known prefix."""
         known = len(self._records)

@@ -24,6 +24,8 @@ same trials in different stores (an experiment worker runs every measure and bot
 conditions of a seed from the same pretraining set) fits each model once and copies
 it after. A fit is deterministic for its seed and training set, so the copy is the
 model a fit would give, and it is stored on the branch all the same.
+The digest reads every trial, so it is taken only when a remembered fit has as
+many trials, ending with the same one.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import hashlib
 import logging
 import struct
 import time
+from collections import OrderedDict
 from dataclasses import asdict, dataclass
 from importlib import resources
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
@@ -121,15 +124,52 @@ def _fit(
     Args:
         examples: gives goal examples encoded before, by trial id (read only when a fit runs).
     """
-    slot = _remembered_fit(entry.name, seed, training_digest(records, changes), goal)
-    if slot:
-        return copy.deepcopy(slot[0])
+    shape = (entry.name, seed, goal, len(records), records[-1].id if records else None)
+    same_shape = _FITS.get(shape, [])
+    digest = None
+    if same_shape:  # only a fit of as many trials, ending with the same one, can match
+        digest = training_digest(records, changes)
+        for remembered in same_shape:
+            if remembered.key() == digest:
+                _FITS.move_to_end(shape)
+                return copy.deepcopy(remembered.model)
     model = entry(seed)
     if goal and examples is not None:
         model.goal.table.prime(examples())
     model.fit(records, changes, goal=goal)
-    slot.append(copy.deepcopy(model))  # the caller updates its own model during exploration
+    # the caller updates its own model during exploration, so the memo keeps a copy
+    _FITS.setdefault(shape, []).append(_Remembered(copy.deepcopy(model), digest, records, changes))
+    _FITS.move_to_end(shape)
+    while sum(map(len, _FITS.values())) > FIT_MEMO_SIZE:
+        oldest = next(iter(_FITS))
+        _FITS[oldest].pop(0)
+        if not _FITS[oldest]:
+            del _FITS[oldest]
     return model
+
+
+class _Remembered:
+    """A fit this process remembers, keyed by its training set's digest, computed only when
+    another training set of the same shape asks (a digest reads every trial)."""
+
+    def __init__(
+        self, model: WorldModel, digest: str | None, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]
+    ) -> None:
+        self.model = model
+        self._digest = digest
+        self._training: tuple[Sequence[TrialRecord], Mapping[int, TrialChange]] | None = None if digest else (records, changes)
+
+    def key(self) -> str:
+        if self._digest is None:
+            assert self._training is not None
+            self._digest = training_digest(*self._training)
+            self._training = None
+        return self._digest
+
+
+#: The fits this process remembers (:func:`_fit`), by (model, seed, goal, trials, last trial id),
+#: least recently used first.
+_FITS: OrderedDict[tuple[object, ...], list[_Remembered]] = OrderedDict()
 
 
 def stored_examples(store: Store, branch: str) -> dict[int, Examples]:
@@ -152,15 +192,9 @@ def keep_examples(store: Store, model: WorldModel) -> None:
         table.encoded = {}
 
 
-@functools.lru_cache(maxsize=FIT_MEMO_SIZE)
-def _remembered_fit(name: str, seed: int, training: str, goal: bool) -> list[WorldModel]:
-    """Where this process keeps its fit of a model on a training set (by digest): empty until :func:`_fit` fills it."""
-    return []
-
-
 def clear_fits() -> None:
     """Forget the fits this process remembers."""
-    _remembered_fit.cache_clear()
+    _FITS.clear()
 
 
 def fit_or_load(
