@@ -152,12 +152,11 @@ class _Remembered:
     """A fit this process remembers, keyed by its training set's digest, computed only when
     another training set of the same shape asks (a digest reads every trial)."""
 
-    def __init__(
-        self, model: WorldModel, digest: str | None, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]
-    ) -> None:
+    def __init__(self, model: WorldModel, digest: str | None, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> None:
         self.model = model
         self._digest = digest
-        self._training: tuple[Sequence[TrialRecord], Mapping[int, TrialChange]] | None = None if digest else (records, changes)
+        # copies of the containers (not of the frozen records): a caller may go on adding to its own
+        self._training = None if digest else (tuple(records), dict(changes))
 
     def key(self) -> str:
         if self._digest is None:
