@@ -17,6 +17,7 @@ and tells the parent its process id so the parent can stop it.
 
 from __future__ import annotations
 
+import atexit
 import os
 import shutil
 import signal
@@ -87,9 +88,23 @@ def _exit_with_parent(parent: int) -> None:
             _stop_worker()
 
 
+def _leave_without_teardown() -> None:
+    """The last thing a pool worker does at exit: flush and go, skipping the interpreter's
+    teardown. After a long run a worker's heap holds what its tasks left in memory, and
+    freeing it object by object made the parent wait for the workers' exit (5.85 s after
+    a 10-seed grid, about 40 s after 100 seeds); every result was returned before."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    os._exit(0)
+
+
 def init_local_worker(events: Any = None) -> None:
     """Initializer of local pool workers; ``events`` is the parent's queue (see :data:`PID`)."""
     global _events
+    atexit.register(_leave_without_teardown)  # runs after the handlers registered later (LIFO)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
     signal.signal(signal.SIGTERM, _stop_worker)
     try:
