@@ -36,7 +36,6 @@ import hashlib
 import logging
 import struct
 import time
-from collections import OrderedDict
 from dataclasses import asdict, dataclass
 from importlib import resources
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
@@ -125,26 +124,22 @@ def _fit(
         examples: gives goal examples encoded before, by trial id (read only when a fit runs).
     """
     shape = (entry.name, seed, goal, len(records), records[-1].id if records else None)
-    same_shape = _FITS.get(shape, [])
+    same_shape = [r for r in _FITS if r.shape == shape]
     digest = None
     if same_shape:  # only a fit of as many trials, ending with the same one, can match
         digest = training_digest(records, changes)
         for remembered in same_shape:
             if remembered.key() == digest:
-                _FITS.move_to_end(shape)
+                _FITS.remove(remembered)
+                _FITS.append(remembered)
                 return copy.deepcopy(remembered.model)
     model = entry(seed)
     if goal and examples is not None:
         model.goal.table.prime(examples())
     model.fit(records, changes, goal=goal)
     # the caller updates its own model during exploration, so the memo keeps a copy
-    _FITS.setdefault(shape, []).append(_Remembered(copy.deepcopy(model), digest, records, changes))
-    _FITS.move_to_end(shape)
-    while sum(map(len, _FITS.values())) > FIT_MEMO_SIZE:
-        oldest = next(iter(_FITS))
-        _FITS[oldest].pop(0)
-        if not _FITS[oldest]:
-            del _FITS[oldest]
+    _FITS.append(_Remembered(shape, copy.deepcopy(model), digest, records, changes))
+    del _FITS[:-FIT_MEMO_SIZE]
     return model
 
 
@@ -152,7 +147,11 @@ class _Remembered:
     """A fit this process remembers, keyed by its training set's digest, computed only when
     another training set of the same shape asks (a digest reads every trial)."""
 
-    def __init__(self, model: WorldModel, digest: str | None, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> None:
+    def __init__(
+        self, shape: tuple[object, ...], model: WorldModel, digest: str | None, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]
+    ) -> None:
+        #: (model, seed, goal, trials, last trial id): what a training set must share to be compared.
+        self.shape = shape
         self.model = model
         self._digest = digest
         # copies of the containers (not of the frozen records): a caller may go on adding to its own
@@ -166,9 +165,8 @@ class _Remembered:
         return self._digest
 
 
-#: The fits this process remembers (:func:`_fit`), by (model, seed, goal, trials, last trial id),
-#: least recently used first.
-_FITS: OrderedDict[tuple[object, ...], list[_Remembered]] = OrderedDict()
+#: The fits this process remembers (:func:`_fit`), least recently used first.
+_FITS: list[_Remembered] = []
 
 
 def stored_examples(store: Store, branch: str) -> dict[int, Examples]:
