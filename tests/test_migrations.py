@@ -219,3 +219,34 @@ def test_a_revision_is_named_with_its_place_in_the_chain() -> None:
     assert revision_label(head_revision()) == f"{head_revision()} ({len(chain)} of {len(chain)})"
     assert revision_label(chain[0]) == f"{chain[0]} (1 of {len(chain)})"
     assert revision_label("not-a-revision") == "not-a-revision"
+
+
+def test_a_new_store_is_a_copy_of_the_migrated_schema_dated_now(tmp_path: Path) -> None:
+    from datetime import datetime, timezone
+
+    from llcps.store import backends
+    from llcps.store.store import _new_store_image
+
+    migrated = tmp_path / "migrated.db"
+    backends.create_sqlite_file(migrated)  # an empty store file: opening it runs every migration
+    Store.open(str(migrated), create=True).close()
+    _new_store_image()  # made before the clock is read, as in a process that made stores before
+    before = datetime.now(timezone.utc).replace(tzinfo=None)
+    copied = tmp_path / "copied.db"
+    with Store.open(str(copied), create=True) as store:
+        assert store.revision == migrations.head_revision()
+        store.create_branch("b", from_branch="main", at=0)  # it is a working store
+
+    def contents(path: Path) -> tuple[list, list, list]:
+        with closing(sqlite3.connect(path)) as conn:
+            # Alembic's batch migrations write a table's constraints in no fixed order
+            schema = sorted((kind, name, sorted(line.strip(" \t,") for line in (sql or "").splitlines()))
+                            for kind, name, sql in conn.execute("SELECT type, name, sql FROM sqlite_master"))
+            settings = sorted(conn.execute("SELECT key, value FROM settings").fetchall())
+            main = conn.execute("SELECT id, name, parent_id, fork_point, created_at FROM branches WHERE name = 'main'").fetchall()
+        return schema, settings, main
+
+    schema, settings, main = contents(copied)
+    assert (schema, settings) == contents(migrated)[:2]
+    assert [row[:4] for row in main] == [row[:4] for row in contents(migrated)[2]] == [(1, "main", None, 0)]
+    assert datetime.fromisoformat(main[0][4]) >= before  # dated when it was made, not when the image was

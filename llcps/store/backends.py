@@ -148,11 +148,13 @@ def _read_application_id(path: Path) -> int:
         raise StoreError(f"cannot read {path}: {exc}", hint="check the file and its permissions; the file was left untouched") from exc
 
 
-def create_sqlite_file(path: Path) -> None:
-    """Put a new, empty SQLite file marked as an llcps store at ``path``, atomically.
+def create_sqlite_file(path: Path, image: bytes | None = None) -> None:
+    """Put a new SQLite file marked as an llcps store at ``path``, atomically.
 
-    The file is made under a temporary name in the same directory and hard-linked to
-    ``path``; if ``path`` exists by then (another creator won), that file is kept.
+    The file is empty, or holds ``image`` (the bytes of a database, see
+    :func:`sqlite_image`). It is made under a temporary name in the same directory and
+    hard-linked to ``path``; if ``path`` exists by then (another creator won), that
+    file is kept.
     """
     try:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".new")
@@ -160,6 +162,8 @@ def create_sqlite_file(path: Path) -> None:
         raise StoreError(f"cannot create {path}: {exc.strerror or exc}", hint="check that the directory is writable") from exc
     os.close(fd)
     try:
+        if image is not None:
+            Path(tmp).write_bytes(image)
         with closing(sqlite3.connect(tmp)) as conn:
             conn.execute(f"PRAGMA application_id = {SQLITE_APPLICATION_ID}")
             conn.commit()
@@ -175,6 +179,12 @@ def create_sqlite_file(path: Path) -> None:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def sqlite_image(path: Path) -> bytes:
+    """The bytes of the SQLite database at ``path`` as one file (its write-ahead log included)."""
+    with closing(sqlite3.connect(f"{path.as_uri()}?mode=ro", uri=True)) as conn:
+        return conn.serialize()
 
 
 def _on_sqlite_connect(foreign_keys: bool, file_backed: bool, busy_timeout_ms: int):  # noqa: ANN202 - event hook factory
