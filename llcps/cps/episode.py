@@ -22,7 +22,6 @@ loads, so the loop loads the simulator, the planner and numpy when it runs.
 from __future__ import annotations
 
 import time
-from datetime import datetime, timezone
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Collection, Mapping
@@ -230,8 +229,10 @@ def solve(
         check_output_file(gif, what="gif", suffixes=GIF_SUFFIXES)
     branch_name = store.resolve_branch(branch).name
     started = time.perf_counter()
+    from llcps.store import utc_now  # here, not where the module loads: it needs no SQLAlchemy
+
     # The run starts with the command: reading the trials and fitting the model count.
-    started_at = datetime.now(timezone.utc).replace(tzinfo=None)
+    started_at = utc_now()
     # What the store holds is read (and checked) first: a malformed row stops the
     # episode before it writes anything (a refitted model, its run).
     if progress is not None:

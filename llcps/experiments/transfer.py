@@ -26,14 +26,14 @@ from __future__ import annotations
 import bisect
 import hashlib
 from dataclasses import dataclass, field, replace
-from datetime import datetime, timezone
+from datetime import datetime
 from typing import Any, Mapping, Sequence
 
 from sqlalchemy import insert, select, update
 
 from llcps.trial_records import TrialChange, TrialRecord
 from llcps.errors import StoreError
-from llcps.store import EpisodeRecord, ExecutionRecord, OperatorRecord, RunRecord, SnapshotRecord, Store
+from llcps.store import EpisodeRecord, ExecutionRecord, OperatorRecord, RunRecord, SnapshotRecord, Store, utc_now
 from llcps.store.trial_changes import change_row
 from llcps.store.model_artifacts import POLICY_NAME
 from llcps.store.records import ModelArtifact
@@ -190,10 +190,6 @@ def _policies(store: Store, names: Sequence[str]) -> list[ModelArtifact]:
     return found
 
 
-def _now() -> datetime:
-    return datetime.now(timezone.utc).replace(tzinfo=None)  # the store keeps naive UTC
-
-
 def _time(text: str | None) -> datetime | None:
     return None if not text else datetime.fromisoformat(text)
 
@@ -265,7 +261,7 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
             if link.parent is not None and parent is None:
                 raise StoreError(f"branch {link.name!r} needs parent branch {link.parent!r}, which is missing")
             branch_ids[link.name] = conn.execute(
-                insert(Branch).values(name=link.name, parent_id=parent, fork_point=0, created_at=_now())
+                insert(Branch).values(name=link.name, parent_id=parent, fork_point=0, created_at=utc_now())
             ).inserted_primary_key[0]
 
         def branch_id(name: str) -> int:
@@ -314,7 +310,7 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                 if snap.sha256 not in found:
                     found[snap.sha256] = conn.execute(
                         insert(Snapshot).values(
-                            sha256=snap.sha256, scene=dict(snap.scene), state=bytes(snap.state), created_at=_now()
+                            sha256=snap.sha256, scene=dict(snap.scene), state=bytes(snap.state), created_at=utc_now()
                         )
                     ).inserted_primary_key[0]
                 snapshot_ids[snap.id] = found[snap.sha256]
@@ -329,7 +325,7 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                         snapshot_id=_need(snapshot_ids, t.snapshot_id, "snapshot"),
                     ),
                     branch_id=branch_id(t.branch),
-                    created_at=_time(t.created_at) or _now(),
+                    created_at=_time(t.created_at) or utc_now(),
                 )
                 for t in trials
             ]
@@ -370,7 +366,7 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                         "episode_id": _need(episode_ids, e.episode_id, "episode"),
                         "trial_id": _need(trial_ids.known, e.trial_id, "trial"),
                         "watermark": trial_ids.bound(e.watermark),
-                        "created_at": _time(e.created_at) or _now(),
+                        "created_at": _time(e.created_at) or utc_now(),
                     }
                     for e in payload.executions
                 ],
@@ -387,7 +383,7 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                     artifact=bytes(policy.artifact),
                     sha256=policy.sha256,
                     meta=dict(policy.meta),
-                    created_at=_time(policy.created_at) or _now(),
+                    created_at=_time(policy.created_at) or utc_now(),
                 )
             )
         for link in payload.branches:

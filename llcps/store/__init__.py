@@ -32,6 +32,7 @@ from llcps.store.records import (
 )
 from llcps.store.branches import MAIN_BRANCH, PRETRAIN, RESET_TARGETS, validate_branch_name
 from llcps.store.store import Store
+from llcps.store.transactions import utc_now
 
 __all__ = [
     "MAIN_BRANCH",
@@ -49,5 +50,6 @@ __all__ = [
     "SnapshotRecord",
     "Store",
     "StoreStatus",
+    "utc_now",
     "validate_branch_name",
 ]

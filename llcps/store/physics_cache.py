@@ -41,7 +41,7 @@ import os
 import secrets
 import tempfile
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable
 
@@ -55,6 +55,7 @@ from llcps.sim.cache import MAX_RESULT_BYTES, CachedTrial, StateCheck, StateTrus
 from llcps.sim.result import TrialResult
 from llcps.store import backends
 from llcps.store.tables import PhysicsCacheEntry
+from llcps.store.transactions import utc_now
 
 #: Default bound of the cache's size (result and end-state bytes), 2 GiB: about 50,000 trials.
 DEFAULT_MAX_BYTES = 2 << 30
@@ -147,10 +148,6 @@ def seal(secret: bytes, key: str, sha: str) -> str:
 def _sealed(value: Any, expected: str) -> bool:
     """Whether a stored seal (untrusted: any type) is ``expected``."""
     return isinstance(value, str) and value.isascii() and hmac.compare_digest(value, expected)
-
-
-def _now() -> datetime:
-    return datetime.now(timezone.utc).replace(tzinfo=None)
 
 
 @dataclass
@@ -263,7 +260,7 @@ class StorePhysicsCache:
     def put(self, key: str, result: TrialResult, end_state: bytes) -> None:
         """Keep a simulated trial; an entry already there (from another process) is kept."""
         encoded = encode_result(result)
-        now = _now()
+        now = utc_now()
         sha = content_hash(encoded, end_state)
         values = {
             "key": key,
@@ -298,7 +295,7 @@ class StorePhysicsCache:
             return
         used, self._used = self._used, {}
         seals, self._seals = self._seals, {}
-        now = _now()
+        now = utc_now()
         try:
             with self._engine.connect() as conn:
                 conn.execution_options(**{backends.WRITE_OPTION: True})

@@ -19,12 +19,13 @@ import os
 import socket
 import threading
 from dataclasses import asdict, dataclass
-from datetime import datetime, timedelta, timezone
+from datetime import datetime, timedelta
 from typing import Any, Callable
 
 from sqlalchemy import Connection, select
 
 from llcps.store.tables import Run
+from llcps.store.transactions import utc_now
 
 #: How often a running command renews its heartbeat.
 HEARTBEAT_SECONDS = 30.0
@@ -63,10 +64,6 @@ class Writer:
 def this_host() -> str:
     """The host name runs record (:func:`llcps.provenance.current` records the same)."""
     return socket.gethostname()
-
-
-def _utc_now() -> datetime:
-    return datetime.now(timezone.utc).replace(tzinfo=None)
 
 
 def _as_time(value: Any) -> datetime | None:
@@ -112,7 +109,7 @@ def writers(conn: Connection, branch: str | None = None) -> list[Writer]:
     stmt = select(Run.id, Run.command, Run.branch, Run.host, Run.pid, Run.heartbeat_at).where(Run.status == "running").order_by(Run.id)
     if branch is not None:
         stmt = stmt.where(Run.branch == branch)
-    now = _utc_now()
+    now = utc_now()
     found = []
     for row in conn.execute(stmt):
         beat = _as_time(row.heartbeat_at)
