@@ -162,9 +162,11 @@ def create_sqlite_file(path: Path, image: bytes | None = None) -> None:
         raise StoreError(f"cannot create {path}: {exc.strerror or exc}", hint="check that the directory is writable") from exc
     os.close(fd)
     try:
-        if image is not None:
-            Path(tmp).write_bytes(image)
         with closing(sqlite3.connect(tmp)) as conn:
+            if image is not None:
+                with closing(sqlite3.connect(":memory:")) as source:
+                    source.deserialize(image)
+                    source.backup(conn)
             conn.execute(f"PRAGMA application_id = {SQLITE_APPLICATION_ID}")
             conn.commit()
         try:
@@ -182,8 +184,13 @@ def create_sqlite_file(path: Path, image: bytes | None = None) -> None:
 
 
 def sqlite_image(path: Path) -> bytes:
-    """The bytes of the SQLite database at ``path`` as one file (its write-ahead log included)."""
-    with closing(sqlite3.connect(f"{path.as_uri()}?mode=ro", uri=True)) as conn:
+    """The SQLite database at ``path`` as bytes, for :func:`create_sqlite_file` to copy.
+
+    The file is switched out of write-ahead logging first (its log folded in), so that
+    the bytes are a whole database that SQLite can read from memory.
+    """
+    with closing(sqlite3.connect(path)) as conn:
+        conn.execute("PRAGMA journal_mode = DELETE")
         return conn.serialize()
 
 
