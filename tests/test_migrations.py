@@ -222,16 +222,16 @@ def test_a_revision_is_named_with_its_place_in_the_chain() -> None:
 
 
 def test_a_new_store_is_a_copy_of_the_migrated_schema_dated_now(tmp_path: Path) -> None:
-    from datetime import datetime, timezone
+    from datetime import datetime
 
-    from llcps.store import backends
+    from llcps.store import backends, utc_now
     from llcps.store.store import _new_store_image
 
     migrated = tmp_path / "migrated.db"
     backends.create_sqlite_file(migrated)  # an empty store file: opening it runs every migration
     Store.open(str(migrated), create=True).close()
     _new_store_image()  # made before the clock is read, as in a process that made stores before
-    before = datetime.now(timezone.utc).replace(tzinfo=None)
+    before = utc_now()
     copied = tmp_path / "copied.db"
     with Store.open(str(copied), create=True) as store:
         assert store.revision == migrations.head_revision()

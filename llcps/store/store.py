@@ -64,14 +64,15 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
         """
         url = backends.resolve_url(url_or_path)
         path = backends.sqlite_path(url)
-        made = path is not None and not backends.check_sqlite_file(path, create=create)
-        if made:
-            backends.create_sqlite_file(path, image=_new_store_image())
+        image = None
+        if path is not None and not backends.check_sqlite_file(path, create=create):
+            image = _new_store_image()
+            backends.create_sqlite_file(path, image=image)
         engine = backends.make_engine(url)
         store = cls(engine, url)
         try:
             store._check_schema(create=create, allow_outdated=allow_outdated)
-            if made:
+            if image is not None:
                 store._stamp_main_branch()
         except SQLAlchemyError as exc:
             engine.dispose()
