@@ -7,8 +7,13 @@ trials of the episodes before it, and the episode before it has fitted its world
 there). The episode's overhead is measured as a real episode spends it: the fit of the
 goal-directed world model at the episode's start (``fit``), encoding and ranking every
 candidate of a toy failure (``rank``), and writing the episode's trials (``store``).
-A life grows linearly; the target is an overhead at episode 1,000 within 1.2 times
-that at episode 10 (a cost that stays flat as experience grows).
+Past :data:`~llcps.models.schedule.FULL_FIT_TRIALS` trials an episode's fit counts its
+new trials into the stored model, and a full fit comes once each time the training set
+doubles (:mod:`llcps.models.schedule`); its cost, measured as the fit of the episode
+before, is spread over the episodes of its doubling (``refit``), so ``overhead`` is
+what an episode costs on average at that point of the life. A life grows linearly;
+the target is an overhead at episode 1,000 within 1.2 times that at episode 10 (a cost
+that stays flat as experience grows).
 
 The store is filled with batched inserts, not episode by episode, so a point far into
 the life costs one fit before it, not a thousand. The group also measures the store of
@@ -33,6 +38,7 @@ from llcps.models import fit_or_load
 from llcps.models.measures import rank
 from llcps.models.persistence import clear_fits
 from llcps.models.relational import GoalQuery
+from llcps.models.schedule import FULL_FIT_TRIALS, bins_trials
 from llcps.models.synthetic import synthetic_changes, synthetic_trials
 from llcps.store import Store
 from llcps.trial_records import TrialChange, TrialRecord, WorldModelInput
@@ -66,10 +72,12 @@ class EpisodeCost:
     fit: float
     rank: float
     store: float
+    #: The episode's share of the full fit that comes once per doubling of the training set.
+    refit: float = 0.0
 
     @property
     def overhead(self) -> float:
-        return self.fit + self.rank + self.store
+        return self.fit + self.rank + self.store + self.refit
 
     def as_json(self) -> dict[str, float]:
         return {**asdict(self), "overhead": self.overhead}
@@ -114,8 +122,15 @@ def _query() -> tuple[GoalQuery, list[WorldModelInput]]:
     return query, inputs
 
 
-def episode_cost(store: Store, episode: int, query: GoalQuery, inputs: Sequence[WorldModelInput]) -> EpisodeCost:
-    """The overhead of episode ``episode``, whose predecessors' trials are all in ``store``."""
+def episode_cost(
+    store: Store, episode: int, query: GoalQuery, inputs: Sequence[WorldModelInput], full_fit: float = 0.0
+) -> EpisodeCost:
+    """The overhead of episode ``episode``, whose predecessors' trials are all in ``store``.
+
+    Args:
+        full_fit: CPU seconds of a full fit at this point of the life; an episode whose
+            own fit only counts (past ``FULL_FIT_TRIALS`` trials) takes its share.
+    """
     clear_fits()  # no fit of this process is reused: a life's processes do not share memory
     with Clock() as fit:
         model = fit_or_load(store, "main", MODEL, 0)
@@ -125,7 +140,10 @@ def episode_cost(store: Store, episode: int, query: GoalQuery, inputs: Sequence[
     with Clock() as storing:
         for record, change in zip(records, changes):
             store.add_trial(record, change=change)
-    return EpisodeCost(episode, store.count_visible_trials("main"), fit.cpu, ranking.cpu, storing.cpu)
+    trials = store.count_visible_trials("main")
+    before = trials - TRIALS_PER_EPISODE
+    refit = 0.0 if before <= FULL_FIT_TRIALS else full_fit * TRIALS_PER_EPISODE / bins_trials(before)
+    return EpisodeCost(episode, trials, fit.cpu, ranking.cpu, storing.cpu, refit)
 
 
 def live(episodes: Sequence[int], progress: Progress | None = None, *, path: Path | None = None) -> list[EpisodeCost]:
@@ -142,9 +160,11 @@ def live(episodes: Sequence[int], progress: Progress | None = None, *, path: Pat
             for episode in episodes:
                 say(progress, f"life: episode {episode} ({(episode - 1) * TRIALS_PER_EPISODE:,} trials before it)")
                 _grow(store, done, episode - 1)
-                fit_or_load(store, "main", MODEL, 0)  # the episode before fits on what it saw
+                clear_fits()
+                with Clock() as full_fit:  # the episode before fits on what it saw (past the fit before: a full fit)
+                    fit_or_load(store, "main", MODEL, 0)
                 _grow(store, episode - 1, episode)
-                costs.append(episode_cost(store, episode, query, inputs))
+                costs.append(episode_cost(store, episode, query, inputs, full_fit.cpu))
                 done = episode + 1
     return costs
 
@@ -190,12 +210,16 @@ def run(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
     figures = []
     for cost in costs:
         subject = f"episode{cost.episode}"
-        note = f"{cost.trials:,} trials; {MODEL} fit {cost.fit:.3f} s, rank {cost.rank:.3f} s, store {cost.store:.3f} s"
+        note = (
+            f"{cost.trials:,} trials; {MODEL} fit {cost.fit:.3f} s, rank {cost.rank:.3f} s, store {cost.store:.3f} s, "
+            f"share of the full fit per doubling {cost.refit:.4f} s"
+        )
         figures += [
             _figure("overhead", cost.overhead, "s CPU", subject=subject, note=note),
             _figure("fit", cost.fit, "s CPU", subject=subject),
             _figure("rank", cost.rank, "s CPU", subject=subject),
             _figure("store", cost.store, "s CPU", subject=subject),
+            _figure("refit", cost.refit, "s CPU", subject=subject),
         ]
     first, last = costs[0], costs[-1]
     figures.append(

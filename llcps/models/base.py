@@ -20,10 +20,11 @@ from llcps.errors import LlcpsError
 from llcps.models.artifact import pack_arrays, unpack_arrays
 from llcps.models.goal import GoalHead, GoalLearner
 from llcps.models.relational import GoalQuery
+from llcps.models.schedule import bins_trials
 
 #: ``meta["format"]`` of every artifact, and the version this code writes and reads.
 ARTIFACT_FORMAT = "llcps-world-model"
-ARTIFACT_VERSION = 3
+ARTIFACT_VERSION = 4
 
 
 class WorldModel(ABC):
@@ -37,14 +38,19 @@ class WorldModel(ABC):
         name: the registry name (descriptions live in the registry).
         seed: all randomness of fitting and predicting derives from it.
         n_trials: size of the training set of the last fit.
+        bins: how many of its first trials fitted the model's bins and calibration (a
+            counting model; :mod:`llcps.models.schedule`), else ``n_trials``.
         goal: the goal-aware head.
     """
 
     name: ClassVar[str]
+    #: Whether it learns more trials by adding their counts (:meth:`extend`).
+    counting: ClassVar[bool] = False
 
     def __init__(self, seed: int) -> None:
         self.seed = int(seed)
         self.n_trials = 0
+        self.bins = 0
         self.goal = GoalHead(self._goal_learner())
         #: Whether the goal-aware head takes part (fitted with ``goal=True``, the default).
         self.has_goal = True
@@ -72,6 +78,34 @@ class WorldModel(ABC):
             self.goal.fit(records, changes or {})
         else:
             self.goal = type(self.goal)(self._goal_learner())  # unfitted: what it learned before is gone
+        return self
+
+    def can_extend(self, trials: int) -> bool:
+        """Whether :meth:`extend` can bring the model up to a training set of ``trials``:
+        a counting model whose fit's bins are those of that set (:mod:`llcps.models.schedule`)."""
+        fits = self.counting and self.n_trials <= trials and bins_trials(trials) == self.bins
+        return fits and (not self.has_goal or (self.goal.trials == self.n_trials and self.goal.bins == self.bins))
+
+    def extend(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange] | None = None) -> WorldModel:
+        """Learn the trials after the fit's by adding their counts: the model a fit on the
+        whole set would give (:mod:`llcps.models.schedule`), for a few trials' work.
+
+        Args:
+            records: the trials the training set gained since the fit, in id order.
+            changes: their known symbolic changes by trial id.
+
+        Raises:
+            LlcpsError: the model cannot (:meth:`can_extend`): it does not count, or the
+                grown set fits bins of its own.
+        """
+        if not self.can_extend(self.n_trials + len(records)):
+            raise LlcpsError(
+                f"world model {self.name!r} fitted on {self.n_trials} trials cannot count {len(records)} more",
+                hint="fit it on the whole training set",
+            )
+        self._extend_outcome(records)
+        if self.has_goal:
+            self.goal.extend(records, changes or {})
         return self
 
     def update(
@@ -105,6 +139,10 @@ class WorldModel(ABC):
     def _update_outcome(self, records: Sequence[TrialRecord]) -> None:
         """Bring the Omega predictor up to a grown set; a full refit unless overridden."""
         self._fit_outcome(records)
+
+    def _extend_outcome(self, records: Sequence[TrialRecord]) -> None:
+        """Add the counts of more trials to the Omega predictor's (a counting model only)."""
+        raise NotImplementedError(f"world model {self.name!r} does not count")
 
     @abstractmethod
     def predict_proba(self, candidates: Sequence[WorldModelInput | TrialRecord]) -> np.ndarray:
@@ -147,6 +185,7 @@ class WorldModel(ABC):
             "model": self.name,
             "seed": self.seed,
             "n_trials": self.n_trials,
+            "bins_trials": self.bins,
             "outcome_names": list(OUTCOME_NAMES),
             "sha256": hashlib.sha256(data).hexdigest(),
         }
@@ -187,6 +226,9 @@ class WorldModel(ABC):
                 model.goal.load(arrays, meta)
             model.has_goal = has_goal
             model.n_trials = int(meta.get("n_trials", 0))
+            model.bins = int(meta.get("bins_trials", model.n_trials))
+            if not 0 <= model.bins <= model.n_trials:
+                raise ValueError("a model's bins must be fitted on at most the trials it learned from")
         except LlcpsError as exc:
             raise LlcpsError(f"{cls.name!r} world-model artifact rejected: {exc.message}", hint=hint) from None
         except Exception as exc:  # noqa: BLE001 - any failure to parse means a bad artifact

@@ -80,6 +80,7 @@ from llcps.models.families import (
     family_keys,
     stratum_of,
 )
+from llcps.models.schedule import bins_trials
 from llcps.models.relational import (
     CONTINUOUS_MASK,
     N_GOAL_FEATURES,
@@ -105,6 +106,8 @@ class GoalLearner(ABC):
 
     #: Name in the artifact (the model's own name).
     name: ClassVar[str]
+    #: Whether it learns more rows by adding their counts (:meth:`extend`; :mod:`llcps.models.schedule`).
+    counting: ClassVar[bool] = False
 
     def __init__(self, seed: int) -> None:
         self.seed = int(seed)
@@ -112,6 +115,10 @@ class GoalLearner(ABC):
     @abstractmethod
     def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
         """Fit on raw rows (n, d), 0/1 labels with both classes present, positive weights."""
+
+    def extend(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        """Learn more rows by adding their counts to the fit's (a :attr:`counting` learner only)."""
+        raise NotImplementedError(f"the {self.name} goal learner does not count")
 
     @abstractmethod
     def predict(self, features: np.ndarray) -> np.ndarray:
@@ -150,7 +157,9 @@ class StratifiedLearner(GoalLearner):
 
     def __init__(self, seed: int, make: Callable[[int], GoalLearner]) -> None:
         super().__init__(seed)
-        self.name = make(seed).name  # type: ignore[misc]
+        made = make(seed)
+        self.name = made.name  # type: ignore[misc]
+        self.counting = made.counting  # type: ignore[misc]
         self._make = make
         self.priors = np.full(N_ACTION_STRATA, 0.5)
         self.subs: dict[int, GoalLearner] = {}
@@ -158,32 +167,63 @@ class StratifiedLearner(GoalLearner):
         self.backoffs: dict[int, GoalLearner] = {}
         #: Per (action, predicate, sign) stratum, the change rate of its (action, sign) stratum.
         self.parents = np.full(N_ACTION_STRATA, 0.5)
+        #: Weighted changes and weighted rows, per (action, sign) and per (action, predicate, sign) stratum.
+        self.sign_sums = np.zeros((N_ACTION_SIGNS, 2))
+        self.stratum_sums = np.zeros((N_ACTION_STRATA, 2))
 
     def fit(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
         strata = action_stratum_of(features)
         signs = action_sign_of(features)
         self.subs = {}
         self.backoffs = {}
-        rates = np.full(N_ACTION_SIGNS, 0.5)
+        self.sign_sums = np.zeros((N_ACTION_SIGNS, 2))
         for c in range(N_ACTION_SIGNS):
             rows = signs == c
             y, w = labels[rows], weights[rows]
-            rates[c] = (float(w @ y) + 1.0) / (float(w.sum()) + 2.0)
+            self.sign_sums[c] = (float(w @ y), float(w.sum()))
             if 0 < y.sum() < len(y):
                 sub = self._make(self.seed)
                 sub.fit(features[rows], y, w)
                 self.backoffs[c] = sub
-        # A stratum's rate is smoothed toward its (action, sign) stratum's rate (two
-        # pseudo-rows of it), so a stratum seen on a few rows, or none, gets its parent's.
-        self.parents = rates[action_sign_of_stratum(np.arange(N_ACTION_STRATA))]
+        self.stratum_sums = np.zeros((N_ACTION_STRATA, 2))
         for k in range(N_ACTION_STRATA):
             rows = strata == k
             y, w = labels[rows], weights[rows]
-            self.priors[k] = (float(w @ y) + 2.0 * self.parents[k]) / (float(w.sum()) + 2.0)
+            self.stratum_sums[k] = (float(w @ y), float(w.sum()))
             if 0 < y.sum() < len(y):
                 sub = self._make(self.seed)
                 sub.fit(features[rows], y, w)
                 self.subs[k] = sub
+        self._rates()
+
+    def extend(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        """Add more rows: to the strata's sums, and to the sub-learners of their strata
+        (a stratum without one stays without: which strata learn is the fit's)."""
+        if not len(labels):
+            return
+        strata = action_stratum_of(features)
+        signs = action_sign_of(features)
+        changed = weights * labels
+        self.sign_sums = self.sign_sums + np.stack(
+            [np.bincount(signs, changed, N_ACTION_SIGNS), np.bincount(signs, weights, N_ACTION_SIGNS)], axis=1
+        )
+        self.stratum_sums = self.stratum_sums + np.stack(
+            [np.bincount(strata, changed, N_ACTION_STRATA), np.bincount(strata, weights, N_ACTION_STRATA)], axis=1
+        )
+        for groups, subs in ((strata, self.subs), (signs, self.backoffs)):
+            for k, sub in subs.items():
+                rows = groups == k
+                if rows.any():
+                    sub.extend(features[rows], labels[rows], weights[rows])
+        self._rates()
+
+    def _rates(self) -> None:
+        """The change rates of the strata's sums. A stratum's rate is smoothed toward its
+        (action, sign) stratum's rate (two pseudo-rows of it), so a stratum seen on a few
+        rows, or none, gets its parent's."""
+        rates = (self.sign_sums[:, 0] + 1.0) / (self.sign_sums[:, 1] + 2.0)
+        self.parents = rates[action_sign_of_stratum(np.arange(N_ACTION_STRATA))]
+        self.priors = (self.stratum_sums[:, 0] + 2.0 * self.parents) / (self.stratum_sums[:, 1] + 2.0)
 
     def predict(self, features: np.ndarray) -> np.ndarray:
         strata = action_stratum_of(features)
@@ -205,10 +245,10 @@ class StratifiedLearner(GoalLearner):
 
     def export(self) -> dict[str, np.ndarray]:
         arrays = {
-            "priors": self.priors,
+            "sign_sums": self.sign_sums,
+            "stratum_sums": self.stratum_sums,
             "learned": np.array([k in self.subs for k in range(N_ACTION_STRATA)]),
             "backoff": np.array([c in self.backoffs for c in range(N_ACTION_SIGNS)]),
-            "parents": self.parents,
         }
         for k, sub in self.subs.items():
             arrays.update({f"s{k}/{name}": value for name, value in sub.export().items()})
@@ -217,14 +257,9 @@ class StratifiedLearner(GoalLearner):
         return arrays
 
     def load(self, arrays: Mapping[str, np.ndarray]) -> None:
-        priors = array(arrays, "priors", (N_ACTION_STRATA,))
-        if np.any((priors <= 0) | (priors >= 1)):
-            raise ValueError("stratum priors must lie strictly inside (0, 1)")
-        parents = array(arrays, "parents", (N_ACTION_STRATA,))
-        if np.any((parents <= 0) | (parents >= 1)):
-            raise ValueError("parent rates must lie strictly inside (0, 1)")
-        self.priors = priors.astype(np.float64)
-        self.parents = parents.astype(np.float64)
+        self.sign_sums = _sums(arrays, "sign_sums", N_ACTION_SIGNS)
+        self.stratum_sums = _sums(arrays, "stratum_sums", N_ACTION_STRATA)
+        self._rates()
         self.subs = self._load_subs(arrays, "learned", N_ACTION_STRATA, "s")
         self.backoffs = self._load_subs(arrays, "backoff", N_ACTION_SIGNS, "b")
 
@@ -236,6 +271,15 @@ class StratifiedLearner(GoalLearner):
             sub.load({name[len(prefix) :]: v for name, v in arrays.items() if name.startswith(prefix)})
             subs[int(k)] = sub
         return subs
+
+
+def _sums(arrays: Mapping[str, np.ndarray], key: str, n: int) -> np.ndarray:
+    """Stored (weighted changes, weighted rows) of ``n`` strata, checked: neither negative,
+    and no more changes than rows."""
+    sums = array(arrays, key, (n, 2)).astype(np.float64)
+    if np.any(sums < 0) or np.any(sums[:, 0] > sums[:, 1] * (1 + 1e-9)):
+        raise ValueError(f"{key}: weighted changes and rows must be non-negative, with no more changes than rows")
+    return sums
 
 
 class Standardizer:
@@ -306,8 +350,15 @@ class GoalHead:
         self.prior = 0.5
         #: Weighted, Laplace-smoothed change rate per (predicate, sign) stratum.
         self.rates = np.full(N_STRATA, 0.5)
+        #: Weighted changes and weighted examples, in all and per (predicate, sign) stratum.
+        self.totals = np.zeros(2)
+        self.rate_sums = np.zeros((N_STRATA, 2))
         self.learned = False
         self.n_examples = 0
+        #: Trials learned from, and how many of the first of them fitted the learner's bins
+        #: (:mod:`llcps.models.schedule`; the rest were counted).
+        self.trials = 0
+        self.bins = 0
         #: Largest trial id the learner was fitted on: later trials are episode evidence.
         self.watermark = 0
         self.table = ExampleTable()
@@ -316,24 +367,62 @@ class GoalHead:
 
     # ------------------------------------------------------------------ fitting
     def fit(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalHead:
-        """Fit the learner on every record with a known change; forget episode evidence."""
-        examples = self.table.encode(records, changes)
+        """Fit the learner on every record with a known change; forget episode evidence.
+
+        A counting learner fits its bins on the first :func:`~llcps.models.schedule.bins_trials`
+        records and counts the rest (:meth:`extend`); any other learner fits on all of them.
+        """
+        bins = bins_trials(len(records)) if self.learner.counting else len(records)
+        examples = self.table.encode(records[:bins], changes)
         self.n_examples = len(examples)
-        self.watermark = max((r.id for r in records if r.id is not None), default=0)
-        positive = float(examples.weights @ examples.labels)
-        total = float(examples.weights.sum())
-        self.prior = (positive + 1.0) / (total + 2.0)
+        self.trials = self.bins = bins
+        self.watermark = max((r.id for r in records[:bins] if r.id is not None), default=0)
+        self.totals = np.array([float(examples.weights @ examples.labels), float(examples.weights.sum())])
         strata = stratum_of(examples.features)
+        self.rate_sums = np.zeros((N_STRATA, 2))
         for k in range(N_STRATA):
             rows = strata == k
             w = examples.weights[rows]
-            self.rates[k] = (float(w @ examples.labels[rows]) + 1.0) / (float(w.sum()) + 2.0)
+            self.rate_sums[k] = (float(w @ examples.labels[rows]), float(w.sum()))
+        self._rates()
         self.learned = bool(0 < examples.labels.sum() < len(examples))
         if self.learned:
             self.learner.fit(examples.features, examples.labels, examples.weights)
         self._evidence = None
         self._evidence_ids = set()
+        if bins < len(records):
+            self.extend(records[bins:], changes)
         return self
+
+    def extend(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalHead:
+        """Learn trials after the fit's by adding their counts (a counting learner; the
+        bins and calibration stay the fit's: :mod:`llcps.models.schedule`); forget episode evidence.
+
+        Raises:
+            NotImplementedError: the learner does not count.
+        """
+        examples = self.table.encode(records, changes)
+        self.trials += len(records)
+        self.watermark = max((r.id for r in records if r.id is not None), default=self.watermark)
+        if len(examples):
+            w, y = examples.weights, examples.labels
+            self.n_examples += len(examples)
+            self.totals = self.totals + np.array([float(w @ y), float(w.sum())])
+            strata = stratum_of(examples.features)
+            self.rate_sums = self.rate_sums + np.stack(
+                [np.bincount(strata, w * y, N_STRATA), np.bincount(strata, w, N_STRATA)], axis=1
+            )
+            self._rates()
+            if self.learned:
+                self.learner.extend(examples.features, y, w)
+        self._evidence = None
+        self._evidence_ids = set()
+        return self
+
+    def _rates(self) -> None:
+        """The Laplace-smoothed change rates of the sums: in all, and per stratum."""
+        self.prior = (self.totals[0] + 1.0) / (self.totals[1] + 2.0)
+        self.rates = (self.rate_sums[:, 0] + 1.0) / (self.rate_sums[:, 1] + 2.0)
 
     def update(
         self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange], *, start: int | None = None
@@ -409,29 +498,33 @@ class GoalHead:
 
     # -------------------------------------------------------------- persistence
     def export(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        arrays = {"goal/prior": np.array([self.prior]), "goal/rates": self.rates}
+        arrays = {"goal/totals": self.totals.reshape(1, 2), "goal/rate_sums": self.rate_sums}
         if self.learned:
             arrays.update({f"goal/{k}": v for k, v in self.learner.export().items()})
-        meta = {"goal_learned": self.learned, "goal_examples": self.n_examples, "goal_watermark": self.watermark}
+        meta = {
+            "goal_learned": self.learned,
+            "goal_examples": self.n_examples,
+            "goal_watermark": self.watermark,
+            "goal_trials": self.trials,
+            "goal_bins": self.bins,
+        }
         return arrays, meta
 
     def load(self, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> GoalHead:
-        prior = float(array(arrays, "goal/prior", (1,))[0])
-        if not 0.0 < prior < 1.0:
-            raise ValueError("the goal prior must lie strictly inside (0, 1)")
-        self.prior = prior
-        rates = array(arrays, "goal/rates", (N_STRATA,))
-        if np.any((rates <= 0) | (rates >= 1)):
-            raise ValueError("the goal change rates must lie strictly inside (0, 1)")
-        self.rates = rates.astype(np.float64)
+        self.totals = _sums(arrays, "goal/totals", 1).reshape(2)
+        self.rate_sums = _sums(arrays, "goal/rate_sums", N_STRATA)
+        self._rates()
         self.learned = bool(meta.get("goal_learned", False))
         self.n_examples = int(meta.get("goal_examples", 0))
         self.watermark = int(meta.get("goal_watermark", 0))
+        self.trials = int(meta.get("goal_trials", 0))
+        self.bins = int(meta.get("goal_bins", 0))
+        if not 0 <= self.bins <= self.trials:
+            raise ValueError("the goal head's bins must be fitted on at most the trials it learned from")
         if self.learned:
             prefix = "goal/"
-            self.learner.load(
-                {k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix) and k not in ("goal/prior", "goal/rates")}
-            )
+            own = ("goal/totals", "goal/rate_sums")
+            self.learner.load({k[len(prefix) :]: v for k, v in arrays.items() if k.startswith(prefix) and k not in own})
         return self
 
 

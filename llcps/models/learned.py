@@ -18,6 +18,7 @@ from llcps.domain import OUTCOME_NAMES
 from llcps.trial_records import TrialRecord, WorldModelInput
 from llcps.models.artifact import array
 from llcps.models.base import WorldModel, label_prior, learnable_labels
+from llcps.models.schedule import bins_trials
 from llcps.models.features import (
     CONTINUOUS_COLUMNS,
     ENCODED_FEATURE_NAMES,
@@ -39,27 +40,54 @@ class EncodedWorldModel(WorldModel):
         self.encoder = FeatureEncoder().fit(encode_inputs([]))
         self.prior = label_prior(outcome_matrix([]))
         self.learned = learnable_labels(outcome_matrix([]))
+        #: Per Omega bit, how many trials learned from had it set (the prior's counts).
+        self.outcome_sum = np.zeros(N_LABELS)
         self._table = TrialTable()
 
     def _fit_outcome(self, records: Sequence[TrialRecord]) -> None:
-        """Fit the encoder and the learner on every trial in ``records``."""
+        """Fit the encoder and the learner on every trial in ``records`` (a counting model:
+        on the first :func:`~llcps.models.schedule.bins_trials` of them, the rest counted)."""
         raw, outcomes = self._table.encode(records)
-        self.n_trials = len(raw)
+        bins = bins_trials(len(raw)) if self.counting else len(raw)
+        self.n_trials = self.bins = bins
         self.encoder = FeatureEncoder()
-        features = self.encoder.fit_transform(raw)
-        self.prior = label_prior(outcomes)
-        self.learned = learnable_labels(outcomes)
+        features = self.encoder.fit_transform(raw[:bins])
+        self.outcome_sum = outcomes[:bins].sum(axis=0, dtype=np.float64)
+        self.prior = label_prior(outcomes[:bins])
+        self.learned = learnable_labels(outcomes[:bins])
         self._reset()
         if self.learned.any():
-            self._fit_encoded(features, outcomes)
+            self._fit_encoded(features, outcomes[:bins])
+        if bins < len(raw):
+            self._count(raw[bins:], outcomes[bins:])
+
+    def _extend_outcome(self, records: Sequence[TrialRecord]) -> None:
+        self._count(encode_inputs(records), outcome_matrix(records))
+
+    def _count(self, raw: np.ndarray, outcomes: np.ndarray) -> None:
+        """Add the counts of more trials, encoded by the fit's encoder; the learnable bits stay the fit's."""
+        self.outcome_sum = self.outcome_sum + outcomes.sum(axis=0, dtype=np.float64)
+        self.n_trials += len(raw)
+        self.prior = (self.outcome_sum + 1.0) / (self.n_trials + 2.0)
+        if self.learned.any() and len(raw):
+            self._extend_encoded(self.encoder.transform(raw), outcomes)
+
+    def _extend_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
+        """Add the counts of more encoded trials to the learner's (a counting model only)."""
+        raise NotImplementedError(f"world model {self.name!r} does not count")
 
     def _update_outcome(self, records: Sequence[TrialRecord]) -> None:
-        """Continue from the current fit if the learner can (:meth:`_can_continue`), else refit.
+        """Count the new trials if the model counts and the grown set keeps its bins
+        (:mod:`llcps.models.schedule`); else continue from the current fit if the learner
+        can (:meth:`_can_continue`); else refit.
 
         A continued learner keeps the encoder of its last full fit, so its inputs mean what
         they meant when it was trained; the label prior and the learnable bits follow the
         grown set.
         """
+        if self.counting and len(records) > self.n_trials and bins_trials(len(records)) == self.bins:
+            self._extend_outcome(records[self.n_trials :])
+            return
         if not (self.learned.any() and self._can_continue()):
             self._fit_outcome(records)
             return
@@ -115,6 +143,7 @@ class EncodedWorldModel(WorldModel):
             "encoder/mean": encoder["mean"],
             "encoder/scale": encoder["scale"],
             "prior": self.prior,
+            "outcome_sum": self.outcome_sum,
             "learned": self.learned,
         }
         learned = [name for name, ok in zip(OUTCOME_NAMES, self.learned) if ok]
@@ -131,6 +160,10 @@ class EncodedWorldModel(WorldModel):
         if np.any((prior <= 0) | (prior >= 1)):
             raise ValueError("label prior must lie strictly inside (0, 1)")
         model.prior = prior.astype(np.float64)
+        outcome_sum = array(arrays, "outcome_sum", (N_LABELS,)).astype(np.float64)
+        if np.any(outcome_sum < 0):
+            raise ValueError("Omega bit counts must not be negative")
+        model.outcome_sum = outcome_sum
         model.learned = array(arrays, "learned", (N_LABELS,), kind="b").astype(bool)
         if model.learned.any():
             model._import_learner(arrays, meta)

@@ -4,7 +4,10 @@ Each classifier is exactly scikit-learn's ``BernoulliNB(alpha=1.0, binarize=0.0)
 (tests/test_models.py checks agreement to 1e-12 on fit and predict), computed for
 all six bits at once: one matrix product gives every bit's feature counts, where
 six separate ``BernoulliNB.fit`` calls spend most of their time validating input.
-That keeps a refit on 10,000 trials within the agent's refit budget.
+That keeps a refit on 10,000 trials within the agent's refit budget. Both learners
+keep their counts: past 4,096 trials they bin at the means (quartiles) of the first
+4,096 x 2^k trials and count the rest, so an episode learns its new trials by adding
+theirs (:mod:`llcps.models.schedule`).
 
 Each encoded feature is binarized at 0: one-hot columns stay as they are, a
 standardized continuous feature becomes "above the training mean". Laplace
@@ -39,22 +42,41 @@ class NaiveBayesModel(EncodedWorldModel):
     """
 
     name: ClassVar[str] = "nb"
+    counting: ClassVar[bool] = True
     alpha: ClassVar[float] = 1.0
 
     def _reset(self) -> None:
-        self.feature_log_prob = np.zeros((0, 2, N_FEATURES))
-        self.class_log_prior = np.zeros((0, 2))
+        k = int(self.learned.sum())
+        #: Counts of the learnable bits: trials, trials with each bit set, trials with each
+        #: feature set, and with both.
+        self.rows = np.zeros(1)
+        self.label_count = np.zeros(k)
+        self.feature_sum = np.zeros(N_FEATURES)
+        self.ones = np.zeros((k, N_FEATURES))
+        self.feature_log_prob = np.zeros((k, 2, N_FEATURES))
+        self.class_log_prior = np.zeros((k, 2))
 
     def _fit_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
+        self._reset()
+        self._extend_encoded(features, outcomes)
+
+    def _extend_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
         x = _binarize(features)
-        y = outcomes[:, self.learned].astype(np.float64)  # (n, k), each column has both classes
+        y = outcomes[:, self.learned].astype(np.float64)  # (n, k)
         # (k, d): count of feature = 1 among trials where the bit is 1. einsum, not BLAS:
         # a small product that a threaded BLAS can stall on a busy machine.
-        ones = np.einsum("nk,nd->kd", y, x)
-        class_count = np.stack([len(y) - y.sum(axis=0), y.sum(axis=0)], axis=1)  # (k, 2)
-        feature_count = np.stack([x.sum(axis=0) - ones, ones], axis=1)  # (k, 2, d)
+        self.ones = self.ones + np.einsum("nk,nd->kd", y, x)
+        self.feature_sum = self.feature_sum + x.sum(axis=0)
+        self.label_count = self.label_count + y.sum(axis=0)
+        self.rows = self.rows + len(y)
+        self._probabilities()
+
+    def _probabilities(self) -> None:
+        """The Laplace-smoothed log-probabilities of the counts."""
+        class_count = np.stack([self.rows - self.label_count, self.label_count], axis=1)  # (k, 2)
+        feature_count = np.stack([self.feature_sum - self.ones, self.ones], axis=1)  # (k, 2, d)
         self.feature_log_prob = np.log(feature_count + self.alpha) - np.log(class_count + 2 * self.alpha)[:, :, None]
-        self.class_log_prior = np.log(class_count) - np.log(len(y))
+        self.class_log_prior = np.log(class_count) - np.log(self.rows)
 
     def _predict_encoded(self, features: np.ndarray) -> np.ndarray:
         x = _binarize(features)
@@ -71,17 +93,23 @@ class NaiveBayesModel(EncodedWorldModel):
         return StratifiedLearner(self.seed, NaiveBayesGoal)
 
     def _export_learner(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        arrays = {"nb/feature_log_prob": self.feature_log_prob, "nb/class_log_prior": self.class_log_prior}
+        arrays = {"nb/rows": self.rows, "nb/label_count": self.label_count, "nb/feature_sum": self.feature_sum, "nb/ones": self.ones}
         return arrays, {"alpha": self.alpha}
 
     def _import_learner(self, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
         k = int(self.learned.sum())
-        feature_log_prob = array(arrays, "nb/feature_log_prob", (k, 2, N_FEATURES))
-        class_log_prior = array(arrays, "nb/class_log_prior", (k, 2))
-        if np.any(feature_log_prob >= 0) or np.any(class_log_prior > 0):
-            raise ValueError("naive Bayes log-probabilities must be negative")
-        self.feature_log_prob = feature_log_prob.astype(np.float64)
-        self.class_log_prior = class_log_prior.astype(np.float64)
+        rows = array(arrays, "nb/rows", (1,)).astype(np.float64)
+        label_count = array(arrays, "nb/label_count", (k,)).astype(np.float64)
+        feature_sum = array(arrays, "nb/feature_sum", (N_FEATURES,)).astype(np.float64)
+        ones = array(arrays, "nb/ones", (k, N_FEATURES)).astype(np.float64)
+        if not (
+            np.all((label_count > 0) & (label_count < rows))
+            and np.all((feature_sum >= 0) & (feature_sum <= rows))
+            and np.all((ones >= 0) & (ones <= feature_sum) & (ones <= label_count[:, None]))
+        ):
+            raise ValueError("naive Bayes counts must be consistent: both classes of every learned bit, no count above its total")
+        self.rows, self.label_count, self.feature_sum, self.ones = rows, label_count, feature_sum, ones
+        self._probabilities()
 
 
 class NaiveBayesGoal(GoalLearner):
@@ -95,9 +123,13 @@ class NaiveBayesGoal(GoalLearner):
     candidates to be ranked; its log-odds are rescaled by a logistic fit on the
     training rows (Platt scaling, slope kept positive), which keeps its order and
     makes its probabilities mean what they say.
+
+    It keeps its weighted counts, so more rows are learned by adding theirs (:meth:`extend`,
+    in the quartiles and the scaling of the fit; :mod:`llcps.models.schedule`).
     """
 
     name: ClassVar[str] = "nb"
+    counting: ClassVar[bool] = True
     alpha: ClassVar[float] = 1.0
     quantiles: ClassVar[tuple[float, ...]] = (0.25, 0.5, 0.75)
 
@@ -105,6 +137,9 @@ class NaiveBayesGoal(GoalLearner):
         super().__init__(seed)
         width = int(CONTINUOUS_MASK.sum())
         self.thresholds = np.zeros((width, len(self.quantiles)))
+        #: Weighted counts of rows per class, and of rows with each bit set per class.
+        self.class_weight = np.ones(2)
+        self.ones = np.zeros((2, self._width()))
         self.feature_log_prob = np.zeros((2, self._width()))
         self.class_log_prior = np.log(np.full(2, 0.5))
         #: Slope and intercept of the Platt scaling of the log-odds.
@@ -123,15 +158,29 @@ class NaiveBayesGoal(GoalLearner):
         self.thresholds = np.quantile(features[:, CONTINUOUS_MASK], self.quantiles, axis=0).T.copy()
         x = self._bits(features)
         y = labels.astype(np.float64)
-        class_weight = np.array([weights @ (1.0 - y), weights @ y])
-        ones = np.stack([np.einsum("n,n,nd->d", weights, 1.0 - y, x), np.einsum("n,n,nd->d", weights, y, x)])
-        self.feature_log_prob = np.log(ones + self.alpha) - np.log(class_weight + 2 * self.alpha)[:, None]
-        self.class_log_prior = np.log(class_weight) - np.log(class_weight.sum())
+        self.class_weight = np.array([weights @ (1.0 - y), weights @ y])
+        self.ones = np.stack([np.einsum("n,n,nd->d", weights, 1.0 - y, x), np.einsum("n,n,nd->d", weights, y, x)])
+        self._probabilities()
         self.platt = np.array([1.0, 0.0])
         scale = LogisticRegression(C=1e4, max_iter=1000).fit(self._log_odds_of_bits(x)[:, None], labels, sample_weight=weights)
         slope = float(scale.coef_[0, 0])
         if slope > 0:
             self.platt = np.array([slope, float(scale.intercept_[0])])
+
+    def extend(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
+        """Add the weighted counts of more rows, in the bins of the fit; the Platt scaling stays."""
+        if not len(labels):
+            return
+        x = self._bits(features)
+        y = labels.astype(np.float64)
+        self.class_weight = self.class_weight + np.array([weights @ (1.0 - y), weights @ y])
+        self.ones = self.ones + np.stack([np.einsum("n,n,nd->d", weights, 1.0 - y, x), np.einsum("n,n,nd->d", weights, y, x)])
+        self._probabilities()
+
+    def _probabilities(self) -> None:
+        """The Laplace-smoothed log-probabilities of the weighted counts."""
+        self.feature_log_prob = np.log(self.ones + self.alpha) - np.log(self.class_weight + 2 * self.alpha)[:, None]
+        self.class_log_prior = np.log(self.class_weight) - np.log(self.class_weight.sum())
 
     def _log_odds(self, features: np.ndarray) -> np.ndarray:
         return self._log_odds_of_bits(self._bits(features))
@@ -148,19 +197,19 @@ class NaiveBayesGoal(GoalLearner):
     def export(self) -> dict[str, np.ndarray]:
         return {
             "nb/thresholds": self.thresholds,
-            "nb/feature_log_prob": self.feature_log_prob,
-            "nb/class_log_prior": self.class_log_prior,
+            "nb/ones": self.ones,
+            "nb/class_weight": self.class_weight,
             "nb/platt": self.platt,
         }
 
     def load(self, arrays: Mapping[str, np.ndarray]) -> None:
         self.thresholds = array(arrays, "nb/thresholds", self.thresholds.shape).astype(np.float64)
-        feature_log_prob = array(arrays, "nb/feature_log_prob", (2, self._width()))
-        class_log_prior = array(arrays, "nb/class_log_prior", (2,))
-        if np.any(feature_log_prob >= 0) or np.any(class_log_prior > 0):
-            raise ValueError("naive Bayes log-probabilities must be negative")
-        self.feature_log_prob = feature_log_prob.astype(np.float64)
-        self.class_log_prior = class_log_prior.astype(np.float64)
+        ones = array(arrays, "nb/ones", (2, self._width())).astype(np.float64)
+        class_weight = array(arrays, "nb/class_weight", (2,)).astype(np.float64)
+        if np.any(class_weight <= 0) or np.any(ones < 0) or np.any(ones > class_weight[:, None] * (1 + 1e-9)):
+            raise ValueError("naive Bayes counts must be positive per class, and no bit counted more often than its class")
+        self.ones, self.class_weight = ones, class_weight
+        self._probabilities()
         platt = array(arrays, "nb/platt", (2,))
         if platt[0] <= 0:
             raise ValueError("the Platt slope must be positive")

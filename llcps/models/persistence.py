@@ -46,10 +46,12 @@ from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import WorldModelEntry, world_model_entry
 from llcps.models.relational import Examples, pack_examples, unpack_examples
+from llcps.models.schedule import bins_trials
 from llcps.store.trial_changes import pack_atoms, pack_bodies
 
 if TYPE_CHECKING:
     from llcps.store import Store
+    from llcps.store.records import ModelArtifact
 
 logger = logging.getLogger(__name__)
 
@@ -246,17 +248,50 @@ def fit_or_load(
             return entry.load(stored.artifact, stored.meta, seed)
         except LlcpsError as exc:
             logger.warning("stored world model %s (id %s) is unusable, refitting: %s", name, stored.id, exc)
+    elif stored is not None and stored.meta.get("code") == model_code() and (stored.meta.get("goal", True) is True or not goal):
+        model = _extended(store, branch, entry, stored, seed, known)
+        if model is not None:
+            _save(store, branch, model, watermark, known)
+            return model
     if records is None or max((r.id for r in records), default=0) != watermark:
         records = store.visible_trials(branch)
     if changes is None or len(changes) != known:
         changes = store.visible_changes(branch)
     model = _fit(entry, seed, records, changes, goal, lambda: stored_examples(store, branch))
+    _save(store, branch, model, watermark, known)
+    return model
+
+
+def _extended(store: Store, branch: str, entry: WorldModelEntry, stored: ModelArtifact, seed: int, known: int) -> WorldModel | None:
+    """The stored model of a counting world model brought up to the trials ``branch``
+    sees by counting the ones after its watermark (:meth:`WorldModel.extend`), or None
+    when a fit is needed: the model does not count, the grown set fits bins of its own
+    (:mod:`llcps.models.schedule`), or the trials and changes up to the watermark are no
+    longer those it learned (deleted, or a backfill added changes)."""
+    if not entry.model_class().counting:
+        return None
+    trials = store.count_visible_trials(branch)
+    if not bins_trials(trials) == stored.meta.get("bins_trials") or not isinstance(stored.meta.get("changes"), int):
+        return None
+    try:
+        model = entry.load(stored.artifact, stored.meta, seed)
+    except LlcpsError as exc:
+        logger.warning("stored world model %s (id %s) is unusable, refitting: %s", entry.name, stored.id, exc)
+        return None
+    records = store.visible_trials(branch, after_id=stored.watermark)
+    changes = store.visible_changes(branch, after_id=stored.watermark)
+    if model.n_trials + len(records) != trials or stored.meta["changes"] + len(changes) != known or not model.can_extend(trials):
+        return None
+    return model.extend(records, changes)
+
+
+def _save(store: Store, branch: str, model: WorldModel, watermark: int, known: int) -> None:
+    """Store a fitted model on ``branch`` with its watermark, and the goal examples it encoded."""
     keep_examples(store, model)
     artifact, meta = model.to_artifact()
     meta["changes"] = known
     meta["code"] = model_code()
-    store.save_world_model(branch=branch, name=name, seed=seed, watermark=watermark, artifact=artifact, meta=meta)
-    return model
+    store.save_world_model(branch=branch, name=model.name, seed=model.seed, watermark=watermark, artifact=artifact, meta=meta)
 
 
 @dataclass(frozen=True)
