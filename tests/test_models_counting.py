@@ -13,6 +13,7 @@ from llcps.models.registry import world_model_entry
 from llcps.models.synthetic import synthetic_changes, synthetic_trials
 
 from tests.test_models_examples import add_toy_trials
+from tests.test_models_store import add_toy_trials as add_trials_without_changes
 
 
 #: The schedule's threshold in these tests: small, so that a few hundred toy trials pass it.
@@ -180,3 +181,23 @@ def test_the_life_bench_charges_an_episode_that_counts_its_share_of_the_full_fit
     assert early.refit == 0.0  # 20 trials before it: its own fit is a full fit
     assert late.refit > 0.0  # 90 before it, past the threshold: it counts, and pays a share
     assert late.overhead == pytest.approx(late.fit + late.rank + late.store + late.refit)
+
+
+def test_trials_written_while_a_fit_reads_are_not_counted_twice(store, candidates, monkeypatch):
+    add_toy_trials(store, 150, seed=1)
+    fit_or_load(store, "main", "nb", 0)
+    add_toy_trials(store, 10, seed=2)
+    count = store.count_visible_trials
+
+    def count_after_another_writer(branch, *args, **kwargs):  # another process writes after the watermark was read
+        monkeypatch.setattr(store, "count_visible_trials", count)
+        add_trials_without_changes(store, 5, seed=3)  # so that the count of changes does not tell
+        return count(branch, *args, **kwargs)
+
+    monkeypatch.setattr(store, "count_visible_trials", count_after_another_writer)
+    fit_or_load(store, "main", "nb", 0)
+    stored = store.latest_world_model("main", "nb", 0)  # what it learned is what its watermark says
+    assert stored.meta["n_trials"] == len([r for r in store.visible_trials("main") if r.id <= stored.watermark]) == 160
+    latest = fit_or_load(store, "main", "nb", 0)  # counts from whatever the first call stored
+    assert latest.n_trials == 165 == store.count_visible_trials("main")
+    assert_same_predictions(latest, fresh_fit(store, "main"), candidates, goal_query())

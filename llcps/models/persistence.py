@@ -249,25 +249,31 @@ def fit_or_load(
         except LlcpsError as exc:
             logger.warning("stored world model %s (id %s) is unusable, refitting: %s", name, stored.id, exc)
     elif stored is not None and stored.meta.get("code") == model_code() and (stored.meta.get("goal", True) is True or not goal):
-        model = _extended(store, branch, entry, stored, seed, known)
+        model = _extended(store, branch, entry, stored, seed, watermark, known)
         if model is not None:
             _save(store, branch, model, watermark, known)
             return model
     if records is None or max((r.id for r in records), default=0) != watermark:
         records = store.visible_trials(branch)
+        if records and records[-1].id > watermark:  # another writer's trials since: the model is of its watermark
+            records = [r for r in records if r.id <= watermark]
     if changes is None or len(changes) != known:
         changes = store.visible_changes(branch)
+        changes = {i: change for i, change in changes.items() if i <= watermark}
     model = _fit(entry, seed, records, changes, goal, lambda: stored_examples(store, branch))
     _save(store, branch, model, watermark, known)
     return model
 
 
-def _extended(store: Store, branch: str, entry: WorldModelEntry, stored: ModelArtifact, seed: int, known: int) -> WorldModel | None:
+def _extended(
+    store: Store, branch: str, entry: WorldModelEntry, stored: ModelArtifact, seed: int, watermark: int, known: int
+) -> WorldModel | None:
     """The stored model of a counting world model brought up to the trials ``branch``
-    sees by counting the ones after its watermark (:meth:`WorldModel.extend`), or None
-    when a fit is needed: the model does not count, the grown set fits bins of its own
-    (:mod:`llcps.models.schedule`), or the trials and changes up to the watermark are no
-    longer those it learned (deleted, or a backfill added changes)."""
+    sees up to ``watermark`` by counting the ones after its own (:meth:`WorldModel.extend`),
+    or None when a fit is needed: the model does not count, the grown set fits bins of
+    its own (:mod:`llcps.models.schedule`), the trials and changes up to its watermark
+    are no longer those it learned (deleted, or a backfill added changes), or trials
+    arrived past ``watermark`` while reading (another writer)."""
     if not entry.model_class().counting:
         return None
     trials = store.count_visible_trials(branch)
@@ -280,7 +286,13 @@ def _extended(store: Store, branch: str, entry: WorldModelEntry, stored: ModelAr
         return None
     records = store.visible_trials(branch, after_id=stored.watermark)
     changes = store.visible_changes(branch, after_id=stored.watermark)
-    if model.n_trials + len(records) != trials or stored.meta["changes"] + len(changes) != known or not model.can_extend(trials):
+    if (
+        model.n_trials + len(records) != trials
+        or stored.meta["changes"] + len(changes) != known
+        or (records and records[-1].id != watermark)
+        or any(trial_id > watermark for trial_id in changes)
+        or not model.can_extend(trials)
+    ):
         return None
     return model.extend(records, changes)
 
