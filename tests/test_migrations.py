@@ -250,3 +250,19 @@ def test_a_new_store_is_a_copy_of_the_migrated_schema_dated_now(tmp_path: Path) 
     assert (schema, settings) == contents(migrated)[:2]
     assert [row[:4] for row in main] == [row[:4] for row in contents(migrated)[2]] == [(1, "main", None, 0)]
     assert datetime.fromisoformat(main[0][4]) >= before  # dated when it was made, not when the image was
+
+
+def test_a_creator_that_loses_the_race_leaves_the_winners_store_as_it_is(tmp_path: Path, monkeypatch) -> None:
+    from llcps.store import backends
+
+    path = tmp_path / "raced.db"
+    with Store.open(str(path), create=True) as store:
+        store.create_branch("winners", from_branch="main", at=0)
+        dated = {b.name: b.created_at for b in store.list_branches()}
+    before = path.read_bytes()
+    assert backends.create_sqlite_file(path) is False  # the file is there by the time it links
+    assert path.read_bytes() == before
+    # both creators found no file; the winner's store is there when the loser links
+    monkeypatch.setattr(backends, "check_sqlite_file", lambda *args, **kwargs: False)
+    with Store.open(str(path), create=True) as store:
+        assert {b.name: b.created_at for b in store.list_branches()} == dated

@@ -148,13 +148,16 @@ def _read_application_id(path: Path) -> int:
         raise StoreError(f"cannot read {path}: {exc}", hint="check the file and its permissions; the file was left untouched") from exc
 
 
-def create_sqlite_file(path: Path, image: bytes | None = None) -> None:
+def create_sqlite_file(path: Path, image: bytes | None = None) -> bool:
     """Put a new SQLite file marked as an llcps store at ``path``, atomically.
 
     The file is empty, or holds ``image`` (the bytes of a database, see
     :func:`sqlite_image`). It is made under a temporary name in the same directory and
     hard-linked to ``path``; if ``path`` exists by then (another creator won), that
     file is kept.
+
+    Returns:
+        Whether the file at ``path`` is the one this call made.
     """
     try:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".new")
@@ -172,10 +175,12 @@ def create_sqlite_file(path: Path, image: bytes | None = None) -> None:
         try:
             os.link(tmp, path)
         except FileExistsError:
-            pass  # another creator made it first: open that one
+            return False  # another creator made it first: open that one
         except OSError:  # a filesystem without hard links: a rename that checks first
-            if not path.exists():
-                os.rename(tmp, path)
+            if path.exists():
+                return False
+            os.rename(tmp, path)
+        return True
     except (OSError, sqlite3.Error) as exc:
         raise StoreError(f"cannot create {path}: {exc}", hint="check that the directory is writable") from exc
     finally:

@@ -64,15 +64,15 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
         """
         url = backends.resolve_url(url_or_path)
         path = backends.sqlite_path(url)
-        image = None
+        copied = False  # made here from the image: its main is dated when the image was
         if path is not None and not backends.check_sqlite_file(path, create=create):
             image = _new_store_image()
-            backends.create_sqlite_file(path, image=image)
+            copied = backends.create_sqlite_file(path, image=image) and image is not None
         engine = backends.make_engine(url)
         store = cls(engine, url)
         try:
             store._check_schema(create=create, allow_outdated=allow_outdated)
-            if image is not None:
+            if copied:
                 store._stamp_main_branch()
         except SQLAlchemyError as exc:
             engine.dispose()
