@@ -111,6 +111,12 @@ def test_extending_a_fit_equals_fitting_the_whole_set(toy, candidates):
     # within an episode, a grown set is counted too
     updated = nb(records[:260], changes).update(records, changes)
     np.testing.assert_allclose(updated.predict_proba(candidates), whole.predict_proba(candidates), rtol=1e-12, atol=0)
+    loaded = world_model_entry("nb").load(*nb(records[:260], changes).to_artifact(), 0).update(records, changes)
+    np.testing.assert_allclose(loaded.predict_proba(candidates), whole.predict_proba(candidates), rtol=1e-12, atol=0)
+    # a caller that leaves a learned trial out gets the fit of the set it gives, not a count on top
+    without = [r for r in records if r.id != records[10].id]
+    left_out = nb(records[:260], changes).update(without, changes)
+    np.testing.assert_allclose(left_out.predict_proba(candidates), nb(without, changes).predict_proba(candidates), rtol=1e-12, atol=0)
 
 
 def test_a_fit_cannot_be_extended_into_bins_of_its_own_and_other_models_do_not_count(toy):

@@ -43,6 +43,9 @@ class EncodedWorldModel(WorldModel):
         #: Per Omega bit, how many trials learned from had it set (the prior's counts).
         self.outcome_sum = np.zeros(N_LABELS)
         self._table = TrialTable()
+        #: Ids of the trials learned, in order, where this process saw them (None: a stored
+        #: fit brought up by :meth:`extend`, whose trials are those its branch saw).
+        self._learned_ids: list[int | None] | None = []
 
     def _fit_outcome(self, records: Sequence[TrialRecord]) -> None:
         """Fit the encoder and the learner on every trial in ``records`` (a counting model:
@@ -60,9 +63,11 @@ class EncodedWorldModel(WorldModel):
             self._fit_encoded(features, outcomes[:bins])
         if bins < len(raw):
             self._count(raw[bins:], outcomes[bins:])
+        self._learned_ids = _ids(records)
 
     def _extend_outcome(self, records: Sequence[TrialRecord]) -> None:
         self._count(encode_inputs(records), outcome_matrix(records))
+        self._learned_ids = None
 
     def _count(self, raw: np.ndarray, outcomes: np.ndarray) -> None:
         """Add the counts of more trials, encoded by the fit's encoder; the learnable bits stay the fit's."""
@@ -86,7 +91,14 @@ class EncodedWorldModel(WorldModel):
         grown set.
         """
         if self.counting and len(records) > self.n_trials and bins_trials(len(records)) == self.bins:
-            self._extend_outcome(records[self.n_trials :])
+            ids = _ids(records)
+            # only a set that grew from the one learned (a caller may leave trials out)
+            if None not in ids and (self._learned_ids is None or ids[: self.n_trials] == self._learned_ids):
+                fresh = records[self.n_trials :]
+                self._count(encode_inputs(fresh), outcome_matrix(fresh))
+                self._learned_ids = ids
+                return
+            self._fit_outcome(records)
             return
         if not (self.learned.any() and self._can_continue()):
             self._fit_outcome(records)
@@ -164,10 +176,15 @@ class EncodedWorldModel(WorldModel):
         if np.any(outcome_sum < 0):
             raise ValueError("Omega bit counts must not be negative")
         model.outcome_sum = outcome_sum
+        model._learned_ids = None  # the trials its branch saw, as the caller's first update will show
         model.learned = array(arrays, "learned", (N_LABELS,), kind="b").astype(bool)
         if model.learned.any():
             model._import_learner(arrays, meta)
         return model
+
+
+def _ids(records: Sequence[TrialRecord]) -> list[int | None]:
+    return [getattr(r, "id", None) for r in records]
 
 
 class SklearnPerLabelModel(EncodedWorldModel):
