@@ -11,6 +11,11 @@ never depends on when its store was made. Artifacts load without executing anyth
 (see :mod:`llcps.models.artifact`); one that fails to load is refitted and replaced, with
 a warning.
 
+A stored model that is behind is fitted again on the whole training set, except a
+counting model (naive Bayes) whose bins still hold (:mod:`llcps.models.schedule`): it is
+brought up by adding the counts of the trials after its watermark, which reads those
+trials only, and gives the model a fit from nothing would.
+
 A fit of the goal-aware head reads every visible trial's encoded (candidate, atom)
 examples; they are encoded once, the first time a fit reads the trial, and kept in
 the store beside it (:func:`keep_examples`, :func:`stored_examples`), tagged with
