@@ -125,8 +125,44 @@ def test_a_fit_cannot_be_extended_into_bins_of_its_own_and_other_models_do_not_c
     assert not small.can_extend(300) and small.can_extend(127)
     with pytest.raises(LlcpsError, match="cannot count"):
         small.extend(records[100:], changes)
-    network = world_model_entry("logreg")(0).fit(records[:100], changes)
+    network = world_model_entry("nn")(0).fit(records[:100], changes)
     assert not network.can_extend(101)
+
+
+@pytest.mark.parametrize("name", ["logreg", "forest"])
+def test_a_scheduled_model_that_does_not_count_keeps_its_learner_and_counts_its_rates(toy, candidates, name):
+    records, changes = toy
+    query = goal_query()
+    entry = world_model_entry(name)
+    whole = entry(0).fit(records, changes)
+    first = entry(0).fit(records[:256], changes)
+    assert (whole.n_trials, whole.bins, whole.goal.bins) == (300, 256, 256)
+    # the learners are those of the first 256 trials: where a bit is learned, Omega is theirs
+    learned = whole.learned
+    np.testing.assert_array_equal(whole.predict_proba(candidates)[:, learned], first.predict_proba(candidates)[:, learned])
+    # the rates and priors count every trial
+    from llcps.models.features import outcome_matrix
+
+    np.testing.assert_allclose(whole.outcome_sum, outcome_matrix(records).sum(axis=0))
+    assert whole.goal.n_examples > first.goal.n_examples
+    # brought up by extend, in batches, it is the fit of the whole set
+    step = entry(0).fit(records[:260], changes).extend(records[260:281], changes).extend(records[281:], changes)
+    assert_same_predictions(step, whole, candidates, query)
+    # and within an episode, a grown set refits nothing
+    updated = entry(0).fit(records[:260], changes).update(records, changes)
+    np.testing.assert_allclose(updated.predict_proba(candidates), whole.predict_proba(candidates), rtol=1e-12, atol=0)
+
+
+def test_fit_or_load_brings_a_stored_logistic_regression_up_without_a_fit(store, candidates, monkeypatch):
+    add_toy_trials(store, 150, seed=1)
+    fit_or_load(store, "main", "logreg", 0)
+    add_toy_trials(store, 20, seed=2)
+    with monkeypatch.context() as m:
+        m.setattr(persistence, "_fit", no_fit)
+        extended = fit_or_load(store, "main", "logreg", 0)
+    fresh = world_model_entry("logreg")(0).fit(store.visible_trials("main"), store.visible_changes("main"))
+    assert extended.n_trials == 170
+    assert_same_predictions(extended, fresh, candidates, goal_query())
 
 
 def test_tampered_counts_are_rejected(toy):

@@ -38,13 +38,17 @@ class WorldModel(ABC):
         name: the registry name (descriptions live in the registry).
         seed: all randomness of fitting and predicting derives from it.
         n_trials: size of the training set of the last fit.
-        bins: how many of its first trials fitted the model's bins and calibration (a
-            counting model; :mod:`llcps.models.schedule`), else ``n_trials``.
+        bins: how many of its first trials fitted the model's bins, calibration and
+            learner (a scheduled model; :mod:`llcps.models.schedule`), else ``n_trials``.
         goal: the goal-aware head.
     """
 
     name: ClassVar[str]
-    #: Whether it learns more trials by adding their counts (:meth:`extend`).
+    #: Whether it fits its learner on the schedule of :mod:`llcps.models.schedule` and is
+    #: brought up to a grown set between its fits by :meth:`extend`.
+    scheduled: ClassVar[bool] = False
+    #: Whether :meth:`extend` adds the new trials' counts to the learner (else the
+    #: learner stays the fit's until the set doubles, and only rates and priors count).
     counting: ClassVar[bool] = False
 
     def __init__(self, seed: int) -> None:
@@ -82,20 +86,21 @@ class WorldModel(ABC):
 
     def can_extend(self, trials: int) -> bool:
         """Whether :meth:`extend` can bring the model up to a training set of ``trials``:
-        a counting model whose fit's bins are those of that set (:mod:`llcps.models.schedule`)."""
-        fits = self.counting and self.n_trials <= trials and bins_trials(trials) == self.bins
+        a scheduled model whose fit's bins are those of that set (:mod:`llcps.models.schedule`)."""
+        fits = self.scheduled and self.n_trials <= trials and bins_trials(trials) == self.bins
         return fits and (not self.has_goal or (self.goal.trials == self.n_trials and self.goal.bins == self.bins))
 
     def extend(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange] | None = None) -> WorldModel:
-        """Learn the trials after the fit's by adding their counts: the model a fit on the
-        whole set would give (:mod:`llcps.models.schedule`), for a few trials' work.
+        """Learn the trials after the fit's by adding their counts (a counting model's
+        learner; every scheduled model's rates and priors): the model a fit on the whole
+        set would give (:mod:`llcps.models.schedule`), for a few trials' work.
 
         Args:
             records: the trials the training set gained since the fit, in id order.
             changes: their known symbolic changes by trial id.
 
         Raises:
-            LlcpsError: the model cannot (:meth:`can_extend`): it does not count, or the
+            LlcpsError: the model cannot (:meth:`can_extend`): it is not scheduled, or the
                 grown set fits bins of its own.
         """
         if not self.can_extend(self.n_trials + len(records)):
@@ -141,7 +146,7 @@ class WorldModel(ABC):
         self._fit_outcome(records)
 
     def _extend_outcome(self, records: Sequence[TrialRecord]) -> None:
-        """Add the counts of more trials to the Omega predictor's (a counting model only)."""
+        """Add the counts of more trials to the Omega predictor's (a scheduled model only)."""
         raise NotImplementedError(f"world model {self.name!r} does not count")
 
     @abstractmethod

@@ -106,6 +106,7 @@ class LogisticRegressionModel(SklearnPerLabelModel):
     """L2-regularized logistic regression, one per Omega bit."""
 
     name: ClassVar[str] = "logreg"
+    scheduled: ClassVar[bool] = True
 
     state_shapes: ClassVar[Mapping[str, tuple[int | str, ...]]] = {
         "classes_": (2,),
@@ -124,6 +125,7 @@ class LogisticGoal(GoalLearner):
     """Weighted L2 logistic regression on standardized (candidate, atom) rows."""
 
     name: ClassVar[str] = "logreg"
+    scheduled: ClassVar[bool] = True
 
     def __init__(self, seed: int) -> None:
         super().__init__(seed)
@@ -159,6 +161,7 @@ class RandomForestModel(EncodedWorldModel):
     """
 
     name: ClassVar[str] = "forest"
+    scheduled: ClassVar[bool] = True
     n_estimators: ClassVar[int] = 100
 
     def _goal_learner(self) -> GoalLearner:
@@ -211,6 +214,7 @@ class ForestGoal(GoalLearner):
     """
 
     name: ClassVar[str] = "forest"
+    scheduled: ClassVar[bool] = True
     n_estimators: ClassVar[int] = 100
     #: Leaves hold at least this many examples: probabilities, not memorized labels.
     min_samples_leaf: ClassVar[int] = 3

@@ -106,7 +106,9 @@ class GoalLearner(ABC):
 
     #: Name in the artifact (the model's own name).
     name: ClassVar[str]
-    #: Whether it learns more rows by adding their counts (:meth:`extend`; :mod:`llcps.models.schedule`).
+    #: Whether it is fitted on the schedule of :mod:`llcps.models.schedule`, and whether
+    #: it then learns more rows by adding their counts (:meth:`extend`).
+    scheduled: ClassVar[bool] = False
     counting: ClassVar[bool] = False
 
     def __init__(self, seed: int) -> None:
@@ -117,8 +119,10 @@ class GoalLearner(ABC):
         """Fit on raw rows (n, d), 0/1 labels with both classes present, positive weights."""
 
     def extend(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
-        """Learn more rows by adding their counts to the fit's (a :attr:`counting` learner only)."""
-        raise NotImplementedError(f"the {self.name} goal learner does not count")
+        """Learn more rows by adding their counts to the fit's (a :attr:`counting` learner);
+        a scheduled learner that does not count stays the fit's until the set doubles."""
+        if not self.scheduled:
+            raise NotImplementedError(f"the {self.name} goal learner is not scheduled")
 
     @abstractmethod
     def predict(self, features: np.ndarray) -> np.ndarray:
@@ -159,6 +163,7 @@ class StratifiedLearner(GoalLearner):
         super().__init__(seed)
         made = make(seed)
         self.name = made.name  # type: ignore[misc]
+        self.scheduled = made.scheduled  # type: ignore[misc]
         self.counting = made.counting  # type: ignore[misc]
         self._make = make
         self.priors = np.full(N_ACTION_STRATA, 0.5)
@@ -197,8 +202,9 @@ class StratifiedLearner(GoalLearner):
         self._rates()
 
     def extend(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
-        """Add more rows: to the strata's sums, and to the sub-learners of their strata
-        (a stratum without one stays without: which strata learn is the fit's)."""
+        """Add more rows: to the strata's sums, and (counting learners) to the
+        sub-learners of their strata (a stratum without one stays without: which strata
+        learn is the fit's)."""
         if not len(labels):
             return
         strata = action_stratum_of(features)
@@ -210,7 +216,7 @@ class StratifiedLearner(GoalLearner):
         self.stratum_sums = self.stratum_sums + np.stack(
             [np.bincount(strata, changed, N_ACTION_STRATA), np.bincount(strata, weights, N_ACTION_STRATA)], axis=1
         )
-        for groups, subs in ((strata, self.subs), (signs, self.backoffs)):
+        for groups, subs in ((strata, self.subs), (signs, self.backoffs)) if self.counting else ():
             for k, sub in subs.items():
                 rows = groups == k
                 if rows.any():
@@ -369,10 +375,10 @@ class GoalHead:
     def fit(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalHead:
         """Fit the learner on every record with a known change; forget episode evidence.
 
-        A counting learner fits its bins on the first :func:`~llcps.models.schedule.bins_trials`
-        records and counts the rest (:meth:`extend`); any other learner fits on all of them.
+        A scheduled learner fits on the first :func:`~llcps.models.schedule.bins_trials`
+        records and the rest are counted (:meth:`extend`); any other learner fits on all of them.
         """
-        bins = bins_trials(len(records)) if self.learner.counting else len(records)
+        bins = bins_trials(len(records)) if self.learner.scheduled else len(records)
         examples = self.table.encode(records[:bins], changes)
         self.n_examples = len(examples)
         self.trials = self.bins = bins
@@ -395,11 +401,12 @@ class GoalHead:
         return self
 
     def extend(self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange]) -> GoalHead:
-        """Learn trials after the fit's by adding their counts (a counting learner; the
-        bins and calibration stay the fit's: :mod:`llcps.models.schedule`); forget episode evidence.
+        """Learn trials after the fit's by adding their counts (the rates, and a counting
+        learner's counts; the bins and calibration stay the fit's: :mod:`llcps.models.schedule`);
+        forget episode evidence.
 
         Raises:
-            NotImplementedError: the learner does not count.
+            NotImplementedError: the learner is not scheduled.
         """
         examples = self.table.encode(records, changes)
         self.trials += len(records)

@@ -48,10 +48,10 @@ class EncodedWorldModel(WorldModel):
         self._learned_ids: list[int | None] | None = []
 
     def _fit_outcome(self, records: Sequence[TrialRecord]) -> None:
-        """Fit the encoder and the learner on every trial in ``records`` (a counting model:
+        """Fit the encoder and the learner on every trial in ``records`` (a scheduled model:
         on the first :func:`~llcps.models.schedule.bins_trials` of them, the rest counted)."""
         raw, outcomes = self._table.encode(records)
-        bins = bins_trials(len(raw)) if self.counting else len(raw)
+        bins = bins_trials(len(raw)) if self.scheduled else len(raw)
         self.n_trials = self.bins = bins
         self.encoder = FeatureEncoder()
         features = self.encoder.fit_transform(raw[:bins])
@@ -70,11 +70,12 @@ class EncodedWorldModel(WorldModel):
         self._learned_ids = None
 
     def _count(self, raw: np.ndarray, outcomes: np.ndarray) -> None:
-        """Add the counts of more trials, encoded by the fit's encoder; the learnable bits stay the fit's."""
+        """Add the counts of more trials, encoded by the fit's encoder, to the prior and
+        (a counting model) the learner; the learnable bits stay the fit's."""
         self.outcome_sum = self.outcome_sum + outcomes.sum(axis=0, dtype=np.float64)
         self.n_trials += len(raw)
         self.prior = (self.outcome_sum + 1.0) / (self.n_trials + 2.0)
-        if self.learned.any() and len(raw):
+        if self.counting and self.learned.any() and len(raw):
             self._extend_encoded(self.encoder.transform(raw), outcomes)
 
     def _extend_encoded(self, features: np.ndarray, outcomes: np.ndarray) -> None:
@@ -82,7 +83,7 @@ class EncodedWorldModel(WorldModel):
         raise NotImplementedError(f"world model {self.name!r} does not count")
 
     def _update_outcome(self, records: Sequence[TrialRecord]) -> None:
-        """Count the new trials if the model counts and the grown set keeps its bins
+        """Count the new trials if the model is scheduled and the grown set keeps its bins
         (:mod:`llcps.models.schedule`); else continue from the current fit if the learner
         can (:meth:`_can_continue`); else refit.
 
@@ -90,7 +91,7 @@ class EncodedWorldModel(WorldModel):
         they meant when it was trained; the label prior and the learnable bits follow the
         grown set.
         """
-        if self.counting and len(records) > self.n_trials and bins_trials(len(records)) == self.bins:
+        if self.scheduled and len(records) > self.n_trials and bins_trials(len(records)) == self.bins:
             ids = _ids(records)
             # only a set that grew from the one learned (a caller may leave trials out)
             if None not in ids and (self._learned_ids is None or ids[: self.n_trials] == self._learned_ids):

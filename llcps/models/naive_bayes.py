@@ -42,6 +42,7 @@ class NaiveBayesModel(EncodedWorldModel):
     """
 
     name: ClassVar[str] = "nb"
+    scheduled: ClassVar[bool] = True
     counting: ClassVar[bool] = True
     alpha: ClassVar[float] = 1.0
 
@@ -129,6 +130,7 @@ class NaiveBayesGoal(GoalLearner):
     """
 
     name: ClassVar[str] = "nb"
+    scheduled: ClassVar[bool] = True
     counting: ClassVar[bool] = True
     alpha: ClassVar[float] = 1.0
     quantiles: ClassVar[tuple[float, ...]] = (0.25, 0.5, 0.75)

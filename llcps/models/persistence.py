@@ -12,9 +12,9 @@ never depends on when its store was made. Artifacts load without executing anyth
 a warning.
 
 A stored model that is behind is fitted again on the whole training set, except a
-counting model (naive Bayes) whose bins still hold (:mod:`llcps.models.schedule`): it is
-brought up by adding the counts of the trials after its watermark, which reads those
-trials only, and gives the model a fit from nothing would.
+scheduled model whose bins still hold (:mod:`llcps.models.schedule`): it is brought up
+by adding the counts of the trials after its watermark, which reads those trials only,
+and gives the model a fit from nothing would.
 
 A fit of the goal-aware head reads every visible trial's encoded (candidate, atom)
 examples; they are encoded once, the first time a fit reads the trial, and kept in
@@ -273,13 +273,13 @@ def fit_or_load(
 def _extended(
     store: Store, branch: str, entry: WorldModelEntry, stored: ModelArtifact, seed: int, watermark: int, known: int
 ) -> WorldModel | None:
-    """The stored model of a counting world model brought up to the trials ``branch``
+    """The stored model of a scheduled world model brought up to the trials ``branch``
     sees up to ``watermark`` by counting the ones after its own (:meth:`WorldModel.extend`),
     or None when a fit is needed: the model does not count, the grown set fits bins of
     its own (:mod:`llcps.models.schedule`), the trials and changes up to its watermark
     are no longer those it learned (deleted, or a backfill added changes), or trials
     arrived past ``watermark`` while reading (another writer)."""
-    if not entry.model_class().counting:
+    if not entry.model_class().scheduled:
         return None
     trials = store.count_visible_trials(branch)
     if not bins_trials(trials) == stored.meta.get("bins_trials") or not isinstance(stored.meta.get("changes"), int):
