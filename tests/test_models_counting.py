@@ -119,14 +119,14 @@ def test_extending_a_fit_equals_fitting_the_whole_set(toy, candidates):
     np.testing.assert_allclose(left_out.predict_proba(candidates), nb(without, changes).predict_proba(candidates), rtol=1e-12, atol=0)
 
 
-def test_a_fit_cannot_be_extended_into_bins_of_its_own_and_other_models_do_not_count(toy):
+def test_a_fit_cannot_be_extended_into_bins_of_its_own_nor_an_unscheduled_model(toy):
     records, changes = toy
     small = nb(records[:100], changes)  # bins of 64; 300 trials need bins of 256
     assert not small.can_extend(300) and small.can_extend(127)
     with pytest.raises(LlcpsError, match="cannot count"):
         small.extend(records[100:], changes)
-    network = world_model_entry("nn")(0).fit(records[:100], changes)
-    assert not network.can_extend(101)
+    unscheduled = world_model_entry("random")(0).fit(records[:100], changes)
+    assert not unscheduled.can_extend(101)
 
 
 @pytest.mark.parametrize("name", ["logreg", "forest"])
@@ -151,18 +151,6 @@ def test_a_scheduled_model_that_does_not_count_keeps_its_learner_and_counts_its_
     # and within an episode, a grown set refits nothing
     updated = entry(0).fit(records[:260], changes).update(records, changes)
     np.testing.assert_allclose(updated.predict_proba(candidates), whole.predict_proba(candidates), rtol=1e-12, atol=0)
-
-
-def test_fit_or_load_brings_a_stored_logistic_regression_up_without_a_fit(store, candidates, monkeypatch):
-    add_toy_trials(store, 150, seed=1)
-    fit_or_load(store, "main", "logreg", 0)
-    add_toy_trials(store, 20, seed=2)
-    with monkeypatch.context() as m:
-        m.setattr(persistence, "_fit", no_fit)
-        extended = fit_or_load(store, "main", "logreg", 0)
-    fresh = world_model_entry("logreg")(0).fit(store.visible_trials("main"), store.visible_changes("main"))
-    assert extended.n_trials == 170
-    assert_same_predictions(extended, fresh, candidates, goal_query())
 
 
 def test_tampered_counts_are_rejected(toy):
@@ -243,3 +231,54 @@ def test_trials_written_while_a_fit_reads_are_not_counted_twice(store, candidate
     latest = fit_or_load(store, "main", "nb", 0)  # counts from whatever the first call stored
     assert latest.n_trials == 165 == store.count_visible_trials("main")
     assert_same_predictions(latest, fresh_fit(store, "main"), candidates, goal_query())
+
+
+def test_the_network_learns_a_grown_set_by_a_warm_start_beside_a_bounded_replay(toy, candidates):
+    from llcps.models.artifact import pack_arrays, unpack_arrays
+    from llcps.models.features import outcome_matrix
+    from llcps.models.neural import REPLAY_ROWS
+
+    records, changes = toy
+    entry = world_model_entry("nn")
+    first = entry(0).fit(records[:260], changes)  # bins of the first 256 trials
+    step = entry(0).fit(records[:260], changes)
+    for start in range(260, 300, 10):
+        step.extend(records[start : start + 10], changes)
+    assert (step.n_trials, step.goal.trials) == (300, 300)
+    assert len(step.replay["priority"]) <= REPLAY_ROWS and len(step.goal.learner.replay["priority"]) <= REPLAY_ROWS
+    assert not np.allclose(step.predict_proba(candidates), first.predict_proba(candidates))  # it learned
+    again = entry(0).fit(records[:260], changes)
+    for start in range(260, 300, 10):
+        again.extend(records[start : start + 10], changes)
+    np.testing.assert_array_equal(again.predict_proba(candidates), step.predict_proba(candidates))  # deterministic
+    # held out, it is within a tenth of a fit of the whole set (Brier score)
+    held = synthetic_trials(500, seed=77)
+    truth = outcome_matrix(held)
+    whole = entry(0).fit(records, changes)
+    brier = [float(((m.predict_proba(held) - truth) ** 2).mean()) for m in (step, whole)]
+    assert abs(brier[0] - brier[1]) <= 0.1 * brier[1], brier
+    # the replay is stored with the weights, and checked when read
+    artifact, meta = step.to_artifact()
+    loaded = entry.load(artifact, meta, 0)
+    np.testing.assert_array_equal(loaded.predict_proba(candidates), step.predict_proba(candidates))
+    arrays = dict(unpack_arrays(artifact))
+    arrays["goal/replay/labels"] = arrays["goal/replay/labels"] + 2
+    data = pack_arrays(arrays)
+    import hashlib
+
+    with pytest.raises(LlcpsError, match="replayed"):
+        entry.load(data, {**meta, "sha256": hashlib.sha256(data).hexdigest()}, 0)
+
+
+@pytest.mark.parametrize("name", ["logreg", "nn"])
+def test_fit_or_load_brings_a_stored_model_of_any_scheduled_kind_up_without_a_fit(store, candidates, monkeypatch, name):
+    add_toy_trials(store, 150, seed=1)
+    fit_or_load(store, "main", name, 0)
+    add_toy_trials(store, 20, seed=2)
+    with monkeypatch.context() as m:
+        m.setattr(persistence, "_fit", no_fit)
+        extended = fit_or_load(store, "main", name, 0)
+    assert extended.n_trials == 170 == store.latest_world_model("main", name, 0).meta["n_trials"]
+    if name == "logreg":  # it only counts its rates and priors: the fit of the whole set
+        fresh = world_model_entry(name)(0).fit(store.visible_trials("main"), store.visible_changes("main"))
+        assert_same_predictions(extended, fresh, candidates, goal_query())

@@ -9,15 +9,17 @@ life costs a pass over the whole training set at every episode.
 
 So a *scheduled* model (one that declares ``scheduled``) fits them, and its learner,
 on the first :func:`bins_trials` trials of its training set and counts the rest: a
-*counting* one (naive Bayes) into its learner too, the others (logistic regression,
-the forest) into their rates and priors only, their learner staying the fit's until
-the set doubles. Up to :data:`FULL_FIT_TRIALS` trials that is the whole set, and the
+*counting* one (naive Bayes) into its learner too; logistic regression and the forest
+into their rates and priors only, their learner staying the fit's until the set
+doubles; the network into its rates and priors, learning the new trials by a warm
+start beside a bounded replay (:mod:`llcps.models.neural`). Up to :data:`FULL_FIT_TRIALS` trials that is the whole set, and the
 model is exactly the full fit. Past it, the bins are those of the first ``FULL_FIT_TRIALS * 2^k`` trials, the
 largest such prefix the set has, so they are fitted again each time the set doubles, and
 an episode in between learns its new trials by adding their counts. What a model
 predicts is a function of its training set alone, whichever way it was reached: a fit
 on the whole set from nothing, or a stored fit brought up to it by counting (the same
-sums, added in another order: equal to the last bits of a float).
+sums, added in another order: equal to the last bits of a float); the network's warm
+starts are the exception, and depend on how the set grew.
 """
 
 from __future__ import annotations
