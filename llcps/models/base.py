@@ -249,8 +249,12 @@ def label_prior(outcomes: np.ndarray) -> np.ndarray:
     What a model predicts for a bit it cannot learn: with no trials every bit is
     0.5; a bit never (always) seen in n trials is 1/(n+2) ((n+1)/(n+2)).
     """
-    n = len(outcomes)
-    return (outcomes.sum(axis=0, dtype=np.float64) + 1.0) / (n + 2.0)
+    return prior_of_counts(outcomes.sum(axis=0, dtype=np.float64), len(outcomes))
+
+
+def prior_of_counts(sums: np.ndarray, n: int) -> np.ndarray:
+    """:func:`label_prior` from its counts: per bit, the trials with it set, of ``n``."""
+    return (sums + 1.0) / (n + 2.0)
 
 
 def learnable_labels(outcomes: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 from llcps.domain import OUTCOME_NAMES
 from llcps.trial_records import TrialRecord, WorldModelInput
 from llcps.models.artifact import array
-from llcps.models.base import WorldModel, label_prior, learnable_labels
+from llcps.models.base import WorldModel, label_prior, learnable_labels, prior_of_counts
 from llcps.models.schedule import bins_trials
 from llcps.models.features import (
     CONTINUOUS_COLUMNS,
@@ -56,7 +56,7 @@ class EncodedWorldModel(WorldModel):
         self.encoder = FeatureEncoder()
         features = self.encoder.fit_transform(raw[:bins])
         self.outcome_sum = outcomes[:bins].sum(axis=0, dtype=np.float64)
-        self.prior = label_prior(outcomes[:bins])
+        self.prior = prior_of_counts(self.outcome_sum, bins)
         self.learned = learnable_labels(outcomes[:bins])
         self._reset()
         if self.learned.any():
@@ -74,7 +74,7 @@ class EncodedWorldModel(WorldModel):
         (a counting model) the learner; the learnable bits stay the fit's."""
         self.outcome_sum = self.outcome_sum + outcomes.sum(axis=0, dtype=np.float64)
         self.n_trials += len(raw)
-        self.prior = (self.outcome_sum + 1.0) / (self.n_trials + 2.0)
+        self.prior = prior_of_counts(self.outcome_sum, self.n_trials)
         if self.counting and self.learned.any() and len(raw):
             self._extend_encoded(self.encoder.transform(raw), outcomes)
 

@@ -54,6 +54,8 @@ def warm_rows(replay: Mapping[str, np.ndarray], new: int, generator: torch.Gener
 def warm_steps(rows: int, batch: int) -> int:
     """Minibatch steps of a warm start on ``rows`` rows: :data:`WARM_EPOCHS` passes."""
     return WARM_EPOCHS * math.ceil(rows / min(batch, rows))
+
+
 _MASK64 = (1 << 64) - 1
 
 
@@ -67,9 +69,13 @@ def replay_priority(seed: int, positions: np.ndarray) -> np.ndarray:
         return x ^ (x >> np.uint64(31))
 
 
-def kept_replay(replay: Mapping[str, np.ndarray] | None, rows: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The :data:`REPLAY_ROWS` rows of smallest ``priority`` among ``replay``'s and ``rows``
-    (arrays of one length per key, ``priority`` among them), in their order."""
+def grown_replay(
+    seed: int, replay: Mapping[str, np.ndarray] | None, first: int, rows: Mapping[str, np.ndarray]
+) -> dict[str, np.ndarray]:
+    """The :data:`REPLAY_ROWS` rows of smallest priority among ``replay``'s and ``rows``
+    (arrays of one length, the rows learned from position ``first`` on), in their order."""
+    n = len(next(iter(rows.values())))
+    rows = {"priority": replay_priority(seed, np.arange(first, first + n)), **rows}
     merged = {k: v if replay is None else np.concatenate([replay[k], v]) for k, v in rows.items()}
     keep = np.sort(np.argsort(merged["priority"], kind="stable")[:REPLAY_ROWS])
     return {k: v[keep] for k, v in merged.items()}
@@ -182,12 +188,10 @@ class NeuralNetworkModel(EncodedWorldModel):
                 network, features, outcomes, generator, max_steps=self.max_steps, learning_rate=self.learning_rate
             )
         self._network = network
-        self.replay = self._replay_of(None, features, outcomes, 0)
+        self.replay = self._grown_replay(None, 0, features, outcomes)
 
-    def _replay_of(self, replay: dict[str, np.ndarray] | None, features: np.ndarray, outcomes: np.ndarray, first: int) -> dict[str, np.ndarray]:
-        positions = np.arange(first, first + len(features))
-        rows = {"priority": replay_priority(self.seed, positions), "features": features.astype(np.float32), "outcomes": outcomes.astype(np.uint8)}
-        return kept_replay(replay, rows)
+    def _grown_replay(self, replay: dict[str, np.ndarray] | None, first: int, features: np.ndarray, outcomes: np.ndarray) -> dict[str, np.ndarray]:
+        return grown_replay(self.seed, replay, first, {"features": features.astype(np.float32), "outcomes": outcomes.astype(np.uint8)})
 
     def _count(self, raw: np.ndarray, outcomes: np.ndarray) -> None:
         """Count the new trials into the prior, and learn them by a warm start beside the replay."""
@@ -207,7 +211,7 @@ class NeuralNetworkModel(EncodedWorldModel):
                 max_steps=min(self.max_steps, warm_steps(len(raw) + len(old), self.batch_size)),
                 learning_rate=self.learning_rate * self.update_lr_fraction,
             )
-        self.replay = self._replay_of(self.replay, features, outcomes, first)
+        self.replay = self._grown_replay(self.replay, first, features, outcomes)
 
     def _can_continue(self) -> bool:
         return self._network is not None
@@ -347,7 +351,7 @@ class NeuralGoal(GoalLearner):
             self._train(network, features, labels, weights, generator, max_steps=self.max_steps, learning_rate=self.learning_rate)
         self._network = network
         self.rows = len(labels)
-        self.replay = self._replay_of(None, features, labels, weights, 0)
+        self.replay = self._grown_replay(None, 0, features, labels, weights)
 
     def extend(self, features: np.ndarray, labels: np.ndarray, weights: np.ndarray) -> None:
         """A warm start: a short run from the current weights on the new rows beside the replay."""
@@ -365,19 +369,14 @@ class NeuralGoal(GoalLearner):
                 max_steps=min(self.max_steps, warm_steps(len(labels) + len(old), self.batch_size)),
                 learning_rate=self.learning_rate * self.update_lr_fraction,
             )
-        self.replay = self._replay_of(self.replay, features, labels, weights, self.rows)
+        self.replay = self._grown_replay(self.replay, self.rows, features, labels, weights)
         self.rows += len(labels)
 
-    def _replay_of(
-        self, replay: dict[str, np.ndarray] | None, features: np.ndarray, labels: np.ndarray, weights: np.ndarray, first: int
+    def _grown_replay(
+        self, replay: dict[str, np.ndarray] | None, first: int, features: np.ndarray, labels: np.ndarray, weights: np.ndarray
     ) -> dict[str, np.ndarray]:
-        rows = {
-            "priority": replay_priority(self.seed, np.arange(first, first + len(labels))),
-            "features": features.astype(np.float64),
-            "labels": labels.astype(np.uint8),
-            "weights": weights.astype(np.float64),
-        }
-        return kept_replay(replay, rows)
+        columns = {"features": features.astype(np.float64), "labels": labels.astype(np.uint8), "weights": weights.astype(np.float64)}
+        return grown_replay(self.seed, replay, first, columns)
 
     def _train(
         self,
