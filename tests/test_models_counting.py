@@ -210,7 +210,8 @@ def test_the_life_bench_charges_an_episode_that_counts_its_share_of_the_full_fit
     assert (early.trials, late.trials) == (30, 100)
     assert early.refit == 0.0  # 20 trials before it: its own fit is a full fit
     assert late.refit > 0.0  # 90 before it, past the threshold: it counts, and pays a share
-    assert late.overhead == pytest.approx(late.fit + late.rank + late.store + late.refit)
+    assert late.overhead == pytest.approx(late.fit + late.rank + late.store + late.update + late.refit)
+    assert late.update > 0.0  # each trial brings the model up to it
 
 
 def test_trials_written_while_a_fit_reads_are_not_counted_twice(store, candidates, monkeypatch):

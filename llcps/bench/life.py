@@ -4,9 +4,12 @@ A synthetic life (:mod:`llcps.models.synthetic`: toy trials and changes, no phys
 of :data:`TRIALS_PER_EPISODE` trials per episode. At episode ``k`` the store holds the
 trials of the episodes before it, and the episode before it has fitted its world model
 (so what a life keeps between episodes, the stored model and encoded examples, is
-there). The episode's overhead is measured as a real episode spends it: the fit of the
-goal-directed world model at the episode's start (``fit``), encoding and ranking every
-candidate of a toy failure (``rank``), and writing the episode's trials (``store``).
+there). The episode's overhead is measured as a real episode spends it: taking its
+training set and fitting the goal-directed world model at the episode's start (``fit``),
+then per trial as exploration does, encoding and ranking every candidate of a toy
+failure (``rank``), writing the trial (``store``) and bringing the model up to it
+(``update``). An episode reads the store's trials only when its fit needs them
+(:class:`~llcps.trial_records.TrainingSet`).
 Past :data:`~llcps.models.schedule.FULL_FIT_TRIALS` trials an episode's fit counts its
 new trials into the stored model, and a full fit comes once each time the training set
 doubles (:mod:`llcps.models.schedule`); its cost, measured as the fit of the episode
@@ -25,7 +28,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import partial
 from pathlib import Path
 
@@ -72,12 +75,14 @@ class EpisodeCost:
     fit: float
     rank: float
     store: float
+    #: The world model's updates, one per trial.
+    update: float = 0.0
     #: The episode's share of the full fit that comes once per doubling of the training set.
     refit: float = 0.0
 
     @property
     def overhead(self) -> float:
-        return self.fit + self.rank + self.store + self.refit
+        return self.fit + self.rank + self.store + self.update + self.refit
 
     def as_json(self) -> dict[str, float]:
         return {**asdict(self), "overhead": self.overhead}
@@ -133,17 +138,25 @@ def episode_cost(
     """
     clear_fits()  # no fit of this process is reused: a life's processes do not share memory
     with Clock() as fit:
-        model = fit_or_load(store, "main", MODEL, 0)
-    with Clock() as ranking:
-        rank(model.predict_proba(inputs), MEASURE, seed=episode, goal=model.predict_goal(query))
-    records, changes = _episode_trials(episode)
-    with Clock() as storing:
-        for record, change in zip(records, changes):
-            store.add_trial(record, change=change)
-    trials = store.count_visible_trials("main")
+        records, changes = store.training_set("main")
+        model = fit_or_load(store, "main", MODEL, 0, records=records, changes=changes)
+    ranking = storing = updating = 0.0
+    for record, change in zip(*_episode_trials(episode)):  # as exploration does: rank, try, learn
+        with Clock() as clock:
+            rank(model.predict_proba(inputs), MEASURE, seed=episode, goal=model.predict_goal(query))
+        ranking += clock.cpu
+        with Clock() as clock:
+            trial_id = store.add_trial(record, change=change)
+            records.append(replace(record, id=trial_id))
+            changes[trial_id] = replace(change, trial_id=trial_id)
+        storing += clock.cpu
+        with Clock() as clock:
+            model.update(records, changes)
+        updating += clock.cpu
+    trials = len(records)
     before = trials - TRIALS_PER_EPISODE
     refit = 0.0 if before <= FULL_FIT_TRIALS else full_fit * TRIALS_PER_EPISODE / bins_trials(before)
-    return EpisodeCost(episode, trials, fit.cpu, ranking.cpu, storing.cpu, refit)
+    return EpisodeCost(episode, trials, fit.cpu, ranking, storing, updating, refit)
 
 
 def live(episodes: Sequence[int], progress: Progress | None = None, *, path: Path | None = None) -> list[EpisodeCost]:
@@ -211,14 +224,15 @@ def run(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
     for cost in costs:
         subject = f"episode{cost.episode}"
         note = (
-            f"{cost.trials:,} trials; {MODEL} fit {cost.fit:.3f} s, rank {cost.rank:.3f} s, store {cost.store:.3f} s, "
-            f"share of the full fit per doubling {cost.refit:.4f} s"
+            f"{cost.trials:,} trials; {MODEL} fit {cost.fit:.3f} s, {TRIALS_PER_EPISODE} trials' rank {cost.rank:.3f} s, "
+            f"store {cost.store:.3f} s, update {cost.update:.3f} s, share of the full fit per doubling {cost.refit:.4f} s"
         )
         figures += [
             _figure("overhead", cost.overhead, "s CPU", subject=subject, note=note),
             _figure("fit", cost.fit, "s CPU", subject=subject),
             _figure("rank", cost.rank, "s CPU", subject=subject),
             _figure("store", cost.store, "s CPU", subject=subject),
+            _figure("update", cost.update, "s CPU", subject=subject),
             _figure("refit", cost.refit, "s CPU", subject=subject),
         ]
     first, last = costs[0], costs[-1]

@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from llcps.sim.cache import PhysicsCache
     from llcps.store import Store
     from llcps.symbolic.knowledge_base import KnowledgeBase
-    from llcps.trial_records import TrialRecord
+    from llcps.trial_records import TrainingSet
 
 DEFAULT_BUDGET = 300
 #: Largest exploration budget (and refit interval) accepted: far beyond any candidate space.
@@ -233,12 +233,13 @@ def solve(
 
     # The run starts with the command: reading the trials and fitting the model count.
     started_at = utc_now()
-    # What the store holds is read (and checked) first: a malformed row stops the
-    # episode before it writes anything (a refitted model, its run).
+    # What the store holds is read (and checked) as the fit reads it, before the episode
+    # writes anything (a refitted model, its run): a malformed row stops it there. An
+    # episode that counts its new trials into a stored model reads only those
+    # (:class:`~llcps.trial_records.TrainingSet`), the rest having been read by the fits before.
     if progress is not None:
         progress(f"fit world model {config.model}", 0, 0)
-    records = list(store.visible_trials(branch_name))
-    changes = store.visible_changes(branch_name)
+    records, changes = store.training_set(branch_name)
     goal = get_measure(config.measure).uses_goal  # a measure ranking by Omega alone needs no goal head
     kb = load_knowledge(store, branch_name)  # before the fit, which may store a model
     model = fit_or_load(store, branch_name, config.model, config.fit_seed, records=records, changes=changes, goal=goal)
@@ -396,14 +397,14 @@ def _explore(
     found.status = "budget_exhausted"
 
 
-def _taken(records: list[TrialRecord], trial_ids: Mapping[int, int | None], only: Collection[int] | None) -> list[TrialRecord]:
+def _taken(records: TrainingSet, trial_ids: Mapping[int, int | None], only: Collection[int] | None) -> TrainingSet:
     """The training set with this episode's exploration trials of candidates outside
     ``only`` left out (None: nothing left out)."""
     if only is None:
         return records
     kept = set(only)
     left_out = {trial_id for index, trial_id in trial_ids.items() if index not in kept and trial_id is not None}
-    return [r for r in records if r.id not in left_out] if left_out else records
+    return records.without(left_out) if left_out else records
 
 
 def _config_json(config: SolveConfig) -> dict[str, Any]:

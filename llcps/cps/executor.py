@@ -21,13 +21,14 @@ from __future__ import annotations
 import hashlib
 import time
 from collections import OrderedDict
+from collections.abc import MutableMapping
 from dataclasses import dataclass, replace
 from typing import Any, Callable, Hashable, TypeVar
 
 import numpy as np
 
 from llcps.domain import PUSH_DIRECTION, ControllerParams, State
-from llcps.trial_records import TrialChange, TrialRecord, TrialSpec
+from llcps.trial_records import TrainingSet, TrialChange, TrialRecord, TrialSpec
 from llcps.errors import LlcpsError
 from llcps.scenarios.base import Scenario
 from llcps.scenarios.goal import goal_text
@@ -109,7 +110,7 @@ class TrialExecutor:
 
     Attributes:
         records: the trials the branch sees, this episode's appended as they are stored
-            (the world model's lifelong training set).
+            (the world model's lifelong training set; the store's own is read only when needed).
         changes: the known symbolic change of each trial in ``records``, by trial id.
         kinds: entity name -> kind (``object`` or a container kind).
         tally: what the stored trials add up to.
@@ -127,8 +128,8 @@ class TrialExecutor:
         seed: int,
         run_id: int | None = None,
         episode_id: int | None = None,
-        records: list[TrialRecord] | None = None,
-        changes: dict[int, TrialChange] | None = None,
+        records: TrainingSet | None = None,
+        changes: MutableMapping[int, TrialChange] | None = None,
         cache: PhysicsCache | None = None,
         max_steps: int = DEFAULT_MAX_STEPS,
         progress: ProgressCallback | None = None,
@@ -141,8 +142,8 @@ class TrialExecutor:
         self.seed = seed
         self.run_id = run_id
         self.episode_id = episode_id
-        self.records: list[TrialRecord] = [] if records is None else records
-        self.changes: dict[int, TrialChange] = {} if changes is None else changes
+        self.records = TrainingSet.of([]) if records is None else records
+        self.changes: MutableMapping[int, TrialChange] = {} if changes is None else changes
         self.kinds = {name: entity.spec.kind for name, entity in world.entities.items()}
         self.cache = cache
         self.max_steps = max_steps

@@ -223,7 +223,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
         world = World.from_scene(scenario.scene(config.condition, config.variant))
         try:
             world.settle(max_steps=SETTLE_STEPS)
-            records = list(self.store.visible_trials(self.branch))
+            records, changes = self.store.training_set(self.branch)
             executor = TrialExecutor(
                 store=self.store,
                 branch=self.branch,
@@ -233,7 +233,7 @@ class ExploreEnv(gymnasium.Env[dict[str, np.ndarray], np.int64]):
                 run_id=self._run_id,
                 episode_id=self._episode_id,
                 records=records,
-                changes=self.store.visible_changes(self.branch),
+                changes=changes,
                 cache=self._cache,
             )
             experience = _SiteExperience(self.store, self.branch, self._experience)

@@ -67,7 +67,7 @@ from typing import Any, Callable, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from llcps.trial_records import TrialChange, TrialRecord
+from llcps.trial_records import TrainingSet, TrialChange, TrialRecord
 from llcps.models.artifact import array
 from llcps.models.measures import GOAL_FLOOR
 from llcps.models.families import (
@@ -442,9 +442,11 @@ class GoalHead:
                 outcomes are one mixture only from one start state; a plan step run from
                 the state a trial left behind says nothing certain about that family there.
         """
+        # the trials after the fit: a training set's base (up to its watermark) is older
+        after_fit = records.tail if isinstance(records, TrainingSet) and records.watermark <= self.watermark else records
         fresh = [
             r
-            for r in records
+            for r in after_fit
             if r.id is not None
             and r.id > self.watermark
             and r.id not in self._evidence_ids

@@ -15,7 +15,7 @@ from typing import Any, ClassVar, Mapping, Sequence
 import numpy as np
 
 from llcps.domain import OUTCOME_NAMES
-from llcps.trial_records import TrialRecord, WorldModelInput
+from llcps.trial_records import TrainingSet, TrialRecord, WorldModelInput
 from llcps.models.artifact import array
 from llcps.models.base import WorldModel, label_prior, learnable_labels, prior_of_counts
 from llcps.models.schedule import bins_trials
@@ -43,9 +43,11 @@ class EncodedWorldModel(WorldModel):
         #: Per Omega bit, how many trials learned from had it set (the prior's counts).
         self.outcome_sum = np.zeros(N_LABELS)
         self._table = TrialTable()
-        #: Ids of the trials learned, in order, where this process saw them (None: a stored
-        #: fit brought up by :meth:`extend`, whose trials are those its branch saw).
-        self._learned_ids: list[int | None] | None = []
+        #: The trials learned, where this process saw them: a training set's base and
+        #: watermark, then the ids of the trials after its base, in order (a plain sequence:
+        #: base 0). None: a stored fit brought up by :meth:`extend`, whose trials are
+        #: those its branch saw, as the caller's first update shows.
+        self._learned: _Learned | None = (0, 0, [])
 
     def _fit_outcome(self, records: Sequence[TrialRecord]) -> None:
         """Fit the encoder and the learner on every trial in ``records`` (a scheduled model:
@@ -63,11 +65,12 @@ class EncodedWorldModel(WorldModel):
             self._fit_encoded(features, outcomes[:bins])
         if bins < len(raw):
             self._count(raw[bins:], outcomes[bins:])
-        self._learned_ids = _ids(records)
+        base, watermark, rest = _split(records)
+        self._learned = (base, watermark, _ids(rest))
 
     def _extend_outcome(self, records: Sequence[TrialRecord]) -> None:
         self._count(encode_inputs(records), outcome_matrix(records))
-        self._learned_ids = None
+        self._learned = None
 
     def _count(self, raw: np.ndarray, outcomes: np.ndarray) -> None:
         """Add the counts of more trials, encoded by the fit's encoder, to the prior and
@@ -91,13 +94,14 @@ class EncodedWorldModel(WorldModel):
         they meant when it was trained; the label prior and the learnable bits follow the
         grown set.
         """
-        if self.scheduled and len(records) > self.n_trials and bins_trials(len(records)) == self.bins:
-            ids = _ids(records)
-            # only a set that grew from the one learned (a caller may leave trials out)
-            if None not in ids and (self._learned_ids is None or ids[: self.n_trials] == self._learned_ids):
-                fresh = records[self.n_trials :]
-                self._count(encode_inputs(fresh), outcome_matrix(fresh))
-                self._learned_ids = ids
+        # the set the model learned, given again (the hedge's model side, after a trial of
+        # the other side), teaches a learner that refits nothing new
+        grows = len(records) > self.n_trials or (len(records) == self.n_trials and not self._can_continue())
+        if self.scheduled and grows and bins_trials(len(records)) == self.bins:
+            fresh = self._grown(records)
+            if fresh is not None:
+                if len(fresh):
+                    self._count(encode_inputs(fresh), outcome_matrix(fresh))
                 return
             self._fit_outcome(records)
             return
@@ -109,6 +113,31 @@ class EncodedWorldModel(WorldModel):
         self.n_trials = len(raw)
         self.prior = label_prior(outcomes)
         self.learned = learnable_labels(outcomes)
+
+    def _grown(self, records: Sequence[TrialRecord]) -> Sequence[TrialRecord] | None:
+        """The trials of ``records`` after those learned, if ``records`` grew from them (a
+        caller may leave trials out), now learned too; else None.
+
+        A :class:`~llcps.trial_records.TrainingSet` whose base is the one learned from is
+        compared by its tail alone, so its base is never read.
+        """
+        base, watermark, rest = _split(records)
+        learned = self._learned
+        if learned is None:  # a stored fit: the first n_trials of the set are its trials
+            if self.n_trials < base:
+                base, watermark, rest = 0, 0, list(records)
+            learned = (base, watermark, _ids(rest[: self.n_trials - base]))
+        elif learned[:2] != (base, watermark) and learned[0] == 0:  # learned from a plain sequence
+            base, watermark, rest = 0, 0, list(records)
+        known = learned[2]
+        if learned[:2] != (base, watermark) or _ids(rest[: len(known)]) != known or None in known:
+            return None
+        fresh = rest[len(known) :]
+        ids = _ids(fresh)
+        if None in ids:
+            return None
+        self._learned = (base, watermark, known + ids)
+        return fresh
 
     def _can_continue(self) -> bool:
         """Whether the learner can train further from its fitted state (:meth:`_continue_encoded`)."""
@@ -177,15 +206,27 @@ class EncodedWorldModel(WorldModel):
         if np.any(outcome_sum < 0):
             raise ValueError("Omega bit counts must not be negative")
         model.outcome_sum = outcome_sum
-        model._learned_ids = None  # the trials its branch saw, as the caller's first update will show
+        model._learned = None  # the trials its branch saw, as the caller's first update will show
         model.learned = array(arrays, "learned", (N_LABELS,), kind="b").astype(bool)
         if model.learned.any():
             model._import_learner(arrays, meta)
         return model
 
 
+#: What a model learned: (base, watermark, ids) as :func:`_split` gives them.
+_Learned = tuple[int, int, list[int | None]]
+
+
 def _ids(records: Sequence[TrialRecord]) -> list[int | None]:
     return [getattr(r, "id", None) for r in records]
+
+
+def _split(records: Sequence[TrialRecord]) -> tuple[int, int, Sequence[TrialRecord]]:
+    """(base, watermark, rest): a training set's base (how many trials, up to which id),
+    left unread, and its trials after it; a plain sequence is all rest."""
+    if isinstance(records, TrainingSet):
+        return records.base, records.watermark, records.tail
+    return 0, 0, records
 
 
 class SklearnPerLabelModel(EncodedWorldModel):

@@ -15,7 +15,7 @@ from sqlalchemy import ColumnElement, Connection, delete, func, insert, select
 from sqlalchemy.exc import IntegrityError
 
 from llcps.domain import check_id
-from llcps.trial_records import TrialChange, TrialRecord
+from llcps.trial_records import TrainingChanges, TrainingSet, TrialChange, TrialRecord
 from llcps.errors import LlcpsError, StoreError
 from llcps.store import backends, visibility
 from llcps.store.branches import BranchQueries
@@ -184,6 +184,43 @@ class TrialQueries(BranchQueries):
             items += part
         return items
 
+    def training_set(self, branch: str | None) -> tuple[TrainingSet, TrainingChanges]:
+        """What ``branch`` sees now, as an episode learns from it: its trials and their
+        known changes, each read from the store only when something needs them (an
+        episode that counts its new trials into a stored model never does).
+
+        Raises:
+            StoreError (when they are read): trials or changes up to the set's watermark
+                were deleted or added since it was taken (the branch changed under it).
+        """
+        with self._read() as conn:
+            name = self._name(conn, branch)
+            chain = self._chain(conn, name)
+            watermark = self._max_visible(conn, chain)
+            trials = self._count(conn, chain, Trial.id <= watermark)
+            changes = self._count_changes(conn, chain, Trial.id <= watermark)
+
+        def changed(what: str, expected: int, found: int) -> StoreError:
+            return StoreError(
+                f"branch {name!r} now has {found} {what} up to trial {watermark}, not the {expected} it had when the episode started",
+                hint="another process deleted or backfilled trials of the branch meanwhile; run again",
+            )
+
+        def load_trials() -> list[TrialRecord]:
+            records = self.visible_trials(name)
+            end = next((i for i in range(len(records) - 1, -1, -1) if _trial_id(records[i]) <= watermark), -1) + 1
+            if end != trials:
+                raise changed("trials", trials, end)
+            return records[:end]
+
+        def load_changes() -> dict[int, TrialChange]:
+            found = {i: c for i, c in self.visible_changes(name).items() if i <= watermark}
+            if len(found) != changes:
+                raise changed("known changes", changes, len(found))
+            return found
+
+        return TrainingSet(trials, watermark, load_trials), TrainingChanges(changes, watermark, load_changes)
+
     def count_visible_trials(self, branch: str | None, source: str | None = None) -> int:
         """How many trials ``branch`` sees (optionally of one source)."""
         with self._read() as conn:
@@ -268,14 +305,17 @@ class TrialQueries(BranchQueries):
     def count_visible_changes(self, branch: str | None) -> int:
         """How many trials ``branch`` sees have a known change (part of a fitted model's identity)."""
         with self._read() as conn:
-            chain = self._chain(conn, self._name(conn, branch))
-            stmt = (
-                select(func.count())
-                .select_from(TrialChangeRow)
-                .join(Trial, Trial.id == TrialChangeRow.trial_id)
-                .where(visibility.clause(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN)
-            )
-            return conn.scalar(stmt) or 0
+            return self._count_changes(conn, self._chain(conn, self._name(conn, branch)))
+
+    @staticmethod
+    def _count_changes(conn: Connection, chain: Sequence[Link], *extra: ColumnElement[bool]) -> int:
+        stmt = (
+            select(func.count())
+            .select_from(TrialChangeRow)
+            .join(Trial, Trial.id == TrialChangeRow.trial_id)
+            .where(visibility.clause(chain, Trial.branch_id, Trial.id), TrialChangeRow.source != UNKNOWN, *extra)
+        )
+        return conn.scalar(stmt) or 0
 
     def change_counts(self) -> dict[str, int]:
         """Trials of the whole store by how their change is known: ``recorded``,
