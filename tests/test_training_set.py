@@ -122,6 +122,8 @@ def test_counting_updates_never_read_the_base_and_learn_what_the_whole_set_teach
     persistence.clear_fits()
     guard_reads(store, monkeypatch)
     records, changes = store.training_set("main")
+    for name in ("count_visible_trials", "count_visible_changes"):  # the set has counted them
+        monkeypatch.setattr(store, name, lambda *args, _name=name, **kwargs: pytest.fail(f"{_name} counted again"))
     lazy = fit_or_load(store, "main", "nb", 0, records=records, changes=changes)
     made = synthetic_trials(6, seed=7)
     made_changes = synthetic_changes(made, seed=7)

@@ -46,7 +46,7 @@ from importlib import resources
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 from llcps.domain import check_seed
-from llcps.trial_records import StoredFeatures, TrialChange, TrialRecord
+from llcps.trial_records import StoredFeatures, TrainingChanges, TrainingSet, TrialChange, TrialRecord
 from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import WorldModelEntry, world_model_entry
@@ -220,7 +220,9 @@ def fit_or_load(
         seed: the model's seed (part of the stored model's identity).
         records: the branch's visible trials, if the caller already loaded them
             (reloaded from the store when they do not reach its watermark).
-        changes: their known symbolic changes, if the caller already loaded them.
+        changes: their known symbolic changes, if the caller already loaded them. A
+            training set and its changes taken at the branch's watermark
+            (``Store.training_set``) also give their counts, so they are not counted again.
         goal: the model must have its goal-aware head (False for a measure that
             ranks by Omega alone: the head is then neither fitted nor stored).
 
@@ -236,7 +238,10 @@ def fit_or_load(
     entry = world_model_entry(name)
     check_seed(seed, "model seed")
     watermark = store.max_visible_trial_id(branch)
-    known = store.count_visible_changes(branch)
+    # a training set taken at this watermark has counted the branch's trials and changes
+    taken = isinstance(records, TrainingSet) and isinstance(changes, TrainingChanges) and records.watermark == watermark
+    known = changes.base if taken else store.count_visible_changes(branch)  # type: ignore[union-attr]
+    trials = records.base if taken else None  # type: ignore[union-attr]
     try:
         stored = store.latest_world_model(branch, name, seed)
     except StoreError as exc:  # a damaged row: the model is derived data, so fit it again
@@ -254,7 +259,7 @@ def fit_or_load(
         except LlcpsError as exc:
             logger.warning("stored world model %s (id %s) is unusable, refitting: %s", name, stored.id, exc)
     elif stored is not None and stored.meta.get("code") == model_code() and (stored.meta.get("goal", True) is True or not goal):
-        model = _extended(store, branch, entry, stored, seed, watermark, known)
+        model = _extended(store, branch, entry, stored, seed, watermark, known, trials)
         if model is not None:
             _save(store, branch, model, watermark, known)
             return model
@@ -271,17 +276,30 @@ def fit_or_load(
 
 
 def _extended(
-    store: Store, branch: str, entry: WorldModelEntry, stored: ModelArtifact, seed: int, watermark: int, known: int
+    store: Store,
+    branch: str,
+    entry: WorldModelEntry,
+    stored: ModelArtifact,
+    seed: int,
+    watermark: int,
+    known: int,
+    trials: int | None = None,
 ) -> WorldModel | None:
     """The stored model of a scheduled world model brought up to the trials ``branch``
     sees up to ``watermark`` by counting the ones after its own (:meth:`WorldModel.extend`),
     or None when a fit is needed: the model does not count, the grown set fits bins of
     its own (:mod:`llcps.models.schedule`), the trials and changes up to its watermark
     are no longer those it learned (deleted, or a backfill added changes), or trials
-    arrived past ``watermark`` while reading (another writer)."""
+    arrived past ``watermark`` while reading (another writer).
+
+    Args:
+        trials: how many trials the branch sees up to ``watermark``, if the caller
+            counted them (else counted here).
+    """
     if not entry.model_class().scheduled:
         return None
-    trials = store.count_visible_trials(branch)
+    if trials is None:
+        trials = store.count_visible_trials(branch)
     if not bins_trials(trials) == stored.meta.get("bins_trials") or not isinstance(stored.meta.get("changes"), int):
         return None
     try:
