@@ -1,4 +1,4 @@
-"""An episode's training set (llcps.trial_records.TrainingSet): the trials its branch saw,
+"""An episode's training set (llcps.training.TrainingSet): the trials its branch saw,
 read from the store only when something needs them, then the episode's own. An episode
 that counts its new trials into a stored model never reads the ones before them, and
 learns exactly what it learns from the whole set read at once."""
@@ -18,7 +18,7 @@ from llcps.errors import StoreError
 from llcps.models import fit_or_load, persistence, schedule
 from llcps.models.synthetic import synthetic_changes, synthetic_trials
 from llcps.store import Store
-from llcps.trial_records import TrainingChanges, TrainingSet, position_after
+from llcps.training import TrainingChanges, TrainingSet, position_after
 
 from tests.test_models_counting import SMALL, assert_same_predictions, goal_query
 from tests.test_models_examples import add_toy_trials

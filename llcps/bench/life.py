@@ -9,7 +9,7 @@ training set and fitting the goal-directed world model at the episode's start (`
 then per trial as exploration does, encoding and ranking every candidate of a toy
 failure (``rank``), writing the trial (``store``) and bringing the model up to it
 (``update``). An episode reads the store's trials only when its fit needs them
-(:class:`~llcps.trial_records.TrainingSet`).
+(:class:`~llcps.training.TrainingSet`).
 Past :data:`~llcps.models.schedule.FULL_FIT_TRIALS` trials an episode's fit counts its
 new trials into the stored model, and a full fit comes once each time the training set
 doubles (:mod:`llcps.models.schedule`); its cost, measured as the fit of the episode

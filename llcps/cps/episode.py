@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from llcps.sim.cache import PhysicsCache
     from llcps.store import Store
     from llcps.symbolic.knowledge_base import KnowledgeBase
-    from llcps.trial_records import TrainingSet
+    from llcps.training import TrainingSet
 
 DEFAULT_BUDGET = 300
 #: Largest exploration budget (and refit interval) accepted: far beyond any candidate space.
@@ -236,7 +236,7 @@ def solve(
     # What the store holds is read (and checked) as the fit reads it, before the episode
     # writes anything (a refitted model, its run): a malformed row stops it there. An
     # episode that counts its new trials into a stored model reads only those
-    # (:class:`~llcps.trial_records.TrainingSet`), the rest having been read by the fits before.
+    # (:class:`~llcps.training.TrainingSet`), the rest having been read by the fits before.
     if progress is not None:
         progress(f"fit world model {config.model}", 0, 0)
     records, changes = store.training_set(branch_name)

@@ -28,7 +28,8 @@ from typing import Any, Callable, Hashable, TypeVar
 import numpy as np
 
 from llcps.domain import PUSH_DIRECTION, ControllerParams, State
-from llcps.trial_records import TrainingSet, TrialChange, TrialRecord, TrialSpec
+from llcps.trial_records import TrialChange, TrialRecord, TrialSpec
+from llcps.training import TrainingSet
 from llcps.errors import LlcpsError
 from llcps.scenarios.base import Scenario
 from llcps.scenarios.goal import goal_text

@@ -67,7 +67,8 @@ from typing import Any, Callable, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from llcps.trial_records import TrainingSet, TrialChange, TrialRecord
+from llcps.trial_records import TrialChange, TrialRecord
+from llcps.training import TrainingSet
 from llcps.models.artifact import array
 from llcps.models.measures import GOAL_FLOOR
 from llcps.models.families import (

@@ -15,7 +15,8 @@ from typing import Any, ClassVar, Mapping, Sequence
 import numpy as np
 
 from llcps.domain import OUTCOME_NAMES
-from llcps.trial_records import TrainingSet, TrialRecord, WorldModelInput
+from llcps.trial_records import TrialRecord, WorldModelInput
+from llcps.training import TrainingSet
 from llcps.models.artifact import array
 from llcps.models.base import WorldModel, label_prior, learnable_labels, prior_of_counts
 from llcps.models.schedule import bins_trials
@@ -118,7 +119,7 @@ class EncodedWorldModel(WorldModel):
         """The trials of ``records`` after those learned, if ``records`` grew from them (a
         caller may leave trials out), now learned too; else None.
 
-        A :class:`~llcps.trial_records.TrainingSet` whose base is the one learned from is
+        A :class:`~llcps.training.TrainingSet` whose base is the one learned from is
         compared by its tail alone, so its base is never read.
         """
         base, watermark, rest = _split(records)

@@ -46,7 +46,8 @@ from importlib import resources
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 from llcps.domain import check_seed
-from llcps.trial_records import StoredFeatures, TrainingChanges, TrainingSet, TrialChange, TrialRecord
+from llcps.trial_records import StoredFeatures, TrialChange, TrialRecord
+from llcps.training import TrainingChanges, TrainingSet
 from llcps.errors import LlcpsError, StoreError
 from llcps.models.base import WorldModel
 from llcps.models.registry import WorldModelEntry, world_model_entry
@@ -238,10 +239,11 @@ def fit_or_load(
     entry = world_model_entry(name)
     check_seed(seed, "model seed")
     watermark = store.max_visible_trial_id(branch)
-    # a training set taken at this watermark has counted the branch's trials and changes
-    taken = isinstance(records, TrainingSet) and isinstance(changes, TrainingChanges) and records.watermark == watermark
-    known = changes.base if taken else store.count_visible_changes(branch)  # type: ignore[union-attr]
-    trials = records.base if taken else None  # type: ignore[union-attr]
+    trials: int | None = None
+    if isinstance(records, TrainingSet) and isinstance(changes, TrainingChanges) and records.watermark == watermark:
+        trials, known = records.base, changes.base  # a set taken at this watermark has counted them
+    else:
+        known = store.count_visible_changes(branch)
     try:
         stored = store.latest_world_model(branch, name, seed)
     except StoreError as exc:  # a damaged row: the model is derived data, so fit it again

@@ -15,7 +15,8 @@ from sqlalchemy import ColumnElement, Connection, delete, func, insert, select
 from sqlalchemy.exc import IntegrityError
 
 from llcps.domain import check_id
-from llcps.trial_records import TrainingChanges, TrainingSet, TrialChange, TrialRecord
+from llcps.trial_records import TrialChange, TrialRecord
+from llcps.training import TrainingChanges, TrainingSet, position_after
 from llcps.errors import LlcpsError, StoreError
 from llcps.store import backends, visibility
 from llcps.store.branches import BranchQueries
@@ -208,7 +209,7 @@ class TrialQueries(BranchQueries):
 
         def load_trials() -> list[TrialRecord]:
             records = self.visible_trials(name)
-            end = next((i for i in range(len(records) - 1, -1, -1) if _trial_id(records[i]) <= watermark), -1) + 1
+            end = position_after(records, watermark)
             if end != trials:
                 raise changed("trials", trials, end)
             return records[:end]
