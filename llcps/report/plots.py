@@ -19,6 +19,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
 from llcps.cps.candidates import candidate_space_size
 from llcps.analysis.cumulative import CumulativePoint
@@ -355,6 +356,10 @@ def generalization_plot(rows: Sequence[FamilyResult], stem: str | Path) -> tuple
     ax.axvline(1.0, color="black", linewidth=0.8)
     ax.set_xscale("log")
     ax.set_xlim(low, high)
+    # Plain ratios at 1-2-5 steps: within a decade a log axis labels its minor ticks too, over each other.
+    ax.xaxis.set_major_locator(FixedLocator([v for v in (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100) if low <= v <= high]))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_yticks(range(len(families)), families, fontsize=8)
     ax.invert_yaxis()
     ax.set_xlabel("exploration trials / random order's (log scale; < 1: fewer than random)", fontsize=8)
