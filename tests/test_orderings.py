@@ -1,8 +1,9 @@
-"""Exploration orderings (llcps.cps.orderings): the paper's ranking and the hedge.
+"""Exploration orderings (llcps.cps.orderings): the paper's ranking, coverage and the hedge.
 
-The orderings run here on synthetic failure points: a fixed probability of resolving the
-novelty per candidate stands in for the world model, and a set of resolving candidates
-for physics, so the hedge's guarantee can be checked over many seeds and layouts.
+The orderings run here on synthetic failure points: the candidates of a small scene, a
+fixed probability of resolving the novelty per candidate stands in for the world model,
+and a set of resolving candidates for physics, so the hedge's guarantee can be checked
+over many seeds and layouts.
 """
 
 from __future__ import annotations
@@ -16,7 +17,9 @@ from hypothesis import strategies as st
 
 from llcps.cps.exploration import Ranking
 from llcps.cps.orderings import ORDERINGS, get_ordering
+from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.orderings.base import Exploration
+from llcps.cps.orderings.coverage import spread
 from llcps.cps.orderings.hedged import MAX_MODEL_SHARE, Hedged
 from llcps.cps.orderings.ranked import Ranked
 from llcps.domain import State
@@ -28,8 +31,8 @@ def _synthetic(base, probability: np.ndarray, *, families: np.ndarray | None = N
 
     class Synthetic(base):  # type: ignore[misc, valid-type]
         def random_side(self) -> list[int]:
-            n = len(self.exploration.point.candidates)
-            return [int(i) for i in np.random.default_rng(self.exploration.seed).permutation(n)]
+            candidates = self.exploration.point.candidates
+            return spread(candidates, [int(i) for i in _permutation(len(candidates), self.exploration.seed)])
 
         def rank(self) -> Ranking:
             p = probability.copy()
@@ -50,8 +53,17 @@ def _synthetic(base, probability: np.ndarray, *, families: np.ndarray | None = N
     return Synthetic
 
 
+#: The candidates of a scene of three objects and a container: 22 action-argument pairs of 36 settings.
+CANDIDATES = tuple(enumerate_candidates(failed=None, entities={"a": "object", "b": "object", "c": "object", "d": "container"}))
+
+
+def _permutation(n: int, seed: int) -> np.ndarray:
+    """Random order's permutation (a stand-in for the random model's ranking)."""
+    return np.random.default_rng(seed).permutation(n)
+
+
 def _exploration(n: int, seed: int) -> Exploration:
-    point = SimpleNamespace(candidates=tuple(range(n)), subgoals=())
+    point = SimpleNamespace(candidates=CANDIDATES[:n], subgoals=())
     return Exploration(model=None, point=point, measure="goal-directed", seed=seed)  # type: ignore[arg-type]
 
 
@@ -153,3 +165,49 @@ def test_where_the_model_is_right_the_hedge_tries_its_kth_best_by_trial_2k_minus
     hedge = _synthetic(Hedged, p)(_exploration(n, seed=5))
     tried = _run(hedge, resolving={k - 1})
     assert len(tried) <= max(2 * k - 1, 1) or hedge.beliefs[-1] < MAX_MODEL_SHARE
+
+
+def _first(order, resolving: set[int]) -> int:
+    """The position (from 1) of the first resolving candidate in ``order``."""
+    return 1 + next(k for k, i in enumerate(order) if i in resolving)
+
+
+def _pair(index: int) -> tuple[str, tuple[str, ...]]:
+    return CANDIDATES[index].action, CANDIDATES[index].arguments
+
+
+def test_coverage_tries_every_action_argument_pair_before_any_twice_and_each_pairs_settings_in_turn():
+    order = spread(CANDIDATES, [int(i) for i in _permutation(len(CANDIDATES), 3)])
+    assert sorted(order) == list(range(len(CANDIDATES)))
+    pairs = [_pair(i) for i in order]
+    assert len(set(pairs[:22])) == 22 and len(set(pairs[22:44])) == 22
+    for pair in set(pairs):
+        mine = [CANDIDATES[i].params for i in order if _pair(i) == pair]
+        assert len({p.orientation for p in mine[:4]}) == 4
+        assert len({p.movement_magnitude for p in mine[:3]}) == 3 and len({p.rate for p in mine[:3]}) == 3
+    assert order[0] == int(_permutation(len(CANDIDATES), 3)[0])  # the permutation decides among equals
+    assert spread(CANDIDATES, [int(i) for i in _permutation(len(CANDIDATES), 4)]) != order
+
+
+def test_coverage_meets_a_resolving_pair_sooner_than_random_order_and_a_scattered_set_about_as_soon():
+    """Over layouts: every setting of one action-argument pair resolves (random order's
+    expected position (N + 1) / (36 + 1) = 21.4; coverage's (22 + 1) / 2 = 11.5), or 36
+    candidates anywhere do (21.4 for both)."""
+    n = len(CANDIDATES)
+    pairs = sorted({_pair(i) for i in range(n)})
+    met: dict[str, list[int]] = {"clustered": [], "clustered, random": [], "scattered": [], "scattered, random": []}
+    for seed in range(300):
+        permutation = [int(i) for i in _permutation(n, seed)]
+        order = spread(CANDIDATES, permutation)
+        rng = np.random.default_rng([seed, 1])
+        pair = pairs[int(rng.integers(len(pairs)))]
+        clustered = {i for i in range(n) if _pair(i) == pair}
+        scattered = {int(i) for i in rng.choice(n, size=36, replace=False)}
+        met["clustered"].append(_first(order, clustered))
+        met["clustered, random"].append(_first(permutation, clustered))
+        met["scattered"].append(_first(order, scattered))
+        met["scattered, random"].append(_first(permutation, scattered))
+    mean = {key: float(np.mean(value)) for key, value in met.items()}
+    assert mean["clustered"] <= 12.5 and max(met["clustered"]) <= 22
+    assert mean["clustered, random"] >= 18.0
+    assert mean["scattered"] <= 1.15 * (n + 1) / 37

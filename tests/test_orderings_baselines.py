@@ -1,4 +1,4 @@
-"""The baseline orderings: case-based reuse, trial and error, uncertainty, the learned policy.
+"""The baseline orderings: coverage, case-based reuse, trial and error, uncertainty, the learned policy.
 
 They run on one real failure point (scenario2's, reached through the Gymnasium
 environment on a fresh store, with its world model fitted on no trials); what stands in
@@ -24,7 +24,7 @@ from llcps.cps.orderings.uncertainty import Uncertainty  # noqa: E402
 from llcps.domain import State  # noqa: E402
 from llcps.errors import LlcpsError  # noqa: E402
 
-BASELINES = ("case-based", "trial-and-error", "uncertainty", "rl")
+BASELINES = ("coverage", "case-based", "trial-and-error", "uncertainty", "rl")
 
 
 @pytest.fixture(scope="module")
@@ -193,3 +193,12 @@ def test_the_rl_ordering_follows_the_policy_and_needs_one(site: Any, policy_stor
         x = _exploration(site)
         with pytest.raises(LlcpsError, match="no trained policy"):
             get_ordering("rl")(Exploration(model=x.model, point=x.point, measure=x.measure, seed=0, store=empty, branch="main"))
+
+
+def test_coverage_meets_every_action_argument_pair_of_a_real_failure_point_before_any_twice(site: Any) -> None:
+    exploration = _exploration(site, seed=3)
+    point = exploration.point
+    pairs = {(c.action, c.arguments) for c in point.candidates}
+    tried = _run(get_ordering("coverage")(exploration), steps=len(pairs) + 1)
+    met = [(point.candidates[i].action, point.candidates[i].arguments) for i in tried]
+    assert len(set(met[:-1])) == len(pairs) and met[-1] in pairs

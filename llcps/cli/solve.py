@@ -48,7 +48,8 @@ def solve_cli(
         typer.Option(
             "--ordering",
             help="Order of the exploration trials: the ranking alone (ranked, the paper's), or the ranking "
-            "hedged with a random order (hedged, the default: at most 2P+1 trials where random order needs P); baselines: past solutions first (case-based), "
+            "hedged with a random order spread over the candidates (hedged, the default: at most 2P+1 trials where that order needs P); "
+            "baselines: that spread random order alone (coverage), past solutions first (case-based), "
             "Thompson sampling with the model as prior (trial-and-error), an ensemble's disagreement (uncertainty), "
             "the policy of `llcps rl train` (rl); see docs/world_models.md.",
         ),
@@ -146,7 +147,7 @@ EXAMPLES = examples(
     "llcps solve bucket --model nn --measure most-changes --budget 50 --json",
     "llcps solve scenario1 --gif scenario1.gif              # then film it",
     "llcps solve scenario2 --variant 3                      # another layout, drawn from the file's ranges",
-    "llcps solve scenario2 --ordering hedged                # never worse than twice random order",
+    "llcps solve scenario2 --ordering hedged                # at most twice its spread random order",
     "llcps solve scenario2 --ordering case-based            # what resolved similar failures first",
     "llcps solve my_scenario.toml                           # a scenario straight from a file",
 )

@@ -7,7 +7,9 @@ episode runs, learning from each failed trial as it goes:
 - ``ranked`` (the paper's): the measure's ranking of the untried candidates, with the
   world model updated and the candidates ranked again after every ``refit_every``
   failed trials.
-- ``hedged`` (the default): the same ranking, interleaved with a seeded random order of
+- ``coverage``: random order spread evenly over the candidates: every action on every
+  argument tuple once before any twice, each one's settings in turn (no world model).
+- ``hedged`` (the default): the same ranking, interleaved with ``coverage``'s order of
   the candidates; the share of trials the ranking gets is the posterior belief that the
   model knows where the resolving candidates are in this scene, never more than
   :data:`~llcps.cps.orderings.hedged.MAX_MODEL_SHARE`. A model that is wrong in a novel
@@ -56,7 +58,7 @@ def _entries(*entries: OrderingEntry) -> dict[str, OrderingEntry]:
 
 #: name -> ordering, the one list of exploration orderings. Its default is ``hedged``: a
 #: novel scene may be one where the model points the wrong way, and the hedge bounds what
-#: that costs (at most ``2P + 1`` trials where random order needs ``P``). Measured leave one
+#: that costs (at most ``2P + 1`` trials where its random side needs ``P``). Measured leave one
 #: family out on the families written after it was designed, it also explored less than
 #: the ranking alone (docs/world_models.md, "Which default").
 ORDERINGS: Registry[OrderingEntry] = Registry(
@@ -72,7 +74,13 @@ ORDERINGS: Registry[OrderingEntry] = Registry(
             "hedged",
             "llcps.cps.orderings.hedged",
             "Hedged",
-            "the ranking interleaved with a random order, by the belief that the model is right here",
+            "the ranking interleaved with coverage's order, by the belief that the model is right here",
+        ),
+        OrderingEntry(
+            "coverage",
+            "llcps.cps.orderings.coverage",
+            "Coverage",
+            "random order spread evenly: every action on every argument tuple before any twice (no model)",
         ),
         OrderingEntry(
             "case-based",

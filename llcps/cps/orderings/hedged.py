@@ -8,12 +8,14 @@ two:
 
 - *the ranking*: the best untried candidate under the model and measure
   (:class:`~llcps.cps.orderings.ranked.Ranked`, updated after every failed trial);
-- *random order*: the next untried candidate of the order the random-order baseline
-  (the ``random`` world model, which scores each candidate by a hash of the seed and
-  the candidate) gives the same candidates under the same measure and seed, ranked
-  once. So the hedge's random side tries what the baseline it is compared with tries,
-  in the same order, and a run beside that baseline finds those trials in the physics
-  cache.
+- *random order, spread*: the next untried candidate of the order
+  :mod:`~llcps.cps.orderings.coverage` gives them: the permutation of the random-order
+  baseline (the ``random`` world model, which scores each candidate by a hash of the
+  seed and the candidate, under the same measure and seed), re-sorted so that every
+  action on every argument tuple is tried once before any twice, and each one's
+  settings in turn. It knows nothing of the scene either, but a resolving group of
+  candidates (one action on the body in the way, in most of its settings) is met sooner
+  than in the bare permutation (docs/world_models.md, "Which default").
 
 **The share.** The model gets the first trial; after each trial it is credited its
 share ``min(w, MAX_MODEL_SHARE)`` and takes the next trial whenever its credit reaches
@@ -33,15 +35,18 @@ of resolving (the paper's four) gives no evidence: its share stays at the prior.
 random trial does not move it (it would lower the whole family of a resolving
 candidate after one unlucky member). So the model's side is ``ranked`` over the
 candidates not yet tried, moved by its own failures only, and random order's side
-its permutation.
+its spread permutation, fixed when the episode starts.
 
 **The guarantee.** Whatever the model predicts, it takes at most
 ``1 + MAX_MODEL_SHARE * (T - 1)`` of the first ``T`` trials, so random order takes at
-least ``(1 - MAX_MODEL_SHARE) (T - 1)`` of them, in its permutation's order, skipping
-candidates the model already tried (which only brings a resolving one nearer). If the
-permutation's first resolving candidate stands at position ``P``, the episode ends by
-trial ``1 + P / (1 - MAX_MODEL_SHARE)``: with the default share of one half, at most
-``2 P + 1`` trials, where random order with that permutation needs ``P``. While the
+least ``(1 - MAX_MODEL_SHARE) (T - 1)`` of them, in its order, skipping candidates
+the model already tried (which only brings a resolving one nearer). If that order's
+first resolving candidate stands at position ``P``, the episode ends by trial
+``1 + P / (1 - MAX_MODEL_SHARE)``: with the default share of one half, at most
+``2 P + 1`` trials, where the spread random order alone needs ``P``. Against the bare
+permutation of random order the bound is measured, not proved: spreading the trials
+meets a resolving set placed without regard to the candidates' structure at about the
+same position, and a structured one sooner (:mod:`~llcps.cps.orderings.coverage`). While the
 model keeps its full share (``w`` at least one half) the model's side loses at most the
 same factor: the ``k``-th candidate of its side is tried by trial ``2 k - 1``.
 """
@@ -53,15 +58,14 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from llcps.cps.exploration import FailurePoint, Ranking, rank_candidates
+from llcps.cps.exploration import FailurePoint, Ranking
 from llcps.cps.orderings.base import Exploration
+from llcps.cps.orderings.coverage import coverage_order
 from llcps.cps.orderings.ranked import Ranked
 
 if TYPE_CHECKING:
     from llcps.domain import State
 
-#: The world model whose ranking is random order.
-RANDOM_ORDER = "random"
 #: Most of the trials the model's ranking may take (the rest follow random order).
 MAX_MODEL_SHARE = 0.5
 #: Belief, before any trial, that the resolving candidate lies where the model says.
@@ -81,14 +85,6 @@ def resolve_probabilities(ranking: Ranking, point: FailurePoint) -> np.ndarray |
     if ranking.goal is not None:
         return np.prod(np.clip(ranking.goal, 0.0, 1.0), axis=1)
     return None
-
-
-def random_order(exploration: Exploration) -> list[int]:
-    """Every candidate, in the order the random-order baseline ranks them first."""
-    from llcps.models.registry import WORLD_MODELS
-
-    x = exploration
-    return list(rank_candidates(WORLD_MODELS[RANDOM_ORDER](x.seed), x.point, measure=x.measure, seed=x.seed).order)
 
 
 class Hedged(Ranked):
@@ -113,8 +109,9 @@ class Hedged(Ranked):
         self.beliefs: list[float] = []
 
     def random_side(self) -> list[int]:
-        """Every candidate in random order's order (:func:`random_order`)."""
-        return random_order(self.exploration)
+        """Every candidate in the order random order's side tries them
+        (:func:`~llcps.cps.orderings.coverage.coverage_order`)."""
+        return coverage_order(self.exploration)
 
     @property
     def belief(self) -> float:
