@@ -193,6 +193,17 @@ def _budget_summary(terminalreporter: Any, wall: float) -> None:
         yellow=wall > budget,
     )
 
+    # A file runs on one worker (--dist loadfile): its sum, and the sum of all over the
+    # workers, tell a long file at the end from too much work in all.
+    files: dict[str, float] = {}
+    for nodeid, took in seconds.items():
+        files[nodeid.split("::")[0]] = files.get(nodeid.split("::")[0], 0.0) + took
+    workers = getattr(terminalreporter.config.option, "numprocesses", None)
+    workers = workers if isinstance(workers, int) and workers > 0 else 1
+    write(f"tests' time in all {sum(files.values()) / 60:.1f} min, {sum(files.values()) / 60 / workers:.1f} min per worker ({workers}); the longest files:")
+    for name in sorted(files, key=files.__getitem__, reverse=True)[:BUDGET_LISTED]:
+        write(f"{files[name]:7.1f} s  {name}")
+
     def share(nodeid: str) -> float:
         limit = timeouts[nodeid]
         return seconds[nodeid] / limit if limit else 0.0
