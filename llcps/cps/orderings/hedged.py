@@ -15,7 +15,7 @@ two:
   action on every argument tuple is tried once before any twice, and each one's
   settings in turn. It knows nothing of the scene either, but a resolving group of
   candidates (one action on the body in the way, in most of its settings) is met sooner
-  than in the bare permutation (docs/world_models.md, "Which default").
+  than in the bare permutation (docs/world_models.md, "Why random order spread").
 
 **The share.** The model gets the first trial; after each trial it is credited its
 share ``min(w, MAX_MODEL_SHARE)`` and takes the next trial whenever its credit reaches
