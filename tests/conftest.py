@@ -121,6 +121,33 @@ def fresh_caches() -> Iterator[None]:
     yield
 
 
+@pytest.fixture(scope="session")
+def readme_pretrained(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A store after the README's first commands, `llcps db init` and `llcps pretrain
+    --trials 200 --seed 1`: 200 real random interactions. It is made once per test run
+    and shared by the xdist workers (one pretraining instead of one per module that needs
+    it), so it is read only: tests copy it (``shutil.copyfile``) and use the copy."""
+    from filelock import FileLock
+    from typer.testing import CliRunner
+
+    from llcps.cli.main import app
+
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        shared = shared.parent  # the run's directory, above each worker's own
+    path = shared / "readme-pretrained.db"
+    with FileLock(str(path) + ".lock"):
+        if not path.exists():
+            making = shared / "readme-pretrained.making.db"
+            making.unlink(missing_ok=True)
+            for args in (("db", "init"), ("pretrain", "--trials", "200", "--seed", "1")):
+                result = CliRunner().invoke(app, ["--db", str(making), *args])
+                assert result.exit_code == 0, (args, result.stdout, result.stderr)
+            assert not Path(f"{making}-wal").exists(), "the store was left open"
+            making.rename(path)
+    return path
+
+
 @pytest.fixture
 def new_trial():  # noqa: ANN201 - returns the sample_trial factory
     """``new_trial(seed, branch=..., source=..., **overrides) -> TrialRecord``."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -33,13 +34,13 @@ def ok(*args: str) -> Any:
 
 
 @pytest.fixture(scope="module")
-def readme_dir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """A directory after the README's first commands: db init, pretrain, solve scenario2."""
+def readme_dir(tmp_path_factory: pytest.TempPathFactory, readme_pretrained: Path) -> Iterator[Path]:
+    """A directory after the README's first commands: db init, pretrain (a copy of the
+    run's ``readme_pretrained`` store), solve scenario2."""
     where = tmp_path_factory.mktemp("readme")
+    shutil.copyfile(readme_pretrained, where / "llcps.db")
     with pytest.MonkeyPatch.context() as patch:
         patch.chdir(where)
-        ok("db", "init")
-        ok("pretrain", "--trials", "200", "--seed", "1")
         solved = json.loads(ok("solve", "scenario2", "--model", "nb", "--measure", "most-positive-changes", "--json").stdout)
         assert solved["status"] == "solved" and solved["learned_operators"], solved
         yield where
@@ -89,17 +90,17 @@ def test_a_solve_run_lasts_as_long_as_its_episode(in_readme_dir: Path) -> None:
 @pytest.mark.slow
 def test_pretrain_again_is_skipped_and_at_pretrain_sees_only_pretraining(in_readme_dir: Path) -> None:
     """`make run` twice: the second `llcps pretrain --trials 200 --seed 1` stores nothing, and
-    after more pretraining (--again) `llcps db branch fresh --at pretrain` still forks after
-    the first 200 trials: no exploration trial, no learned operator."""
+    after more pretraining (--again, 20 trials) `llcps db branch fresh --at pretrain` still
+    forks after the first 200 trials: no exploration trial, no learned operator."""
     with Store.open("llcps.db") as store:
         before = store.count_visible_trials("main")
     again = ok("pretrain", "--trials", "200", "--seed", "1")
     assert "pretraining with --trials 200 --seed 1 is already on branch main (run 1): skipped; --again to add more" in again.stderr
     ok("db", "branch", "twice")
-    ok("--branch", "twice", "pretrain", "--trials", "200", "--seed", "1", "--again", "--model", "nb")
+    ok("--branch", "twice", "pretrain", "--trials", "20", "--seed", "1", "--again", "--model", "nb")
     with Store.open("llcps.db") as store:
         assert store.count_visible_trials("main") == before
-        assert store.count_visible_trials("twice") == before + 200
+        assert store.count_visible_trials("twice") == before + 20
     ok("db", "branch", "fresh", "--from", "twice", "--at", "pretrain")
     with Store.open("llcps.db") as store:
         seen = store.visible_trials("fresh")

@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -10,6 +13,7 @@ from llcps.domain import ACTIONS
 from llcps.trial_records import TrialRecord
 from llcps.models import PAPER_MODELS, WORLD_MODELS, load_world_model, make_world_model
 from llcps.models.evaluation import evaluate
+from llcps.store import Store
 
 
 def pretraining_trials(n: int, *, seed: int) -> list[TrialRecord]:
@@ -65,9 +69,12 @@ def test_models_fit_real_trials_and_round_trip(real_trials, name):
 
 
 @pytest.mark.slow
-def test_paper_models_beat_the_majority_baseline_on_200_pretraining_trials():
-    """The paper's pretraining size: some model beats the baseline's F1 on a bit with both classes."""
-    trials = pretraining_trials(200, seed=1)
+def test_paper_models_beat_the_majority_baseline_on_200_pretraining_trials(readme_pretrained: Path, tmp_path: Path) -> None:
+    """The paper's pretraining size (the README's `llcps pretrain --trials 200 --seed 1`):
+    some model beats the baseline's F1 on a bit with both classes."""
+    with Store.open(str(shutil.copyfile(readme_pretrained, tmp_path / "llcps.db"))) as store:
+        trials = store.visible_trials("main", source="pretrain")
+    assert len(trials) == 200
     reports = [evaluate(name, trials, seed=1) for name in PAPER_MODELS]
     assert any(report.beats_baseline_f1() for report in reports)
     assert any(report.mean("brier") < report.mean("baseline_brier") for report in reports)
