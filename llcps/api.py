@@ -21,6 +21,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
 
+import numpy as np
 import pandas as pd
 
 from llcps.cps.episode import SolveConfig, SolveResult
@@ -28,7 +29,10 @@ from llcps.errors import LlcpsError
 from llcps.jobs.solve import solve as solve_job
 from llcps.provenance import FIELDS as PROVENANCE_FIELDS
 from llcps.store import Store
-from llcps.store.flat import KINDS, Column, flat_rows, trial_columns
+from llcps.domain import ACTIONS, COLORS, ENTITY_NUMBERS, ORIENTATIONS, OUTCOME_NAMES, SHAPES, TRIAL_SOURCES
+from llcps.store import trial_blocks
+from llcps.store.flat import ARGUMENT_SLOTS, ENTITY_FIELDS, KINDS, TRIAL_COLUMN_SOURCES, Column, flat_rows, trial_columns
+from llcps.store.trial_blocks import TrialColumns
 
 if TYPE_CHECKING:
     from llcps.cps.replay import ReplayReport
@@ -164,6 +168,66 @@ def trial_frame(store: Store, records: Sequence[Any]) -> pd.DataFrame:
     return _frame(flat_rows(store, records), ((c.name, c.kind, c.categories) for c in columns))
 
 
+def columns_frame(columns: TrialColumns) -> pd.DataFrame:
+    """Trials read as columns (:meth:`Store.visible_columns`) as the tidy DataFrame of
+    :meth:`Workbench.trials`: the frame :func:`trial_frame` makes of the same trials' records,
+    built from arrays instead of one row per trial."""
+    n = len(columns)
+    branch_ids = np.array(sorted(dict(columns.branch_names)), dtype=np.int64)
+    branch_names = [dict(columns.branch_names)[b] for b in branch_ids.tolist()]
+
+    def objects(values: Sequence[Any], codes: np.ndarray) -> np.ndarray:
+        """The value of each code (None for a code of -1), as an object array."""
+        table = np.empty(len(values) + 1, dtype=object)
+        table[: len(values)] = list(values)
+        return table[codes]
+
+    def category(values: Sequence[str], codes: np.ndarray, known: Sequence[str]) -> pd.Categorical:
+        categories = [*known, *sorted(set(values) - set(known))]
+        index = np.array([categories.index(v) for v in values] + [-1], dtype=np.int64)
+        return pd.Categorical.from_codes(index[codes], categories=pd.CategoricalDtype(categories).categories)
+
+    def nullable(values: np.ndarray) -> pd.arrays.IntegerArray:
+        return pd.arrays.IntegerArray(values.astype(np.int64), values == trial_blocks.NONE)
+
+    data: dict[str, Any] = {
+        "id": columns.id.astype(np.int64),
+        "branch": objects(branch_names, np.searchsorted(branch_ids, columns.branch_id)),
+        "run_id": nullable(columns.run_id),
+        "episode_id": nullable(columns.episode_id),
+        "scenario": objects(columns.scenarios, columns.scenario),
+        "source": category(columns.sources, columns.source, TRIAL_SOURCES),
+        "action": category(columns.actions, columns.action, ACTIONS),
+        "rate": columns.rate.astype(np.float64),
+        "movement_magnitude": columns.movement_magnitude.astype(np.float64),
+        "orientation": category(columns.orientations, columns.orientation, ORIENTATIONS),
+    }
+    for slot in range(ARGUMENT_SLOTS):
+        names = [a[slot] if slot < len(a) else None for a in columns.argument_lists]
+        data[f"arg{slot}"] = objects(names, columns.arguments) if n else np.empty(0, dtype=object)
+        for name in ENTITY_FIELDS:
+            if name == "shape":
+                data[f"arg{slot}_shape"] = category(SHAPES, columns.shape[:, slot].astype(np.int64), SHAPES)
+            elif name == "color":
+                data[f"arg{slot}_color"] = category(COLORS, columns.color[:, slot].astype(np.int64), COLORS)
+            else:
+                data[f"arg{slot}_{name}"] = columns.numbers[:, slot, ENTITY_NUMBERS.index(name)].astype(np.float64)
+    for bit, name in enumerate(OUTCOME_NAMES):
+        data[name] = columns.bit(bit)
+    data["solved"] = columns.bit(trial_blocks.SOLVED_BIT)
+    data["sim_steps"] = columns.sim_steps.astype(np.int64)
+    data["wall_seconds"] = columns.wall_seconds.astype(np.float64)
+    data["seed"] = columns.seed.astype(np.int64)
+    data["snapshot_id"] = nullable(columns.snapshot_id)
+    stamps = columns.created_at.astype(np.int64)
+    data["created_at"] = np.where(stamps == trial_blocks.NO_TIME, np.datetime64("NaT"), stamps.astype("datetime64[us]")).astype("datetime64[ns]")
+    frame = pd.DataFrame(data)
+    for column in trial_columns():
+        if column.kind == "string":
+            frame[column.name] = frame[column.name].astype("string")
+    return frame[[c.name for c in trial_columns()]]
+
+
 def _number(value: Any) -> Any:
     """A summary value that must be a number (anything else read from the database is dropped)."""
     return value if isinstance(value, (int, float)) and not isinstance(value, bool) else None
@@ -212,8 +276,11 @@ class Workbench:
         ids, the controller call, ``arg<k>_<feature>`` per argument slot, the six outcome
         bits and ``solved`` as booleans, and what the store records.
         """
-        records = self.store.visible_trials(branch, source=source, scenario=scenario, episode=episode, solved=solved)
-        return trial_frame(self.store, records)
+        if len(TRIAL_COLUMN_SOURCES) > 1:  # a registered source computes its columns from records
+            records = self.store.visible_trials(branch, source=source, scenario=scenario, episode=episode, solved=solved)
+            return trial_frame(self.store, records)
+        columns = self.store.visible_columns(branch, source=source, scenario=scenario, episode=episode, solved=solved)
+        return columns_frame(columns)
 
     def episodes(
         self, *, branch: str | None = None, scenario: str | None = None, run: int | None = None

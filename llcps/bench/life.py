@@ -190,6 +190,7 @@ class StoreAtScale:
     trials: int
     fill_seconds: float
     visible_load: Clock
+    records_load: Clock
     commits_per_s: float
 
 
@@ -204,15 +205,19 @@ def store_at_scale(n: int, progress: Progress | None = None, *, commits: int = 3
             with Clock() as fill:
                 for start in range(0, n, BATCH):
                     store.add_trials(list(pool.trials(min(BATCH, n - start), "main", start=start)))
-            say(progress, f"life: loading the {n:,} visible trials")
+            say(progress, f"life: loading the {n:,} visible trials as columns")
             with Clock() as load:
-                seen = len(store.visible_trials("main"))
+                seen = len(store.visible_columns("main"))
+            say(progress, f"life: loading the {n:,} visible trials as records")
+            with Clock() as records:
+                if len(store.visible_trials("main")) != seen:
+                    raise AssertionError("the visible set as records and as columns differ in size")
             say(progress, f"life: {commits} durable commits on {seen:,} trials")
             one_by_one = list(pool.trials(commits, "main", start=n))
             with Clock() as single:
                 for trial in one_by_one:
                     store.add_trial(trial)
-    return StoreAtScale(seen, fill.wall, load, commits / single.wall)
+    return StoreAtScale(seen, fill.wall, load, records, commits / single.wall)
 
 
 def run(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
@@ -247,9 +252,14 @@ def run(quick: bool = False, progress: Progress | None = None) -> list[Figure]:
         _figure("fill", scale.fill_seconds, "s wall", subject=subject, note=f"{BATCH:,} trials per transaction"),
         _figure(
             "visible_load", scale.visible_load.wall, "s wall", subject=subject,
-            at_most=2.0 if scale.trials >= STORE_TRIALS else None, note="every trial's features distinct",
+            at_most=2.0 if scale.trials >= STORE_TRIALS else None,
+            note="as columns (Store.visible_columns: packed blocks and the rows after them); every trial's features distinct",
         ),
         _figure("visible_load_cpu", scale.visible_load.cpu, "s cpu", subject=subject),
+        _figure(
+            "visible_records_load", scale.records_load.wall, "s wall", subject=subject,
+            note="as one TrialRecord per trial (Store.visible_trials), what a model's full fit reads",
+        ),
         _figure("commits_per_s", scale.commits_per_s, "trials/s wall", subject=subject, at_least=1000, note="add_trial one at a time, each durable on return"),
     ]
     return figures

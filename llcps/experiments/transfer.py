@@ -39,6 +39,7 @@ from llcps.store.model_artifacts import POLICY_NAME
 from llcps.store.records import ModelArtifact
 from llcps.store.tables import Branch, Episode, Operator, OperatorExecution, Run, Snapshot, Trial, TrialChangeRow, WorldModel
 from llcps.store.runs import run_provenance_values
+from llcps.store.training_set import seal_blocks
 from llcps.store.trials import trial_row
 
 #: Keys of an episode summary (``SolveResult.as_json()``) that hold store ids.
@@ -330,6 +331,7 @@ def import_payload(store: Store, payload: Payload) -> IdMap:
                 for t in trials
             ]
             new_ids = list(conn.execute(_INSERT_TRIALS, rows).scalars())
+            seal_blocks(conn, [row["branch_id"] for row in rows], new_ids)
             for t, new in zip(trials, new_ids, strict=True):
                 trial_ids.add(t.id, new)
         if payload.changes:

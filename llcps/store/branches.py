@@ -20,7 +20,7 @@ from llcps.errors import LlcpsError, StoreError
 from llcps.store import visibility, writers
 from llcps.store.records import BranchChange, BranchInfo
 from llcps.store.settings import SettingQueries
-from llcps.store.tables import MAX_BRANCH_NAME, Branch, Episode, Operator, OperatorExecution, Run, Trial, TrialChangeRow, TrialExamplesRow, WorldModel
+from llcps.store.tables import MAX_BRANCH_NAME, Branch, Episode, Operator, OperatorExecution, Run, Trial, TrialBlockRow, TrialChangeRow, TrialExamplesRow, WorldModel
 from llcps.store.transactions import CHANGED_HINT, utc_now
 from llcps.store.trials import iso_timestamp
 from llcps.store.visibility import Link
@@ -68,6 +68,10 @@ class BranchQueries(SettingQueries):
     def __init__(self, engine: Engine, url: URL) -> None:
         super().__init__(engine, url)
         self._branch_ids: dict[str, int] = {}  # name -> id, for writing trials; dropped when a branch goes
+        # branch id -> the last trial id this process saw packed in a block (a hint for
+        # llcps.store.training_set.seal_blocks; emptied when trials go)
+        self._sealed: dict[int, int] = {}
+        self._packs_blocks = True  # False for an outdated store opened as it is (llcps.store.store)
         self._forks_checked: set[tuple[int, int, int]] = set()  # (branch id, parent id, fork point) within the parent's head
 
     def _branches(self, conn: Connection) -> list[Any]:
@@ -335,6 +339,11 @@ class BranchQueries(SettingQueries):
         conn.execute(delete(WorldModel).where(clauses["model"]))
         conn.execute(delete(TrialChangeRow).where(TrialChangeRow.trial_id.in_(trial_ids)))
         conn.execute(delete(TrialExamplesRow).where(TrialExamplesRow.trial_id.in_(trial_ids)))
+        held = select(Trial.id).where(
+            clauses["trial"], Trial.branch_id == TrialBlockRow.branch_id, Trial.id.between(TrialBlockRow.first_id, TrialBlockRow.last_id)
+        )
+        conn.execute(delete(TrialBlockRow).where(held.exists()))
+        self._sealed.clear()
         conn.execute(delete(Trial).where(clauses["trial"]))
         conn.execute(delete(Episode).where(clauses["episode"]))
 

@@ -117,6 +117,8 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
                 f"the database is at schema revision {revision!r}, older than this llcps needs ({head!r})",
                 hint="run `llcps db upgrade` to migrate it",
             )
+        # An outdated store opened to be upgraded (or looked at) may lack trial_blocks.
+        self._packs_blocks = revision == head
 
     def _stamp_main_branch(self) -> None:
         """Date ``main`` of a store just made from :func:`_new_store_image` now, as if
@@ -162,6 +164,7 @@ class Store(MaintenanceQueries, TrialQueries, OperatorQueries, ModelArtifactQuer
         """
         before = self.revision
         head = migrations.head_revision()
+        self._packs_blocks = True  # at head once this returns
         if before == head:
             return before, head
         known = migrations.known_revisions()

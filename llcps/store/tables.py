@@ -220,6 +220,26 @@ class TrialExamplesRow(Base):
     data: Mapped[bytes] = mapped_column(LargeBinary)
 
 
+class TrialBlockRow(Base):
+    """:data:`~llcps.store.trial_blocks.BLOCK` consecutive trials of one branch, packed as
+    columns (llcps.store.trial_blocks.pack), so that a branch's visible set is read as a
+    few hundred rows rather than a million.
+
+    Derived data: written in the transaction that stores the trial completing the block,
+    deleted with any trial it holds, and not used where it no longer matches its rows.
+    """
+
+    __tablename__ = "trial_blocks"
+    __table_args__ = (Index("ix_trial_blocks_branch_id_first_id", "branch_id", "first_id"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    branch_id: Mapped[int] = mapped_column(ForeignKey("branches.id", ondelete="CASCADE"))
+    first_id: Mapped[int] = mapped_column(Integer)
+    last_id: Mapped[int] = mapped_column(Integer)
+    trials: Mapped[int] = mapped_column(Integer)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+
+
 class Operator(Base):
     """A learned operator (the knowledge-base expansion K')."""
 

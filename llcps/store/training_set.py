@@ -9,21 +9,25 @@ path (see :meth:`TrialQueries._read_by_link`). Rows become records in
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, Callable, Sequence
 
-from sqlalchemy import ColumnElement, Connection, delete, func, insert, select
+import numpy as np
+
+from sqlalchemy import ColumnElement, Connection, bindparam, delete, func, insert, select
 from sqlalchemy.exc import IntegrityError
 
 from llcps.domain import check_id
 from llcps.trial_records import TrialChange, TrialRecord
 from llcps.training import TrainingChanges, TrainingSet, position_after
 from llcps.errors import LlcpsError, StoreError
-from llcps.store import backends, visibility
+from llcps.store import backends, trial_blocks, visibility
 from llcps.store.branches import BranchQueries
-from llcps.store.tables import Trial, TrialChangeRow, TrialExamplesRow
+from llcps.store.tables import Trial, TrialBlockRow, TrialChangeRow, TrialExamplesRow
 from llcps.store.transactions import utc_now
 from llcps.store.trial_changes import CHANGE_COLUMNS, UNKNOWN, ChangeDecoder, change_row
 from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, trial_row
+from llcps.store.trial_blocks import BlockError, TrialColumns
 from llcps.store.visibility import Link
 
 
@@ -37,6 +41,74 @@ def _trial_id(record: TrialRecord) -> int:
 
 def _change_id(change: TrialChange) -> int:
     return change.trial_id  # type: ignore[return-value]
+
+
+def seal_blocks(conn: Connection, branch_ids: Sequence[int], trial_ids: Sequence[int], sealed: dict[int, int] | None = None) -> None:
+    """Pack the full blocks of the branches just written to (:mod:`llcps.store.trial_blocks`),
+    in the transaction that wrote trials ``trial_ids`` to branches ``branch_ids`` (in pairs).
+
+    Args:
+        sealed: branch id -> the last trial id known to be in a block, kept between calls
+            by the caller: a hint that spares a durable single-trial write the query for
+            it. Another process may have packed more since, which only makes the next
+            look come sooner; a removal of trials must empty it.
+    """
+    newest: dict[int, int] = {}
+    for branch_id, trial_id in zip(branch_ids, trial_ids, strict=True):
+        newest[branch_id] = max(newest.get(branch_id, 0), trial_id)
+    for branch_id, trial_id in newest.items():
+        hint = None if sealed is None else sealed.get(branch_id)
+        if hint is not None and trial_id - hint < trial_blocks.BLOCK:
+            continue
+        last = _seal_branch(conn, branch_id, trial_id, most=len(trial_ids) // trial_blocks.BLOCK + 1)
+        if sealed is not None:
+            sealed[branch_id] = last
+
+
+_LAST_BLOCK = (
+    select(TrialBlockRow.last_id)
+    .where(TrialBlockRow.branch_id == bindparam("branch_id"))
+    .order_by(TrialBlockRow.first_id.desc())
+    .limit(1)
+)
+
+
+def _seal_branch(conn: Connection, branch_id: int, newest: int, *, most: int) -> int:
+    """Pack full blocks of the branch's trials after its last block
+    (:mod:`llcps.store.trial_blocks`), at most ``most``, in the transaction that stored
+    them (the newest of them ``newest``).
+
+    One more block than a transaction's trials fill keeps up with any writer, and
+    packs the trials of a store made before blocks existed one block per
+    transaction, so that no single write carries them all.
+
+    A trial the decoder refuses leaves its block unpacked: reads then go to the rows,
+    and name the trial as they always did.
+    """
+    last = conn.scalar(_LAST_BLOCK, {"branch_id": branch_id})
+    if last is None:  # no block yet: from before the branch's first trial
+        last = (conn.scalar(select(func.min(Trial.id)).where(Trial.branch_id == branch_id)) or 1) - 1
+    if newest - last < trial_blocks.BLOCK:  # fewer ids than a block since the last one: no count needed
+        return last
+    pending = conn.scalar(select(func.count()).select_from(Trial).where(Trial.branch_id == branch_id, Trial.id > last)) or 0
+    names = {branch_id: str(branch_id)}
+    while pending >= trial_blocks.BLOCK and most > 0:
+        most -= 1
+        rows = conn.execute(
+            select(*TRIAL_COLUMNS).where(Trial.branch_id == branch_id, Trial.id > last).order_by(Trial.id).limit(trial_blocks.BLOCK)
+        )
+        try:
+            with gc_paused():
+                columns = trial_blocks.from_records(TrialDecoder(names).decode_result(rows), {str(branch_id): branch_id})
+        except StoreError:
+            return last
+        first, last = int(columns.id[0]), int(columns.id[-1])
+        conn.execute(
+            insert(TrialBlockRow).values(branch_id=branch_id, first_id=first, last_id=last, trials=len(columns), data=trial_blocks.pack(columns))
+        )
+        pending -= len(columns)
+    return last
+
 
 
 class TrialQueries(BranchQueries):
@@ -69,6 +141,8 @@ class TrialQueries(BranchQueries):
                     ids = list(conn.execute(_INSERT_TRIALS, rows).scalars())
                 if changes is not None:
                     self._insert_changes(conn, [(i, c) for i, c in zip(ids, changes) if c is not None])
+                if self._packs_blocks:
+                    seal_blocks(conn, [row["branch_id"] for row in rows], ids, self._sealed)
                 return ids
         except StoreError as exc:  # raised from the database's error, its __cause__
             if isinstance(exc.__cause__, IntegrityError) and backends.violates_foreign_key(exc.__cause__):
@@ -184,6 +258,80 @@ class TrialQueries(BranchQueries):
                 return None
             items += part
         return items
+
+    def visible_columns(
+        self,
+        branch: str | None,
+        *,
+        source: str | None = None,
+        scenario: str | None = None,
+        solved: bool | None = None,
+        episode: int | None = None,
+    ) -> TrialColumns:
+        """The trials ``branch`` sees (None: the current branch), in id order, as columns:
+        what :meth:`visible_trials` gives, without a Python object per trial.
+
+        Each link of the branch's chain is read as its packed blocks
+        (:mod:`llcps.store.trial_blocks`) and the rows after them. A block that fails its
+        checks, or whose trial count no longer matches the rows in its range, is not used:
+        that link is read from its rows from there on.
+
+        Args:
+            source, scenario, solved, episode: keep only trials with these values.
+        """
+        if episode is not None:
+            check_id(episode, "episode")
+        with self._read() as conn:
+            chain = self._chain(conn, self._name(conn, branch))
+            decoder = TrialDecoder({link.branch_id: link.name for link in chain})
+            branch_ids = {link.name: link.branch_id for link in chain}
+            parts: list[TrialColumns] = []
+            with gc_paused():
+                for link in chain[::-1]:  # the oldest ancestor's trials first
+                    packed, sealed = self._read_blocks(conn, link) if self._packs_blocks else ([], 0)
+                    parts += packed
+                    rows = select(*TRIAL_COLUMNS).where(Trial.branch_id == link.branch_id, Trial.id > sealed)
+                    if link.limit is not None:
+                        rows = rows.where(Trial.id <= link.limit)
+                    parts.append(trial_blocks.from_records(decoder.decode_result(conn.execute(rows.order_by(Trial.id))), branch_ids))
+        columns = replace(trial_blocks.concat(parts), branch_names=tuple((link.branch_id, link.name) for link in chain))
+        if len(columns) > 1 and not (columns.id[1:] > columns.id[:-1]).all():  # links whose id ranges overlap
+            columns = columns.where(np.argsort(columns.id, kind="stable"))
+        keep = np.ones(len(columns), dtype=bool)
+        for field, value in (("source", source), ("scenario", scenario)):
+            if value is not None:
+                keep &= columns.codes_of(field, value)
+        if solved is not None:
+            keep &= columns.bit(trial_blocks.SOLVED_BIT) == solved
+        if episode is not None:
+            keep &= columns.episode_id == episode
+        return columns if keep.all() else columns.where(keep)
+
+    @staticmethod
+    def _read_blocks(conn: Connection, link: Link) -> tuple[list[TrialColumns], int]:
+        """A link's usable blocks, in id order, cut at its limit, and the last trial id they cover (0: none)."""
+        query = select(TrialBlockRow.first_id, TrialBlockRow.last_id, TrialBlockRow.trials, TrialBlockRow.data).where(
+            TrialBlockRow.branch_id == link.branch_id
+        )
+        if link.limit is not None:
+            query = query.where(TrialBlockRow.first_id <= link.limit)
+        parts: list[TrialColumns] = []
+        sealed = 0
+        for first, last, trials, data in conn.execute(query.order_by(TrialBlockRow.first_id)):
+            if not (isinstance(first, int) and isinstance(last, int) and sealed < first <= last):
+                break
+            try:
+                columns = trial_blocks.unpack(data, link.branch_id)
+            except BlockError:
+                break
+            if len(columns) != trials or len(columns) == 0 or columns.id[0] != first or columns.id[-1] != last:
+                break
+            rows = conn.scalar(select(func.count()).select_from(Trial).where(Trial.branch_id == link.branch_id, Trial.id.between(first, last)))
+            if rows != trials:  # trials deleted or added in its range outside llcps
+                break
+            parts.append(columns if link.limit is None or last <= link.limit else columns.where(columns.id <= link.limit))
+            sealed = last if link.limit is None else min(last, link.limit)
+        return parts, sealed
 
     def training_set(self, branch: str | None) -> tuple[TrainingSet, TrainingChanges]:
         """What ``branch`` sees now, as an episode learns from it: its trials and their
