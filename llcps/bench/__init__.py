@@ -19,7 +19,9 @@ The groups against the paper (``GROUPS``; one module each):
 - ``store`` (:mod:`llcps.bench.store`): the experience store's throughput, durable
   commits, batched inserts and the visible set of a branch three levels deep.
 - ``life`` (:mod:`llcps.bench.life`): the per-episode overhead outside physics (fit,
-  rank, store) at episodes 10, 100 and 1,000 of a synthetic life.
+  rank, store) at episodes 10, 100 and 1,000 of a synthetic life, and the store of a
+  long life: 1,000,000 trials' visible set read as columns (and as records), durable
+  commits on it.
 - ``scaling`` (:mod:`llcps.bench.scaling`): the experiment grid on 1 and 2 worker
   processes, with and without the physics cache.
 

@@ -20,8 +20,10 @@ that stays flat as experience grows).
 
 The store is filled with batched inserts, not episode by episode, so a point far into
 the life costs one fit before it, not a thousand. The group also measures the store of
-a long life: 1,000,000 trials on a branch, the load of its visible set (target ≤ 2 s)
-and durable single-trial commits on it (target ≥ 1,000/s).
+a long life: 1,000,000 trials on a branch, the load of its visible set as columns
+(:meth:`~llcps.store.Store.visible_columns`, target ≤ 2 s) and, without a target, as
+records (what a model's fit reads), and durable single-trial commits on it (target
+≥ 1,000/s).
 """
 
 from __future__ import annotations
@@ -196,8 +198,8 @@ class StoreAtScale:
 
 def store_at_scale(n: int, progress: Progress | None = None, *, commits: int = 300) -> StoreAtScale:
     """A store of ``n`` trials on one branch, each with features of its own (as pretraining
-    writes them), filled with batched inserts; then its visible set loaded once and
-    ``commits`` single-trial durable commits."""
+    writes them), filled with batched inserts; then its visible set loaded once as
+    columns and once as records, and ``commits`` single-trial durable commits."""
     pool = TrialPool()
     with tempfile.TemporaryDirectory(prefix="llcps-life-") as tmp:
         with Store.open(str(Path(tmp) / "scale.db"), create=True) as store:
