@@ -70,6 +70,8 @@ EPISODE_COLUMNS: Mapping[str, tuple[str, str]] = {
     "life_condition": ("string", "the condition its life ran under (update, reset, scratch, random)"),
     "life_episode": ("nullable_int", "its index in the life (empty for a re-solve after the life)"),
     "first_encounter": ("nullable_bool", "the first episode of its family in the life"),
+    "ordering": ("string", "the exploration ordering it ran (ranked, hedged, ...)"),
+    "resolving_pick": ("string", "the side of the ordering that chose the resolving trial (the hedge's model or random; else empty)"),
 }
 
 #: Columns of :meth:`Workbench.lives` (``episodes.csv`` of ``life run``): name -> (kind, meaning).
@@ -146,6 +148,17 @@ def _frame(rows: list[dict[str, Any]], columns: Iterable[tuple[str, str, Sequenc
     for name, kind, categories in spec:
         frame[name] = _convert(frame[name], kind, categories)
     return frame
+
+
+def _resolving_pick(summary: Mapping[str, Any]) -> str | None:
+    """Which side of the ordering chose a solved episode's last trial, from its summary's
+    ``ordering_trace`` (untrusted): None without one, or when the last trial was not the
+    ordering's pick (a candidate the arm would refuse, tried after every other)."""
+    trace, trials = summary.get("ordering_trace"), summary.get("exploration_trials")
+    picks = trace.get("picks") if isinstance(trace, Mapping) else None
+    if not isinstance(picks, list) or not picks or type(trials) is not int or len(picks) != trials:
+        return None
+    return picks[-1] if isinstance(picks[-1], str) and len(picks[-1]) <= 16 else None
 
 
 def _life_place(place: Any) -> dict[str, Any]:
@@ -309,6 +322,8 @@ class Workbench:
                     "finished_at": e.finished_at,
                     "variant": _number(summary.get("variant")),
                     **_life_place(summary.get("life")),
+                    "ordering": summary.get("ordering") if isinstance(summary.get("ordering"), str) else None,
+                    "resolving_pick": _resolving_pick(summary) if e.status == "solved" else None,
                 }
             )
         return _frame(rows, ((n, k, ()) for n, (k, _) in EPISODE_COLUMNS.items()))

@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from llcps.cps.episode import SolveConfig, solve
@@ -183,3 +184,24 @@ def test_the_reach_check_tries_last_what_the_arm_would_refuse(tmp_path: Path) ->
     # random order knows nothing else: the check only takes the refused calls out of its sequence
     kept = [t.spec for t in tried[False] if not _refused_here(t)]
     assert [t.spec for t in tried[True]][: len(kept)] == kept
+
+
+def test_the_hedge_keeps_which_side_chose_each_trial_in_the_episode_summary(tmp_path: Path) -> None:
+    import llcps
+
+    path = tmp_path / "trace.db"
+    with Store.open(str(path), create=True) as store:
+        pretrain(store, branch="main", n=6, seed=3)
+        result = solve(store, branch=None, config=SolveConfig(scenario="scenario3", budget=4, seed=0))
+        trace = result.as_json()["ordering_trace"]
+        assert result.ordering == "hedged" and result.exploration_trials >= 1
+        assert len(trace["picks"]) == len(trace["beliefs"]) == result.exploration_trials
+        assert trace["picks"][0] == "model" and set(trace["picks"]) <= {"model", "random"}
+        assert all(0.0 <= b <= 1.0 for b in trace["beliefs"])
+        (episode,) = store.list_episodes()
+        assert episode.summary["ordering_trace"] == trace
+    with llcps.open(path) as wb:
+        row = wb.episodes().iloc[0]
+    assert row["ordering"] == "hedged"
+    pick = None if pd.isna(row["resolving_pick"]) else row["resolving_pick"]
+    assert pick == (trace["picks"][-1] if result.solved else None)

@@ -135,6 +135,8 @@ class SolveResult:
     wall_seconds: float = 0.0
     learned_operators: list[str] = field(default_factory=list)
     resolving_trial_id: int | None = None
+    #: What the ordering decided per trial (:meth:`Ordering.trace`; the hedge: which side chose each).
+    ordering_trace: dict[str, list[Any]] | None = None
     episode_id: int | None = None
     run_id: int | None = None
 
@@ -170,6 +172,7 @@ class SolveResult:
             "resolving_trial_id": self.resolving_trial_id,
             "episode_id": self.episode_id,
             "run_id": self.run_id,
+            **({} if self.ordering_trace is None else {"ordering_trace": self.ordering_trace}),
         }
 
 
@@ -183,6 +186,7 @@ class _Progress:
     candidates: int = 0
     learned_operators: list[str] = field(default_factory=list)
     resolving_trial_id: int | None = None
+    ordering: Any = None  # the exploration's ordering (llcps.cps.orderings.base.Ordering), once it exists
 
 
 def solve(
@@ -306,6 +310,7 @@ def solve(
             wall_seconds=time.perf_counter() - started,
             learned_operators=list(found.learned_operators),
             resolving_trial_id=found.resolving_trial_id,
+            ordering_trace=found.ordering.trace() if found.ordering is not None else None,
             episode_id=episode_id,
             run_id=run_id,
         )
@@ -371,6 +376,7 @@ def _explore(
             episode_id=executor.episode_id,
         )
     )
+    found.ordering = ordering
     # What the arm would refuse moves nothing, so it cannot resolve the novelty: tried
     # only once every other candidate was, in candidate order, unknown to the ordering.
     refused = sorted(point.refused)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, ClassVar, Collection
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Collection
 
 if TYPE_CHECKING:
     from llcps.cps.exploration import FailurePoint
@@ -73,6 +73,11 @@ class Ordering(ABC):
 
     def learn(self, index: int, after: State) -> None:
         """Take a failed trial in (after it left :attr:`remaining`); nothing by default."""
+
+    def trace(self) -> dict[str, list[Any]] | None:
+        """What the ordering decided for each trial it chose, in order, kept in the
+        episode's summary (``ordering_trace``); None: nothing beyond the order itself."""
+        return None
 
     def exclude(self, indices: Collection[int]) -> None:
         """Candidates tried before this ordering took over (another ordering chose them):

@@ -54,7 +54,7 @@ same factor: the ``k``-th candidate of its side is tried by trial ``2 k - 1``.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -128,6 +128,12 @@ class Hedged(Ranked):
         while self.permutation[self._cursor] not in untried:
             self._cursor += 1
         return self.permutation[self._cursor]
+
+    def trace(self) -> dict[str, list[Any]]:
+        """``picks`` (which side chose each trial) and ``beliefs`` (the belief ``w`` then,
+        to six places): the last pick of a solved episode is the side that found the
+        resolution."""
+        return {"picks": list(self.picks), "beliefs": [round(b, 6) for b in self.beliefs]}
 
     def learn(self, index: int, after: State) -> None:
         self.log_odds += self._evidence(index)
