@@ -10,9 +10,7 @@ path (see :meth:`TrialQueries._read_by_link`). Rows become records in
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any, Callable, Sequence
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from sqlalchemy import ColumnElement, Connection, bindparam, delete, func, insert, select
 from sqlalchemy.exc import IntegrityError
@@ -21,14 +19,16 @@ from llcps.domain import check_id
 from llcps.trial_records import TrialChange, TrialRecord
 from llcps.training import TrainingChanges, TrainingSet, position_after
 from llcps.errors import LlcpsError, StoreError
-from llcps.store import backends, trial_blocks, visibility
+from llcps.store import backends, visibility
 from llcps.store.branches import BranchQueries
 from llcps.store.tables import Trial, TrialBlockRow, TrialChangeRow, TrialExamplesRow
 from llcps.store.transactions import utc_now
 from llcps.store.trial_changes import CHANGE_COLUMNS, UNKNOWN, ChangeDecoder, change_row
 from llcps.store.trials import TRIAL_COLUMNS, TrialDecoder, gc_paused, trial_row
-from llcps.store.trial_blocks import BlockError, TrialColumns
 from llcps.store.visibility import Link
+
+if TYPE_CHECKING:  # numpy loads with the blocks, when trials are written or read as columns
+    from llcps.store.trial_blocks import TrialColumns
 
 
 _INSERT_TRIAL = insert(Trial)
@@ -53,6 +53,8 @@ def seal_blocks(conn: Connection, branch_ids: Sequence[int], trial_ids: Sequence
             it. Another process may have packed more since, which only makes the next
             look come sooner; a removal of trials must empty it.
     """
+    from llcps.store import trial_blocks
+
     newest: dict[int, int] = {}
     for branch_id, trial_id in zip(branch_ids, trial_ids, strict=True):
         newest[branch_id] = max(newest.get(branch_id, 0), trial_id)
@@ -85,6 +87,8 @@ def _seal_branch(conn: Connection, branch_id: int, newest: int, *, most: int) ->
     A trial the decoder refuses leaves its block unpacked: reads then go to the rows,
     and name the trial as they always did.
     """
+    from llcps.store import trial_blocks
+
     last = conn.scalar(_LAST_BLOCK, {"branch_id": branch_id})
     if last is None:  # no block yet: from before the branch's first trial
         last = (conn.scalar(select(func.min(Trial.id)).where(Trial.branch_id == branch_id)) or 1) - 1
@@ -279,6 +283,10 @@ class TrialQueries(BranchQueries):
         Args:
             source, scenario, solved, episode: keep only trials with these values.
         """
+        import numpy as np
+
+        from llcps.store import trial_blocks
+
         if episode is not None:
             check_id(episode, "episode")
         with self._read() as conn:
@@ -310,6 +318,7 @@ class TrialQueries(BranchQueries):
     @staticmethod
     def _read_blocks(conn: Connection, link: Link) -> tuple[list[TrialColumns], int]:
         """A link's usable blocks, in id order, cut at its limit, and the last trial id they cover (0: none)."""
+        from llcps.store import trial_blocks
         query = select(TrialBlockRow.first_id, TrialBlockRow.last_id, TrialBlockRow.trials, TrialBlockRow.data).where(
             TrialBlockRow.branch_id == link.branch_id
         )
@@ -322,7 +331,7 @@ class TrialQueries(BranchQueries):
                 break
             try:
                 columns = trial_blocks.unpack(data, link.branch_id)
-            except BlockError:
+            except trial_blocks.BlockError:
                 break
             if len(columns) != trials or len(columns) == 0 or columns.id[0] != first or columns.id[-1] != last:
                 break
