@@ -114,7 +114,6 @@ def _seal_branch(conn: Connection, branch_id: int, newest: int, *, most: int) ->
     return last
 
 
-
 class TrialQueries(BranchQueries):
     """Writing trials and their changes, and reading what a branch sees of them."""
 
