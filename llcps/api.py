@@ -185,7 +185,6 @@ def columns_frame(columns: TrialColumns) -> pd.DataFrame:
     """Trials read as columns (:meth:`Store.visible_columns`) as the tidy DataFrame of
     :meth:`Workbench.trials`: the frame :func:`trial_frame` makes of the same trials' records,
     built from arrays instead of one row per trial."""
-    n = len(columns)
     branch_ids = np.array(sorted(dict(columns.branch_names)), dtype=np.int64)
     branch_names = [dict(columns.branch_names)[b] for b in branch_ids.tolist()]
 
@@ -217,7 +216,7 @@ def columns_frame(columns: TrialColumns) -> pd.DataFrame:
     }
     for slot in range(ARGUMENT_SLOTS):
         names = [a[slot] if slot < len(a) else None for a in columns.argument_lists]
-        data[f"arg{slot}"] = objects(names, columns.arguments) if n else np.empty(0, dtype=object)
+        data[f"arg{slot}"] = objects(names, columns.arguments)
         for name in ENTITY_FIELDS:
             if name == "shape":
                 data[f"arg{slot}_shape"] = category(SHAPES, columns.shape[:, slot].astype(np.int64), SHAPES)

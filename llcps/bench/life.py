@@ -45,6 +45,7 @@ from llcps.models.persistence import clear_fits
 from llcps.models.relational import GoalQuery
 from llcps.models.schedule import FULL_FIT_TRIALS, bins_trials
 from llcps.models.synthetic import synthetic_changes, synthetic_trials
+from llcps.errors import LlcpsError
 from llcps.store import Store
 from llcps.trial_records import TrialChange, TrialRecord, WorldModelInput
 
@@ -213,7 +214,7 @@ def store_at_scale(n: int, progress: Progress | None = None, *, commits: int = 3
             say(progress, f"life: loading the {n:,} visible trials as records")
             with Clock() as records:
                 if len(store.visible_trials("main")) != seen:
-                    raise AssertionError("the visible set as records and as columns differ in size")
+                    raise LlcpsError(f"the visible set read as records and as columns differ in size ({seen:,} as columns)")
             say(progress, f"life: {commits} durable commits on {seen:,} trials")
             one_by_one = list(pool.trials(commits, "main", start=n))
             with Clock() as single:
