@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from llcps.cps.episode import SolveConfig, SolveResult
+from llcps.cps.orderings.base import resolving_pick
 from llcps.errors import LlcpsError
 from llcps.jobs.solve import solve as solve_job
 from llcps.provenance import FIELDS as PROVENANCE_FIELDS
@@ -148,17 +149,6 @@ def _frame(rows: list[dict[str, Any]], columns: Iterable[tuple[str, str, Sequenc
     for name, kind, categories in spec:
         frame[name] = _convert(frame[name], kind, categories)
     return frame
-
-
-def _resolving_pick(summary: Mapping[str, Any]) -> str | None:
-    """Which side of the ordering chose a solved episode's last trial, from its summary's
-    ``ordering_trace`` (untrusted): None without one, or when the last trial was not the
-    ordering's pick (a candidate the arm would refuse, tried after every other)."""
-    trace, trials = summary.get("ordering_trace"), summary.get("exploration_trials")
-    picks = trace.get("picks") if isinstance(trace, Mapping) else None
-    if not isinstance(picks, list) or not picks or type(trials) is not int or len(picks) != trials:
-        return None
-    return picks[-1] if isinstance(picks[-1], str) and len(picks[-1]) <= 16 else None
 
 
 def _life_place(place: Any) -> dict[str, Any]:
@@ -322,7 +312,7 @@ class Workbench:
                     "variant": _number(summary.get("variant")),
                     **_life_place(summary.get("life")),
                     "ordering": summary.get("ordering") if isinstance(summary.get("ordering"), str) else None,
-                    "resolving_pick": _resolving_pick(summary) if e.status == "solved" else None,
+                    "resolving_pick": resolving_pick(summary) if e.status == "solved" else None,
                 }
             )
         return _frame(rows, ((n, k, ()) for n, (k, _) in EPISODE_COLUMNS.items()))

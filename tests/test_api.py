@@ -189,22 +189,3 @@ def test_the_main_jobs_run_from_python(tmp_path: Path) -> None:
         assert wb.episodes()["id"].tolist() == [result.episode_id]
         with pytest.raises(LlcpsError, match="bad solve setting"):
             wb.solve("scenario3", budgets=3)
-
-
-@pytest.mark.parametrize(
-    ("summary", "pick"),
-    [
-        ({"exploration_trials": 3, "ordering_trace": {"picks": ["model", "random", "model"], "beliefs": [0.5, 0.4, 0.3]}}, "model"),
-        ({"exploration_trials": 2, "ordering_trace": {"picks": ["model", "random"]}}, "random"),
-        ({"exploration_trials": 3, "ordering_trace": {"picks": ["model", "random"]}}, None),  # the last trial was no pick of the ordering
-        ({"exploration_trials": 1}, None),  # another ordering, or a summary from before the trace
-        ({"exploration_trials": 1, "ordering_trace": "model"}, None),
-        ({"exploration_trials": 1, "ordering_trace": {"picks": [7]}}, None),
-        ({"exploration_trials": "1", "ordering_trace": {"picks": ["model"]}}, None),
-        ({"exploration_trials": 1, "ordering_trace": {"picks": ["x" * 10_000]}}, None),
-    ],
-)
-def test_the_resolving_pick_is_read_from_an_untrusted_summary(summary: dict, pick: str | None) -> None:
-    from llcps.api import _resolving_pick
-
-    assert _resolving_pick(summary) == pick

@@ -186,14 +186,14 @@ def test_bad_results_file_is_a_project_error(tmp_path) -> None:  # noqa: ANN001
 
 def test_results_written_before_the_ordering_column_read_as_the_papers_ordering(tmp_path) -> None:  # noqa: ANN001
     table = synthetic_table(seeds=1)
-    hedged = ResultsTable(dataclasses.replace(r, ordering="hedged") for r in table)
-    assert ResultsTable.read(hedged.write_csv(tmp_path / "h.csv")) == hedged  # the column round-trips
+    hedged = ResultsTable(dataclasses.replace(r, ordering="hedged", resolving_pick="model") for r in table)
+    assert ResultsTable.read(hedged.write_csv(tmp_path / "h.csv")) == hedged  # the columns round-trip
     lines = table.write_csv(tmp_path / "r.csv").read_text().splitlines()
-    assert lines[0].endswith(",ordering,draw") and all(line.endswith(",ranked,0") for line in lines[1:])
-    (tmp_path / "old.csv").write_text("\n".join(line.rsplit(",", 2)[0] for line in lines) + "\n")
-    assert "ordering" not in (tmp_path / "old.csv").read_text() and "draw" not in (tmp_path / "old.csv").read_text()
+    assert lines[0].endswith(",ordering,draw,resolving_pick") and all(line.endswith(",ranked,0,") for line in lines[1:])
+    (tmp_path / "old.csv").write_text("\n".join(line.rsplit(",", 3)[0] for line in lines) + "\n")
+    assert not {"ordering", "draw", "resolving_pick"} & set((tmp_path / "old.csv").read_text().splitlines()[0].split(","))
     old = ResultsTable.read(tmp_path / "old.csv")
-    assert old == table and old.unique("ordering") == ("ranked",) and old.unique("draw") == (0,)
+    assert old == table and old.unique("ordering") == ("ranked",) and old.unique("draw") == (0,) and old.unique("resolving_pick") == ("",)
     drawn = ResultsTable(dataclasses.replace(r, draw=2) for r in table)
     assert ResultsTable.read(drawn.write_csv(tmp_path / "d.csv")) == drawn  # the draw column round-trips
     records = json.loads(hedged.write_json(tmp_path / "h.json").read_text())

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Iterator
 
@@ -224,6 +224,31 @@ def test_two_orderings_against_one_random_set_are_two_row_groups(table: ResultsT
     assert overall["ranked"].geomean_ratio == pytest.approx(math.sqrt(3.0)) and overall["hedged"].default
 
 
+def test_the_families_count_the_resolutions_of_the_model_side(table: ResultsTable) -> None:
+    """Family a's hedged episodes: the model side chose the last trial in variants 0 and 3,
+    random order in 1 and 2, and variant 4 names no side (a refused candidate tried last);
+    family b's are from before the trace was kept. The ranking alone has no sides."""
+    sides = {0: "model", 1: "random", 2: "random", 3: "model", 4: ""}
+    hedged = [replace(r, resolving_pick=sides[r.variant] if r.scenario == "scenario1" else "") for r in _hedged(table)]
+    results = {(r.ordering, r.family): r for r in family_results(ResultsTable([*table, *hedged]))}
+    a, b = results[("hedged", "scenario1")], results[("hedged", "scenario2")]
+    assert (a.resolved_by_model, a.resolved_with_pick) == (2, 4)
+    assert (b.resolved_by_model, b.resolved_with_pick) == (0, 0)
+    assert all(r.resolved_with_pick == 0 for (ordering, _), r in results.items() if ordering == "ranked")
+    from llcps.report.formatting import model_side_share
+
+    assert (model_side_share(2, 4), model_side_share(0, 0)) == ("2 of 4", "-")
+
+
+@pytest.mark.parametrize("pick", ["x" * 17, "mo\tdel"])
+def test_a_bad_resolving_pick_is_a_clean_error_naming_the_column(tmp_path: Path, pick: object) -> None:
+    row = {**asdict(_row(DEFAULT[0], "scenario1", 0, 3)), "resolving_pick": pick}
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps([row]))
+    with pytest.raises(LlcpsError, match="column 'resolving_pick'"):
+        ResultsTable.read(path)
+
+
 def test_random_rows_of_the_papers_ordering_are_every_orderings_baseline(table: ResultsTable) -> None:
     hedged = _hedged(table)
     # The hedged store's own random rows (other numbers): the ranked ones still pair with hedged.
@@ -381,7 +406,14 @@ def test_a_tiny_generalization_grid_reports_every_family(tiny: tuple[Store, Path
         (f, m, v, d) for f in ("scenario1", "scenario4") for m in (DEFAULT[0], "random") for v in (0, 1) for d in range(3 if m == "random" else 1)
     }  # fmt: skip
     assert all(r.condition == "reset" for r in table)
+    # The default (hedged) says which side resolved each episode; the random order has no sides.
+    hedged = [r for r in table if r.model == DEFAULT[0]]
+    assert {r.ordering for r in hedged} == {"hedged"} and all(r.resolving_pick == "" for r in table if r.model == "random")
+    assert all(r.resolving_pick in ("model", "random") for r in hedged if r.solved and r.exploration_trials)
     families = result.analysis["generalization"]["families"]  # type: ignore[attr-defined]
+    default = [r for r in families if r["default"]]
+    assert sum(r["resolved_with_pick"] for r in default) == sum(1 for r in hedged if r.resolving_pick)
+    assert sum(r["resolved_by_model"] for r in default) == sum(1 for r in hedged if r.resolving_pick == "model")
     assert [r["family"] for r in families] == ["scenario1", "scenario4"] and all(r["n"] == 2 and r["random_draws"] == 3 for r in families)
     # Each draw of the random order explored with a world model seeded apart: three permutations per variant.
     random = [e for e in store.list_episodes() if e.summary.get("model") == "random"]

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from llcps.cps.exploration import Ranking
 from llcps.cps.orderings import ORDERINGS, get_ordering
 from llcps.cps.candidates import enumerate_candidates
-from llcps.cps.orderings.base import Exploration
+from llcps.cps.orderings.base import Exploration, resolving_pick
 from llcps.cps.orderings.coverage import spread
 from llcps.cps.orderings.hedged import MAX_MODEL_SHARE, Hedged
 from llcps.cps.orderings.ranked import Ranked
@@ -211,3 +211,22 @@ def test_coverage_meets_a_resolving_pair_sooner_than_random_order_and_a_scattere
     assert mean["clustered"] <= 12.5 and max(met["clustered"]) <= 22
     assert mean["clustered, random"] >= 18.0
     assert mean["scattered"] <= 1.15 * (n + 1) / 37
+
+
+@pytest.mark.parametrize(
+    ("summary", "pick"),
+    [
+        ({"exploration_trials": 3, "ordering_trace": {"picks": ["model", "random", "model"], "beliefs": [0.5, 0.4, 0.3]}}, "model"),
+        ({"exploration_trials": 2, "ordering_trace": {"picks": ["model", "random"]}}, "random"),
+        ({"exploration_trials": 3, "ordering_trace": {"picks": ["model", "random"]}}, None),  # the last trial was no pick of the ordering
+        ({"exploration_trials": 1}, None),  # another ordering, or a summary from before the trace
+        ({"exploration_trials": 1, "ordering_trace": "model"}, None),
+        ({"exploration_trials": 1, "ordering_trace": {"picks": [7]}}, None),
+        ({"exploration_trials": "1", "ordering_trace": {"picks": ["model"]}}, None),
+        ({"exploration_trials": 1, "ordering_trace": {"picks": ["x" * 10_000]}}, None),
+        ({"exploration_trials": 1, "ordering_trace": {"picks": [""]}}, None),
+        ({"exploration_trials": 1, "ordering_trace": {"picks": ["mo\ndel"]}}, None),
+    ],
+)
+def test_the_resolving_pick_is_read_from_an_untrusted_summary(summary: dict, pick: str | None) -> None:
+    assert resolving_pick(summary) == pick

@@ -19,7 +19,10 @@ random order's rows:
 - a two-sided paired Wilcoxon signed-rank test over variants, Holm-corrected across
   the families of one row group;
 - when some episode ended unsolved (censored at the budget): Kaplan–Meier medians
-  and a log-rank test (:mod:`llcps.analysis.survival`).
+  and a log-rank test (:mod:`llcps.analysis.survival`);
+- for an ordering with sides (``hedged``), how many of its solved episodes the model's
+  side resolved (the side that chose the last trial; ``resolving_pick``), so a family's
+  ratio can be read as the model pointing the right way or not.
 
 Overall, per row group: the geometric mean of the per-family median ratios
 ``exp(mean_F log r_F)`` and how many families have ``r_F > 1``.
@@ -41,6 +44,7 @@ from llcps.analysis.results import ResultsTable, group_rows
 from llcps.analysis.stats import holm, paired_wilcoxon
 from llcps.analysis.survival import budget, kaplan_meier, logrank
 from llcps.cps.orderings import ORDERINGS, PAPER_ORDERING
+from llcps.cps.orderings.base import MODEL_SIDE
 from llcps.experiments.design import OWN_BRANCH_CONDITIONS, RANDOM_ORDER_MODEL, condition_rank, scenario_rank
 from llcps.experiments.presets import PRESETS, measure_rank, model_rank
 from llcps.experiments.rows import ordering_rank
@@ -71,6 +75,9 @@ class FamilyResult:
         km_median_model, km_median_random: Kaplan–Meier medians (None: not reached, or no censoring).
         logrank_p, logrank_reason: log-rank test, only when some episode was censored.
         default: the row group is the registries' default world model, measure and ordering.
+        resolved_by_model: solved episodes whose resolving trial the ordering's model side chose.
+        resolved_with_pick: solved episodes whose summary says which side chose it (0: an
+            ordering without sides, or episodes from before the trace was kept).
     """
 
     family: str
@@ -95,6 +102,8 @@ class FamilyResult:
     logrank_p: float | None
     logrank_reason: str
     default: bool
+    resolved_by_model: int = 0
+    resolved_with_pick: int = 0
 
 
 @dataclass(frozen=True)
@@ -168,6 +177,7 @@ def family_results(table: ResultsTable, *, metric: str = "exploration_trials") -
         p, reason = paired_wilcoxon(a, b)
         med_a, med_b = float(np.median(a)), float(np.median(b))
         solved_a = np.array([m.solved for m, _ in pairs])
+        picks = [m.resolving_pick for m, _ in pairs if m.solved and m.resolving_pick]
         every_draw = [t for _, draws in pairs for t in draws]
         solved_b = np.array([t.solved for t in every_draw])
         km_a = km_b = lr = None
@@ -203,6 +213,8 @@ def family_results(table: ResultsTable, *, metric: str = "exploration_trials") -
                 logrank_p=lr,
                 logrank_reason="" if lr is not None else lr_reason,
                 default=(model, measure, ordering) == (WORLD_MODELS.default, MEASURES.default, ORDERINGS.default),
+                resolved_by_model=sum(pick == MODEL_SIDE for pick in picks),
+                resolved_with_pick=len(picks),
             )
         )
     out.sort(key=_order)

@@ -25,6 +25,7 @@ from llcps.limits import MAX_RESULTS_FILE_BYTES
 from llcps.experiments.design import Sequence, parse_branch, scenario_rank
 from llcps.experiments.presets import PRESETS
 from llcps.cps.orderings import PAPER_ORDERING
+from llcps.cps.orderings.base import resolving_pick
 from llcps.experiments.rows import (
     COLUMNS,
     METRICS,
@@ -82,9 +83,10 @@ def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
 
     Results written before scene variants existed have no ``variant`` column: variant 0;
     before orderings were recorded, no ``ordering`` column: the paper's ordering, the
-    only one runs had; before draws of the random order, no ``draw`` column: draw 0.
+    only one runs had; before draws of the random order, no ``draw`` column: draw 0;
+    before the resolving pick was recorded, no ``resolving_pick`` column: empty.
     """
-    data = {"variant": 0, "ordering": PAPER_ORDERING, "draw": 0, **data}
+    data = {"variant": 0, "ordering": PAPER_ORDERING, "draw": 0, "resolving_pick": "", **data}
     missing = [c for c in COLUMNS if c not in data]
     if missing:
         raise LlcpsError(
@@ -98,6 +100,8 @@ def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
                 values[name] = raw if isinstance(raw, bool) else _parse_bool(str(raw))
             elif name == "episode_id":
                 values[name] = None if raw in (None, "") else _integer(raw)
+            elif name == "resolving_pick":
+                values[name] = "" if raw is None else str(raw)
             elif name in _PARSERS:
                 values[name] = _PARSERS[name](raw)
             else:
@@ -361,6 +365,7 @@ def table_from_episodes(episodes: Iterable[Any]) -> EpisodeImport:
                 variant=seq.variant,
                 ordering=str(summary.get("ordering") or PAPER_ORDERING),
                 draw=seq.draw,
+                resolving_pick=(resolving_pick(summary) or "") if summary["solved"] is True else "",
             )
         except (KeyError, TypeError, ValueError):
             skip("malformed summary")

@@ -410,11 +410,13 @@ def _ratio(value: Any) -> str:
 def show_generalization(analysis: dict[str, Any]) -> None:
     """Leave one family out: per held-out family, each row group (model / measure / ordering, when
     not all ran the paper's / pretraining / condition) against the random order, and overall."""
+    from llcps.report.formatting import model_side_share
+
     data = analysis["generalization"]
     print_table(
         "leave one family out: median exploration trials per held-out family, row group vs random order "
         "(ratio > 1: the row group explored more)",
-        ("family", "row group", "n", "random draws", "median", "median random", "median of ratios", "ratio of medians", "Wilcoxon p", "Holm p", "unsolved", "log-rank p"),
+        ("family", "row group", "n", "random draws", "median", "median random", "median of ratios", "ratio of medians", "Wilcoxon p", "Holm p", "unsolved", "log-rank p", "by model side"),
         [
             (
                 r["family"],
@@ -429,6 +431,7 @@ def show_generalization(analysis: dict[str, Any]) -> None:
                 _p(r["p_holm"]),
                 f"{r['unsolved_model']}/{r['unsolved_random']}",
                 "-" if r["logrank_p"] is None else _p(r["logrank_p"]),
+                model_side_share(r["resolved_by_model"], r["resolved_with_pick"]),
             )
             for r in data["families"]
         ],

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from llcps.cps.orderings import ORDERINGS, PAPER_ORDERING
+from llcps.cps.orderings.base import MAX_PICK_NAME
 from llcps.domain import MAX_ID, MAX_PRETRAIN_TRIALS, MAX_SEED
 from llcps.errors import LlcpsError
 from llcps.outputs import replaced_atomically, write_text
@@ -77,6 +78,10 @@ class ResultRow:
     #: Which permutation of the random order (:attr:`~llcps.experiments.design.Sequence.draw`;
     #: 0 for every other model, and in results written before the column existed).
     draw: int = 0
+    #: The side of the ordering that chose the resolving trial (the hedge's ``model`` or
+    #: ``random``: :func:`~llcps.cps.orderings.base.resolving_pick`); empty when the
+    #: episode did not solve, its ordering has no sides, or the results predate the column.
+    resolving_pick: str = ""
 
     def __post_init__(self) -> None:
         """Each field of the type and range a run writes: a results file is user input,
@@ -93,6 +98,9 @@ class ResultRow:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise ColumnError(name, f"must be a finite number of seconds, zero or more, got {value!r}")
+        pick = self.resolving_pick
+        if not isinstance(pick, str) or len(pick) > MAX_PICK_NAME or not pick.isprintable():
+            raise ColumnError("resolving_pick", f"must be empty or a printable name of at most {MAX_PICK_NAME} characters, got {pick!r}")
         if not isinstance(self.solved, bool):
             raise ColumnError("solved", f"must be true or false, got {self.solved!r}")
         episode = self.episode_id

@@ -47,4 +47,10 @@ def stars(row: Figure2Row) -> str:
     return "**" if row.p_holm < ALPHA else "*" if row.significant else ""
 
 
-__all__ = ["format_ci", "format_median", "format_num", "format_p", "format_pct", "stars"]
+def model_side_share(by_model: int, with_pick: int) -> str:
+    """``7 of 10``: solved episodes the model side resolved, of those whose side is known;
+    ``-`` for an ordering without sides."""
+    return f"{by_model} of {with_pick}" if with_pick else "-"
+
+
+__all__ = ["format_ci", "format_median", "format_num", "format_p", "format_pct", "model_side_share", "stars"]

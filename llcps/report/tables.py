@@ -14,7 +14,7 @@ from llcps.analysis.generalization import HEADLINE_RATIO, FamilyResult, Generali
 from llcps.analysis.paper import FIGURE2_SCENARIOS, PAPER_CAPTION_FRACTION_REDUCED, PAPER_FIGURE2, PRETRAIN_NAMES
 from llcps.analysis.survival import SurvivalComparison
 from llcps.analysis.versus_random import BASELINE_MODEL, RandomComparison
-from llcps.report.formatting import format_ci, format_median, format_num, format_p, format_pct, stars
+from llcps.report.formatting import format_ci, format_median, format_num, format_p, format_pct, model_side_share, stars
 
 
 def markdown_table(header: list[str], body: Iterable[Iterable[str]]) -> list[str]:
@@ -201,6 +201,7 @@ def generalization_block(rows: tuple[FamilyResult, ...]) -> TableBlock:
     header = (
         "family", _group_header(named), "n", f"{BASELINE_MODEL} draws", "median trials", f"median {BASELINE_MODEL}", "median of ratios", "ratio of medians",
         "Wilcoxon p", "Holm p", "unsolved", f"unsolved {BASELINE_MODEL}", "KM median", f"KM median {BASELINE_MODEL}", "log-rank p",
+        "resolved by the model side",
     )  # fmt: skip
     body = tuple(
         (
@@ -221,6 +222,7 @@ def generalization_block(rows: tuple[FamilyResult, ...]) -> TableBlock:
             "-" if r.logrank_p is None and r.unsolved_model + r.unsolved_random == 0 else format_p(
                 math.nan if r.logrank_p is None else r.logrank_p, r.logrank_reason
             ),
+            model_side_share(r.resolved_by_model, r.resolved_with_pick),
         )
         for r in rows
     )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, ClassVar, Collection
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Collection, Mapping
 
 if TYPE_CHECKING:
     from llcps.cps.exploration import FailurePoint
@@ -84,3 +84,22 @@ class Ordering(ABC):
         they leave :attr:`remaining` without being learned from."""
         gone = set(indices)
         self.remaining = [i for i in self.remaining if i not in gone]
+
+
+#: The side of a two-sided ordering (``hedged``) that follows the world model's ranking.
+MODEL_SIDE = "model"
+#: Longest name of a side of an ordering read back from a trace (``model``, ``random``).
+MAX_PICK_NAME = 16
+
+
+def resolving_pick(summary: Mapping[str, Any]) -> str | None:
+    """Which side of the ordering chose a solved episode's last trial, read from its
+    stored summary's ``ordering_trace`` (:meth:`Ordering.trace`; untrusted input): None
+    without one, or when the last trial was not the ordering's pick (a candidate the arm
+    would refuse, tried after every other)."""
+    trace, trials = summary.get("ordering_trace"), summary.get("exploration_trials")
+    picks = trace.get("picks") if isinstance(trace, Mapping) else None
+    if not isinstance(picks, list) or not picks or type(trials) is not int or len(picks) != trials:
+        return None
+    last = picks[-1]
+    return last if isinstance(last, str) and 0 < len(last) <= MAX_PICK_NAME and last.isprintable() else None

@@ -59,7 +59,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from llcps.cps.exploration import FailurePoint, Ranking
-from llcps.cps.orderings.base import Exploration
+from llcps.cps.orderings.base import MODEL_SIDE, Exploration
 from llcps.cps.orderings.coverage import coverage_order
 from llcps.cps.orderings.ranked import Ranked
 
@@ -121,7 +121,7 @@ class Hedged(Ranked):
     def choose(self) -> int:
         self.beliefs.append(self.belief)
         if self.credit >= 1.0:
-            self.picks.append("model")
+            self.picks.append(MODEL_SIDE)
             return self.order[0]
         self.picks.append("random")
         untried = set(self.remaining)
@@ -137,7 +137,7 @@ class Hedged(Ranked):
 
     def learn(self, index: int, after: State) -> None:
         self.log_odds += self._evidence(index)
-        chosen_by_model = self.picks[-1] == "model"
+        chosen_by_model = self.picks[-1] == MODEL_SIDE
         if chosen_by_model:
             self.credit -= 1.0
         self.credit += min(self.belief, MAX_MODEL_SHARE)
