@@ -135,7 +135,7 @@ def test_the_hedge_reaches_a_resolver_within_its_bound_of_random_order_when_the_
     hedge = _synthetic(Hedged, p, families=(p * 1000).astype(int))(_exploration(n, seed))
     tried = _run(hedge, resolving)
     assert tried[-1] in resolving
-    position = 1 + min(hedge.permutation.index(i) for i in resolving)
+    position = 1 + min(hedge.random.order.index(i) for i in resolving)
     assert len(tried) <= 1 + position / (1.0 - MAX_MODEL_SHARE)
 
 

@@ -27,7 +27,7 @@ one family out.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar, Sequence
+from typing import TYPE_CHECKING, ClassVar, Collection, Sequence
 
 import numpy as np
 
@@ -85,6 +85,24 @@ def coverage_order(exploration: Exploration) -> list[int]:
     return spread(exploration.point.candidates, random_order(exploration))
 
 
+class FixedOrder:
+    """Every candidate in an order fixed when the episode starts, walked once: what
+    :class:`Coverage` tries, and the hedge's random side
+    (:class:`~llcps.cps.orderings.hedged.Hedged`)."""
+
+    def __init__(self, order: list[int]) -> None:
+        #: Candidate indices, in the order they are tried.
+        self.order = order
+        self._cursor = 0
+
+    def next_untried(self, untried: Collection[int]) -> int:
+        """The first candidate of the order in ``untried`` (never empty). A candidate once
+        tried stays tried, so the walk never goes back."""
+        while self.order[self._cursor] not in untried:
+            self._cursor += 1
+        return self.order[self._cursor]
+
+
 class Coverage(Ordering):
     """Try the candidates in :func:`coverage_order`; a failed trial changes nothing."""
 
@@ -92,8 +110,7 @@ class Coverage(Ordering):
 
     def __init__(self, exploration: Exploration) -> None:
         super().__init__(exploration)
-        self.order = coverage_order(exploration)
+        self.walk = FixedOrder(coverage_order(exploration))
 
     def choose(self) -> int:
-        untried = set(self.remaining)
-        return next(i for i in self.order if i in untried)
+        return self.walk.next_untried(set(self.remaining))

@@ -60,7 +60,7 @@ import numpy as np
 
 from llcps.cps.exploration import FailurePoint, Ranking
 from llcps.cps.orderings.base import MODEL_SIDE, Exploration
-from llcps.cps.orderings.coverage import coverage_order
+from llcps.cps.orderings.coverage import FixedOrder, coverage_order
 from llcps.cps.orderings.ranked import Ranked
 
 if TYPE_CHECKING:
@@ -100,9 +100,8 @@ class Hedged(Ranked):
     def __init__(self, exploration: Exploration) -> None:
         self.exploration = exploration
         #: Random order's side: every candidate, in the order it tries them.
-        self.permutation = self.random_side()
+        self.random = FixedOrder(self.random_side())
         super().__init__(exploration)
-        self._cursor = 0
         self.log_odds = math.log(MODEL_PRIOR / (1.0 - MODEL_PRIOR))
         self.credit = 1.0
         self.picks: list[str] = []
@@ -124,10 +123,7 @@ class Hedged(Ranked):
             self.picks.append(MODEL_SIDE)
             return self.order[0]
         self.picks.append("random")
-        untried = set(self.remaining)
-        while self.permutation[self._cursor] not in untried:
-            self._cursor += 1
-        return self.permutation[self._cursor]
+        return self.random.next_untried(set(self.remaining))
 
     def trace(self) -> dict[str, list[Any]]:
         """``picks`` (which side chose each trial) and ``beliefs`` (the belief ``w`` then,
