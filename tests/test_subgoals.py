@@ -8,12 +8,26 @@ both ways (resolve_probability).
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from llcps.cps.exploration import MAX_CLEARANCES, MAX_SUBGOAL_ATOMS, SUBGOAL_TRUST, Subgoal, clearances, resolve_probability, subgoals
+from llcps.cps.exploration import (
+    MAX_CLEARANCES,
+    MAX_SUBGOAL_ATOMS,
+    SUBGOAL_TRUST,
+    Subgoal,
+    blocked_belief,
+    clearances,
+    own_action,
+    rank_candidates,
+    resolve_probability,
+    subgoals,
+)
 from llcps.domain import fluent
 from llcps.models.measures import GOAL_FLOOR, rank
 from llcps.symbolic.knowledge_base import KnowledgeBase
@@ -100,6 +114,71 @@ def test_resolve_probability_by_hand() -> None:
     assert resolve_probability(goal, np.zeros((3, 0)), np.zeros(0)) == pytest.approx([0.1, 0.5, 0.1])
     # two missing atoms: their product
     assert resolve_probability(np.array([[0.5, 0.5]]), np.zeros((1, 0)), np.zeros(0)) == pytest.approx([0.25])
+
+
+def test_a_contact_that_blocked_a_f_keeps_a_fs_own_action_from_the_atoms_by_hand() -> None:
+    """Candidates 0 and 1 are a_f's own action on its arguments, 2 is not; one clearance,
+    believed with 0.9 to have blocked a_f."""
+    goal = np.array([[0.9], [0.9], [0.1]])
+    sub = np.array([[0.0], [0.8], [0.6]])
+    trust = np.array([0.9])
+    blocking = np.array([[0.9], [0.9], [0.0]])
+    p = resolve_probability(goal, sub, trust, blocking)
+    # 0: the atoms only if the contact did not block: 0.9 (1 - 0.9); it does not end the contact.
+    # 1: 0.9 (1 - 0.9 * 0.2) directly, or the contact ended (0.8) and K's step then works (0.9).
+    # 2: not a_f's: as without blocking.
+    assert p == pytest.approx([0.09, 1 - (1 - 0.9 * 0.82) * (1 - 0.8 * 0.9), 1 - 0.9 * (1 - 0.6 * 0.9)])
+    assert resolve_probability(goal, sub, trust, np.zeros((3, 1))) == pytest.approx(resolve_probability(goal, sub, trust))
+    assert p[2] == pytest.approx(resolve_probability(goal, sub, trust)[2])
+
+
+@given(st.floats(0, 1), st.floats(0, 1))
+def test_the_belief_that_a_contact_blocked_a_f_grows_with_how_sure_the_model_was_of_a_f(p: float, q: float) -> None:
+    """t / (t + (1 - t)(1 - p)): the prior when the model expected nothing of a_f, certainty
+    when it was sure, and more the surer it was."""
+    assert blocked_belief(0.0) == pytest.approx(SUBGOAL_TRUST) and blocked_belief(1.0) == 1.0
+    assert blocked_belief(0.9) == pytest.approx(0.5 / (0.5 + 0.5 * 0.1))
+    low, high = sorted((p, q))
+    assert SUBGOAL_TRUST - 1e-12 <= blocked_belief(low) <= blocked_belief(high) + 1e-12 <= 1.0 + 1e-12
+
+
+@pytest.mark.slow
+def test_a_real_failure_at_a_contact_blocks_a_fs_own_action_from_the_first_ranking_on(readme_pretrained: Path, tmp_path: Path) -> None:
+    """scenario10: the can stands against the shelf's post, and K's placement fails. The
+    contact is a clearance; the nb model of the README's pretraining expected the placement
+    to work, so the contact is believed to have blocked it, a_f's own placements are
+    lowered and nothing else, and an ordering keeps its first ranking's belief."""
+    from llcps.cps.inspection import reach_failure
+    from llcps.cps.orderings.base import Exploration
+    from llcps.cps.orderings.ranked import Ranked
+    from llcps.models.persistence import fit_or_load
+    from llcps.store import Store
+
+    with Store.open(str(shutil.copyfile(readme_pretrained, tmp_path / "llcps.db"))) as store:
+        point = reach_failure(store, branch="main", scenario="scenario10", seed=0, reach_check=False)
+        model = fit_or_load(store, "main", "nb", 1, records=store.visible_trials("main"), changes=store.visible_changes("main"))
+    assert point.failed is not None and (point.failed.action, point.failed.arguments) == ("place_in_container", ("can", "bin"))
+    cleared = [s for s in point.subgoals if s.clearance]
+    assert cleared and all(s.step == point.failure.step.label for s in cleared)
+    assert all(not s.clearance for s in point.subgoals if s.step != point.failure.step.label)
+    ranking = rank_candidates(model, point, measure="goal-directed", seed=0)
+    own = own_action(point, ranking.indices)
+    assert own.any() and not own.all()
+    assert ranking.goal is not None and ranking.subgoals is not None and ranking.resolve is not None
+    direct = np.prod(ranking.goal, axis=1)
+    assert ranking.blocked == pytest.approx(blocked_belief(float(direct[own].mean()))) and ranking.blocked > SUBGOAL_TRUST
+    clearance = np.array([s.clearance for s in point.subgoals])
+    trust = np.where(clearance, ranking.blocked, SUBGOAL_TRUST)
+    unblocked = resolve_probability(ranking.goal, ranking.subgoals, trust)
+    assert np.all(ranking.resolve[own] <= unblocked[own] + 1e-12) and np.any(ranking.resolve[own] < unblocked[own])
+    assert ranking.resolve[~own] == pytest.approx(unblocked[~own])
+    ordering = Ranked(Exploration(model=model, point=point, measure="goal-directed", seed=0))
+    first = ordering.blocked
+    assert first == pytest.approx(ranking.blocked)
+    tried = ordering.next()
+    assert tried is not None
+    ordering.observe(tried, point.state)  # a failure: ranked again, with the first ranking's belief
+    assert ordering.ranking.blocked == first and tried not in ordering.ranking.indices
 
 
 @settings(max_examples=60, deadline=None)

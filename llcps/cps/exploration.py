@@ -31,6 +31,21 @@ carries or holds one of them at the failure gives one more subgoal of a_f itself
 not out of the way. It is valued and distrusted as K's subgoals are, so a contact whose
 end did not let K's plan work stops mattering after a few trials. A failure with no such
 contact ranks as without clearances.
+
+**A contact that blocked a_f.** A clearance is also an explanation of the failure: its
+contact blocks a_f's own action on its arguments, in every setting, while it lasts (a
+board across the bin's opening stops every placement of the can into the bin). a_f's
+failure is evidence for it: certain if the contact blocks, and of chance ``1 - p``
+otherwise, ``p`` being the model's probability that a_f's action on its arguments makes
+the missing atoms (the mean over those candidates at the first ranking). So the belief
+starts at ``b = t / (t + (1 - t)(1 - p))`` from ``t`` = :data:`SUBGOAL_TRUST`
+(:func:`blocked_belief`): a model that expected a_f to work learns that the contact is
+the likely reason it did not; one that expected nothing of a_f learns nothing. ``b`` is
+the clearance's trust (halved as above), and a candidate of a_f's own action and
+arguments makes the missing atoms directly only with the contact's end or its absence:
+its probability of doing so is multiplied by ``1 - b (1 - q)``, ``q`` being its
+probability of ending the contact. Other candidates are not judged by it: the evidence
+is about a_f.
 """
 
 from __future__ import annotations
@@ -82,6 +97,8 @@ class Subgoal:
     step: str
     atoms: tuple[tuple[Fluent, bool], ...]
     claimed: tuple[frozenset[tuple[Fluent, bool]], ...] = ()
+    #: A clearance (:func:`clearances`): a contact that may have blocked a_f itself.
+    clearance: bool = False
 
     @property
     def label(self) -> str:
@@ -134,7 +151,7 @@ def subgoals(kb: KnowledgeBase, task: Task, failure: StepFailure, state: State) 
     return found
 
 
-def resolve_probability(goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarray) -> np.ndarray:
+def resolve_probability(goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarray, blocking: np.ndarray | None = None) -> np.ndarray:
     """P(a candidate resolves the novelty) per candidate: it makes the missing atoms, or
     it meets a subgoal and K's step works from there (see the module docstring).
 
@@ -142,11 +159,37 @@ def resolve_probability(goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarra
         goal: (n, k) probabilities of the missing atoms (their product is used).
         subgoals: (n, s) probability that the candidate meets each subgoal.
         trust: (s,) belief that each subgoal's step works once met.
+        blocking: (n, s) per candidate and subgoal, the belief that the subgoal's
+            contact keeps the candidate from making the missing atoms while it lasts
+            (a clearance's belief on the candidates of a_f's own action and arguments,
+            else 0; see the module docstring). None: nothing blocks.
     """
-    miss = 1.0 - joint_probability(goal)
+    met = np.clip(subgoals, 0.0, 1.0)
+    direct = joint_probability(goal)
+    if blocking is not None and subgoals.size:
+        direct = direct * np.prod(1.0 - blocking * (1.0 - met), axis=1)
+    miss = 1.0 - direct
     if subgoals.size:
-        miss = miss * np.prod(1.0 - np.clip(subgoals, 0.0, 1.0) * trust, axis=1)
+        miss = miss * np.prod(1.0 - met * trust, axis=1)
     return 1.0 - miss
+
+
+def blocked_belief(own_probability: float) -> float:
+    """The belief that a contact at the failure (a clearance) blocked a_f, now that a_f
+    failed (see the module docstring): ``t / (t + (1 - t)(1 - p))`` from the prior ``t`` =
+    :data:`SUBGOAL_TRUST`, ``p`` being the model's probability that a_f's own action on
+    its arguments makes the missing atoms (``own_probability``)."""
+    t = SUBGOAL_TRUST
+    return t / (t + (1.0 - t) * (1.0 - float(np.clip(own_probability, 0.0, 1.0))))
+
+
+def own_action(point: FailurePoint, indices: Sequence[int]) -> np.ndarray:
+    """Per candidate of ``indices``: whether it is a_f's own action on a_f's own arguments
+    (at other settings), bool (n,)."""
+    failed = point.failed
+    if failed is None:
+        return np.zeros(len(indices), dtype=bool)
+    return np.array([(point.candidates[i].action, point.candidates[i].arguments) == (failed.action, failed.arguments) for i in indices], dtype=bool)
 
 
 def _signed_missing(failure: StepFailure) -> list[tuple[Fluent, bool]]:
@@ -183,6 +226,8 @@ class FailurePoint:
     claimed: tuple[frozenset[tuple[Fluent, bool]], ...] = ()
     subgoals: tuple[Subgoal, ...] = ()
     refused: frozenset[int] = frozenset()
+    #: a_f's controller call (its action on its arguments, at K's settings).
+    failed: TrialSpec | None = None
 
     @property
     def missing_effects(self) -> str:
@@ -273,9 +318,8 @@ def failure_point(
     steps_of = kb if known is None else known
     bodies = scene_bodies(world)
     kinds = {body.name: body.kind for body in bodies}
-    routes = tuple(
-        Subgoal(step, atoms, claimed_by(atoms))
-        for step, atoms in (*subgoals(steps_of, task, failure, state), *clearances(failure, state, kinds))
+    routes = tuple(Subgoal(step, atoms, claimed_by(atoms)) for step, atoms in subgoals(steps_of, task, failure, state)) + tuple(
+        Subgoal(step, atoms, claimed_by(atoms), clearance=True) for step, atoms in clearances(failure, state, kinds)
     )
     refused = frozenset(i for i, spec in enumerate(specs) if refuses(world, spec)) if reach_check else frozenset()
     return FailurePoint(
@@ -289,6 +333,7 @@ def failure_point(
         claimed=claimed,
         subgoals=routes,
         refused=refused,
+        failed=failed_spec,
     )
 
 
@@ -341,6 +386,9 @@ class Ranking:
     goal: np.ndarray | None
     subgoals: np.ndarray | None = None
     resolve: np.ndarray | None = None
+    #: The belief that a clearance's contact blocked a_f (None: no clearance, or a
+    #: measure without the goal).
+    blocked: float | None = None
 
 
 def rank_candidates(
@@ -351,12 +399,16 @@ def rank_candidates(
     seed: int,
     indices: Sequence[int] | None = None,
     subgoal_failures: Sequence[int] | None = None,
+    blocked: float | None = None,
 ) -> Ranking:
     """Rank some of a failure point's candidates (all by default) under ``measure``.
 
     Args:
         subgoal_failures: per subgoal of ``point``, how many trials met it without K's
             plan from there working (each halves its trust; none by default).
+        blocked: the belief that a clearance's contact blocked a_f (None: worked out
+            from this ranking's candidates, :func:`blocked_belief`; an ordering that ranks
+            again passes its first ranking's, :attr:`Ranking.blocked`).
 
     Returns:
         The ranking; ``order`` holds candidate indices into ``point.candidates``.
@@ -370,14 +422,24 @@ def rank_candidates(
         for k in range(len(point.subgoals)):
             subgoal[:, k] = joint_probability(model.predict_goal(point.subgoal_query(k, chosen)))
         failures = np.zeros(len(point.subgoals)) if subgoal_failures is None else np.asarray(subgoal_failures, dtype=np.float64)
-        resolve = resolve_probability(goal, subgoal, SUBGOAL_TRUST * 0.5**failures)
+        decay = 0.5**failures
+        trust, blocking = SUBGOAL_TRUST * decay, None
+        clearance = np.array([s.clearance for s in point.subgoals], dtype=bool)
+        if clearance.any():
+            own = own_action(point, chosen)
+            if blocked is None:
+                blocked = blocked_belief(float(np.mean(joint_probability(goal[own]))) if own.any() else 0.0)
+            trust = np.where(clearance, blocked * decay, trust)
+            blocking = np.outer(own, np.where(clearance, trust, 0.0))
+        resolve = resolve_probability(goal, subgoal, trust, blocking)
     # Without subgoals, the missing atoms' probabilities themselves (the same order, and
     # the score keeps one term per atom).
     ranked_by = resolve[:, None] if resolve is not None and point.subgoals else goal
     order = rank(outcome, measure, seed=seed, desired=point.desired, goal=ranked_by)
     score = get_measure(measure).score(outcome, point.desired, ranked_by)
     return Ranking(
-        order=[chosen[i] for i in order], indices=chosen, score=score, outcome=outcome, goal=goal, subgoals=subgoal, resolve=resolve
+        order=[chosen[i] for i in order], indices=chosen, score=score, outcome=outcome, goal=goal, subgoals=subgoal, resolve=resolve,
+        blocked=blocked,
     )
 
 

@@ -16,7 +16,10 @@ class Ranked(Ordering):
     take them into the world model (episode evidence) and rank the rest again.
 
     A failed trial that met one of K's subgoals (:class:`~llcps.cps.exploration.Subgoal`)
-    halves the trust in that subgoal's step for the next ranking.
+    halves the trust in that subgoal's step for the next ranking. The belief that a
+    contact blocked a_f is the first ranking's, before any trial
+    (:func:`~llcps.cps.exploration.blocked_belief`): later rankings see a_f's own action
+    lowered by the episode's failures, which are no evidence against the contact.
     """
 
     name: ClassVar[str] = "ranked"
@@ -28,7 +31,10 @@ class Ranked(Ordering):
         self.subgoal_failures = [0] * len(exploration.point.subgoals)
         #: The failed trials (candidate indices) the ranking took in, in order.
         self.taken: list[int] = []
+        #: The belief that a clearance's contact blocked a_f, fixed by the first ranking.
+        self.blocked: float | None = None
         self.ranking = self.rank()
+        self.blocked = self.ranking.blocked
         self.order = self.ordered(self.ranking)
 
     def ordered(self, ranking: Ranking) -> list[int]:
@@ -39,7 +45,8 @@ class Ranked(Ordering):
         """The untried candidates ranked by the model and measure as they are now."""
         x = self.exploration
         return rank_candidates(
-            x.model, x.point, measure=x.measure, seed=x.seed, indices=self.remaining, subgoal_failures=self.subgoal_failures
+            x.model, x.point, measure=x.measure, seed=x.seed, indices=self.remaining, subgoal_failures=self.subgoal_failures,
+            blocked=self.blocked,
         )
 
     def choose(self) -> int:
