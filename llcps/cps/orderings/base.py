@@ -86,8 +86,9 @@ class Ordering(ABC):
         self.remaining = [i for i in self.remaining if i not in gone]
 
 
-#: The side of a two-sided ordering (``hedged``) that follows the world model's ranking.
+#: The sides of a two-sided ordering (``hedged``): the world model's ranking, and random order.
 MODEL_SIDE = "model"
+RANDOM_SIDE = "random"
 #: Longest name of a side of an ordering read back from a trace (``model``, ``random``).
 MAX_PICK_NAME = 16
 

@@ -59,7 +59,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from llcps.cps.exploration import FailurePoint, Ranking
-from llcps.cps.orderings.base import MODEL_SIDE, Exploration
+from llcps.cps.orderings.base import MODEL_SIDE, RANDOM_SIDE, Exploration
 from llcps.cps.orderings.coverage import FixedOrder, coverage_order
 from llcps.cps.orderings.ranked import Ranked
 
@@ -122,7 +122,7 @@ class Hedged(Ranked):
         if self.credit >= 1.0:
             self.picks.append(MODEL_SIDE)
             return self.order[0]
-        self.picks.append("random")
+        self.picks.append(RANDOM_SIDE)
         return self.random.next_untried(set(self.remaining))
 
     def trace(self) -> dict[str, list[Any]]:
