@@ -21,6 +21,7 @@ from llcps.cps.exploration import (
     MAX_SUBGOAL_ATOMS,
     SUBGOAL_TRUST,
     Subgoal,
+    attempted,
     blocked_belief,
     clearances,
     own_action,
@@ -28,11 +29,12 @@ from llcps.cps.exploration import (
     resolve_probability,
     subgoals,
 )
+from llcps.cps.plan_execution import Failure, with_attempts
 from llcps.domain import fluent
 from llcps.models.measures import GOAL_FLOOR, rank
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
-from llcps.symbolic.monitor import check_step
+from llcps.symbolic.monitor import StepFailure, check_step
 from llcps.symbolic.planner import ground
 
 OBJECTS = {"can": "item", "bin": "container"}
@@ -142,6 +144,41 @@ def test_the_belief_that_a_contact_blocked_a_f_grows_with_how_sure_the_model_was
     assert SUBGOAL_TRUST - 1e-12 <= blocked_belief(low) <= blocked_belief(high) + 1e-12 <= 1.0 + 1e-12
 
 
+def test_each_failed_attempt_at_the_atoms_is_evidence_that_the_contact_blocked_them() -> None:
+    """a_f, and a repair's step that missed the same atom, each failed: t / (t + (1 - t)
+    (1 - p_1)(1 - p_2)), worked by hand; one attempt is a_f's alone."""
+    t = SUBGOAL_TRUST
+    assert blocked_belief([0.9, 0.5]) == pytest.approx(t / (t + (1 - t) * 0.1 * 0.5))
+    assert blocked_belief([0.9]) == pytest.approx(blocked_belief(0.9))
+    assert blocked_belief([]) == pytest.approx(t)  # no attempt the model expected anything of: the prior
+
+
+@given(st.lists(st.floats(0, 1), max_size=4), st.floats(0, 1))
+def test_a_further_failed_attempt_never_lowers_the_belief_that_the_contact_blocked(ps: list[float], p: float) -> None:
+    assert blocked_belief([*ps, p]) >= blocked_belief(ps) - 1e-12
+
+
+def test_the_repairs_steps_that_missed_a_fs_atoms_are_its_attempts() -> None:
+    """K's push of the can into the bin failed (a_f); its repair, the placement, missed
+    the same atom: the placement is an attempt, once, and a_f's own step is not; a step
+    that missed other atoms is not either."""
+    kb = KnowledgeBase.default()
+    task, pushed = _failure(kb, "push")
+    _, placed = _failure(kb, "place_in_container")
+
+    def failure(monitor):
+        return Failure(step=monitor.step, state=STATE, physics=b"", snapshot=None, monitor=monitor)
+
+    (together,) = [s for s in ground(kb, task) if s.name == "push_together" and s.args == ("can", "bin")]
+    other = StepFailure(together, frozenset({fluent("touching", "can", "bin")}), frozenset())
+    a_f = failure(pushed)
+    found = with_attempts(a_f, [a_f, failure(other), failure(placed), failure(placed), a_f])
+    assert found is not None and found.attempts == (placed.step,)
+    assert (found.step, found.monitor) == (a_f.step, a_f.monitor)
+    assert with_attempts(None, [a_f]) is None
+    assert with_attempts(a_f, [a_f]).attempts == ()
+
+
 @pytest.mark.slow
 def test_a_real_failure_at_a_contact_blocks_a_fs_own_action_from_the_first_ranking_on(readme_pretrained: Path, tmp_path: Path) -> None:
     """scenario10: the can stands against the shelf's post, and K's placement fails. The
@@ -202,3 +239,36 @@ def test_a_likelier_subgoal_ranks_first_and_failures_weaken_it(goal_p, low, high
         assert order[0] == 1
     weaker = resolve_probability(goal, sub, trust / 2)
     assert np.all(weaker <= p + 1e-15)
+
+
+@pytest.mark.slow
+def test_a_real_repair_that_missed_a_fs_atom_is_blocked_by_the_contact_beside_a_f(readme_pretrained: Path, tmp_path: Path) -> None:
+    """docs/heldout/lid.toml: a board lies across the bin. K pushes the can into the bin
+    (a_f) and fails; its repair places the can and fails too. The placement is an attempt
+    at the same atom: the nb model expected it to work, so the belief that the board
+    blocked grows beyond a_f's alone, the can's placements into the bin are lowered as a_f's
+    pushes are, and no other candidate moves."""
+    from llcps.cps.inspection import reach_failure
+    from llcps.models.persistence import fit_or_load
+    from llcps.store import Store
+
+    lid = str(Path(__file__).resolve().parents[1] / "docs" / "heldout" / "lid.toml")
+    with Store.open(str(shutil.copyfile(readme_pretrained, tmp_path / "llcps.db"))) as store:
+        point = reach_failure(store, branch="main", scenario=lid, seed=0, reach_check=False)
+        model = fit_or_load(store, "main", "nb", 1, records=store.visible_trials("main"), changes=store.visible_changes("main"))
+    assert point.failed is not None and (point.failed.action, point.failed.arguments) == ("push", ("can",))
+    assert [(a.action, a.arguments) for a in point.attempts] == [("place_in_container", ("can", "bin"))]
+    assert any(s.clearance for s in point.subgoals)
+    ranking = rank_candidates(model, point, measure="goal-directed", seed=0)
+    assert ranking.goal is not None and ranking.subgoals is not None and ranking.resolve is not None
+    pushes, placements = attempted(point, ranking.indices)
+    own = own_action(point, ranking.indices)
+    assert pushes.any() and placements.any() and np.array_equal(own, pushes | placements)
+    direct = np.prod(ranking.goal, axis=1)
+    assert ranking.blocked == pytest.approx(blocked_belief([float(direct[pushes].mean()), float(direct[placements].mean())]))
+    assert ranking.blocked > blocked_belief(float(direct[pushes].mean()))
+    clearance = np.array([s.clearance for s in point.subgoals])
+    trust = np.where(clearance, ranking.blocked, SUBGOAL_TRUST)
+    unblocked = resolve_probability(ranking.goal, ranking.subgoals, trust)
+    assert np.all(ranking.resolve[placements] < unblocked[placements])
+    assert ranking.resolve[~own] == pytest.approx(unblocked[~own])

@@ -46,6 +46,13 @@ arguments makes the missing atoms directly only with the contact's end or its ab
 its probability of doing so is multiplied by ``1 - b (1 - q)``, ``q`` being its
 probability of ending the contact. Other candidates are not judged by it: the evidence
 is about a_f.
+
+K's repairs may have tried for the same missing atoms another way before exploration
+started (a placement of the can, after a push of it into the bin failed), and failed
+too (:attr:`~llcps.cps.plan_execution.Failure.attempts`). Each such failed attempt is
+evidence for the contact in the same way, independently: ``b = t / (t + (1 - t)
+prod_i (1 - p_i))`` over a_f and the attempts, and the candidates of each attempt's
+action on its arguments are blocked as a_f's own are.
 """
 
 from __future__ import annotations
@@ -174,22 +181,30 @@ def resolve_probability(goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarra
     return 1.0 - miss
 
 
-def blocked_belief(own_probability: float) -> float:
+def blocked_belief(own_probability: float | Sequence[float]) -> float:
     """The belief that a contact at the failure (a clearance) blocked a_f, now that a_f
-    failed (see the module docstring): ``t / (t + (1 - t)(1 - p))`` from the prior ``t`` =
-    :data:`SUBGOAL_TRUST`, ``p`` being the model's probability that a_f's own action on
-    its arguments makes the missing atoms (``own_probability``)."""
+    failed (see the module docstring): ``t / (t + (1 - t) prod_i (1 - p_i))`` from the
+    prior ``t`` = :data:`SUBGOAL_TRUST`, ``p_i`` being the model's probability that the
+    i-th failed attempt's action on its arguments makes the missing atoms
+    (``own_probability``: a_f's alone, or one per attempt)."""
     t = SUBGOAL_TRUST
-    return t / (t + (1.0 - t) * (1.0 - float(np.clip(own_probability, 0.0, 1.0))))
+    missed = float(np.prod(1.0 - np.clip(np.atleast_1d(np.asarray(own_probability, dtype=np.float64)), 0.0, 1.0)))
+    return t / (t + (1.0 - t) * missed)
+
+
+def attempted(point: FailurePoint, indices: Sequence[int]) -> list[np.ndarray]:
+    """Per failed attempt at the missing atoms (a_f, then :attr:`FailurePoint.attempts`):
+    which candidates of ``indices`` are its action on its arguments, bool (n,) each."""
+    keys = [(spec.action, spec.arguments) for spec in ((point.failed,) if point.failed is not None else ()) + point.attempts]
+    of = [(point.candidates[i].action, point.candidates[i].arguments) for i in indices]
+    return [np.array([k == key for k in of], dtype=bool).reshape(len(indices)) for key in keys]
 
 
 def own_action(point: FailurePoint, indices: Sequence[int]) -> np.ndarray:
-    """Per candidate of ``indices``: whether it is a_f's own action on a_f's own arguments
-    (at other settings), bool (n,)."""
-    failed = point.failed
-    if failed is None:
-        return np.zeros(len(indices), dtype=bool)
-    return np.array([(point.candidates[i].action, point.candidates[i].arguments) == (failed.action, failed.arguments) for i in indices], dtype=bool)
+    """Per candidate of ``indices``: whether it is the action of a failed attempt at the
+    missing atoms (a_f's, or a repair's) on its arguments, bool (n,)."""
+    masks = attempted(point, indices)
+    return np.logical_or.reduce(masks) if masks else np.zeros(len(indices), dtype=bool)
 
 
 def _signed_missing(failure: StepFailure) -> list[tuple[Fluent, bool]]:
@@ -214,6 +229,9 @@ class FailurePoint:
         refused: the candidates whose controller would refuse them here, a waypoint out
             of the arm's reach (:func:`~llcps.sim.controllers.refuses`): they can move
             nothing. Empty unless asked for (``reach_check``).
+        failed: a_f's controller call.
+        attempts: the controller calls of the other steps of K's plans that missed the
+            same atoms (:attr:`~llcps.cps.plan_execution.Failure.attempts`).
     """
 
     scenario: str
@@ -226,8 +244,8 @@ class FailurePoint:
     claimed: tuple[frozenset[tuple[Fluent, bool]], ...] = ()
     subgoals: tuple[Subgoal, ...] = ()
     refused: frozenset[int] = frozenset()
-    #: a_f's controller call (its action on its arguments, at K's settings).
     failed: TrialSpec | None = None
+    attempts: tuple[TrialSpec, ...] = ()
 
     @property
     def missing_effects(self) -> str:
@@ -287,6 +305,7 @@ def failure_point(
     grid: Grid,
     known: KnowledgeBase | None = None,
     reach_check: bool = False,
+    attempts: Sequence[GroundAction] = (),
 ) -> FailurePoint:
     """The failure point of ``site``'s world as it is now (just after a_f failed).
 
@@ -299,6 +318,8 @@ def failure_point(
             (:attr:`FailurePoint.refused`); the check solves IK, which leaves the arm's
             joints as they were but not every byte the world saves next, so only a
             caller that restores the world before its next trial asks for it.
+        attempts: the other plan steps that missed the same atoms
+            (:attr:`FailurePoint.attempts`).
     """
     from llcps.sim.controllers import refuses
     from llcps.sim.perception import entity_features, scene_bodies
@@ -334,6 +355,7 @@ def failure_point(
         subgoals=routes,
         refused=refused,
         failed=failed_spec,
+        attempts=tuple(site.controller_call(step) for step in attempts),
     )
 
 
@@ -359,7 +381,7 @@ def start_exploration(
     if failure.snapshot is None:
         raise ValueError("exploration starts from a stored snapshot: run the plan with store=True")
     site.restore(failure.snapshot)
-    return failure_point(site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb), reach_check=reach_check)
+    return failure_point(site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb), reach_check=reach_check, attempts=failure.attempts)
 
 
 @dataclass(frozen=True)
@@ -428,7 +450,8 @@ def rank_candidates(
         if clearance.any():
             own = own_action(point, chosen)
             if blocked is None:
-                blocked = blocked_belief(float(np.mean(joint_probability(goal[own]))) if own.any() else 0.0)
+                direct = joint_probability(goal)
+                blocked = blocked_belief([float(np.mean(direct[mask])) for mask in attempted(point, chosen) if mask.any()])
             trust = np.where(clearance, blocked * decay, trust)
             blocking = np.outer(own, np.where(clearance, trust, 0.0))
         resolve = resolve_probability(goal, subgoal, trust, blocking)

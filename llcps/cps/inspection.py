@@ -191,7 +191,7 @@ def reach_failure(
         world.restore_serialized(failure.physics)  # candidates start where a_f did
         return failure_point(
             executor, failure.monitor, failure.state, kb, grid=config.candidate_grid(spec), known=experience.costed(kb),
-            reach_check=reach_check,
+            reach_check=reach_check, attempts=failure.attempts,
         )  # fmt: skip
     finally:
         world.close()

@@ -67,6 +67,11 @@ class Failure(StepStart):
     #: The learned step blamed for the failure: a_f itself, or the step right before it
     #: (see the module docstring). The repair returns to where it started, without it.
     blamed: StepStart | None = None
+    #: The other steps of this episode's plans that missed one of the atoms this step
+    #: missed (set on a_f's failure by :func:`plan_and_repair`: K's repairs that tried
+    #: for the same atoms another way and failed too; exploration takes them as failed
+    #: attempts beside a_f, :mod:`llcps.cps.exploration`).
+    attempts: tuple[GroundAction, ...] = ()
 
     @property
     def left_out(self) -> tuple[str, tuple[str, ...]]:
@@ -224,10 +229,12 @@ def plan_and_repair(
 
     Returns:
         a_f's failure, or None when no step failed. Exploration looks for an
-        alternative to its step a_f from the state a_f was executed in.
+        alternative to its step a_f from the state a_f was executed in; the failure's
+        ``attempts`` are the repairs' steps that missed a_f's missing atoms too.
     """
     first: Failure | None = None
     misled: Failure | None = None  # the first failure blamed on a learned step or on a detour
+    failures: list[Failure] = []
     excluded: set[tuple[str, tuple[str, ...]]] = set()
     alone_first = False  # K alone plans first: after a blamed learned step or a detour
     detour = False  # K' planned otherwise from the start than K alone would
@@ -249,6 +256,8 @@ def plan_and_repair(
             detour = reset_plan is not None and [step.label for step in reset_plan] != labels
         run = run_plan(executor, steps, store=store, record=known, experience=experience)
         state, failure = run.state, run.failure
+        if failure is not None:
+            failures.append(failure)
         if not opening:
             log.repairs.append(
                 {
@@ -261,7 +270,7 @@ def plan_and_repair(
         if failure is None:
             if executor.scenario.goal_reached(state):
                 log.solved = True
-            return first or misled
+            return with_attempts(first or misled, failures)
         back_to = failure.blamed or (run.started if detour else None)
         detour = rewound = False
         if failure.blamed is not None or back_to is None:
@@ -276,7 +285,23 @@ def plan_and_repair(
         if (first or misled) is failure:
             log.failed_action = failure.step.label
             log.missing_effects = failure.monitor.describe()
-    return first or misled
+    return with_attempts(first or misled, failures)
+
+
+def with_attempts(found: Failure | None, failures: Sequence[Failure]) -> Failure | None:
+    """``found`` (a_f's failure) with :attr:`Failure.attempts`: the steps of ``failures``
+    that missed one of the atoms a_f missed, other than a_f's own action on its
+    arguments, each ground action once, in the order they failed."""
+    if found is None:
+        return None
+    missing = found.monitor.missing_add | found.monitor.missing_del
+    own = (found.step.name, found.step.args)
+    attempts: dict[tuple[str, tuple[str, ...]], GroundAction] = {}
+    for failure in failures:
+        key = (failure.step.name, failure.step.args)
+        if key != own and missing & (failure.monitor.missing_add | failure.monitor.missing_del):
+            attempts.setdefault(key, failure.step)
+    return replace(found, attempts=tuple(attempts.values()))
 
 
 def find_failure(executor: TrialExecutor, experience: BranchExperience, kb: KnowledgeBase, log: PlanLog) -> Failure | None:
