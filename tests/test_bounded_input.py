@@ -317,6 +317,23 @@ def test_a_report_from_a_bad_results_file_names_row_and_column(tmp_path: Path, c
     assert set(COLUMNS) >= {column}
 
 
+@pytest.mark.parametrize(("column", "value"), [("model", ["nb"]), ("scenario", {"name": "scenario1"}), ("resolving_pick", 5), ("branch", 3.5)])
+def test_a_json_results_file_with_a_non_text_value_in_a_text_column_names_row_and_column(tmp_path: Path, column: str, value: Any) -> None:
+    """A JSON number, list or object where a text column belongs is an error, not its str()."""
+    import json
+
+    from llcps.analysis.results import ResultsTable
+
+    path = ResultsTable.read(_results(tmp_path)).write_json(tmp_path / "results.json")
+    data = json.loads(path.read_text())
+    rows = data["rows"] if isinstance(data, dict) else data
+    rows[2][column] = value
+    path.write_text(json.dumps(data))
+    result = llcps("experiment", "report", str(path))
+    assert_one_error(result, f"{path}: row 3", f"column {column!r}: bad value")
+    assert json.loads(path.read_text()) == data  # nothing rewritten
+
+
 def test_a_stored_scene_is_held_to_the_same_limits() -> None:
     """The scene of a stored snapshot is read through ``SceneSpec.from_dict``: the entity bound of
     a file holds for it too."""

@@ -78,6 +78,14 @@ def _parse_bool(text: str) -> bool:
     raise ValueError(f"not a boolean: {text!r}")
 
 
+def _text(raw: Any) -> str:
+    """A text column's value: a string as read (a CSV cell, or a JSON string); a JSON
+    number, list or object there is an error, not its ``str()``."""
+    if not isinstance(raw, str):
+        raise TypeError(f"not text: {type(raw).__name__}")
+    return raw
+
+
 def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
     """Build a row from strings (CSV) or JSON values, with one clear error per bad field.
 
@@ -101,11 +109,11 @@ def _row_from_mapping(data: Mapping[str, Any], where: str) -> ResultRow:
             elif name == "episode_id":
                 values[name] = None if raw in (None, "") else _integer(raw)
             elif name == "resolving_pick":
-                values[name] = "" if raw is None else str(raw)
+                values[name] = "" if raw is None else _text(raw)
             elif name in _PARSERS:
                 values[name] = _PARSERS[name](raw)
             else:
-                values[name] = str(raw)
+                values[name] = _text(raw)
         except (TypeError, ValueError, OverflowError):
             raise LlcpsError(f"{where}: column {name!r}: bad value {_shown(raw)}", hint=_ROW_HINT) from None
     try:
