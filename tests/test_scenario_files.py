@@ -17,7 +17,9 @@ from typer.testing import CliRunner
 from llcps.cli.main import app
 from llcps.scenarios import CONDITIONS, SCENARIOS, get_scenario, shipped_names
 from llcps.scenarios.loader import read_text
-from llcps.sim.world import World
+from llcps.domain import fluent
+from llcps.sim.perception import perceive
+from llcps.sim.world import SETTLE_STEPS, World
 
 runner = CliRunner()
 NAMES = list(SCENARIOS)
@@ -252,6 +254,56 @@ def test_a_condition_moves_an_entity_between_the_table_and_another_entity() -> N
     assert scene.entity("ball").position[:2] == pytest.approx((0.62, 0.0))
     with World.from_scene(scene) as world:
         assert "ball" in world.entities
+
+
+def test_a_container_may_stand_on_top_of_another_entity() -> None:
+    """A condition may stand the container on an object (``on_top_of``, with an offset):
+    its bottom on the object's top face, and so it stays once the world settles."""
+    text = """
+name = "raised"
+goal = ["(in cube bin)"]
+
+[[entities]]
+name = "cube"
+shape = "box"
+color = "red"
+size = [0.05, 0.05, 0.05]
+x = 0.42
+y = 0.23
+reachable = true
+
+[[entities]]
+name = "crate"
+shape = "box"
+color = "blue"
+size = [0.2, 0.2, 0.14]
+mass = 5.0
+x = 0.52
+y = -0.2
+
+[[entities]]
+name = "bin"
+kind = "container"
+shape = "box"
+color = "green"
+size = [0.16, 0.16, 0.08]
+x = 0.52
+y = 0.04
+reachable = true
+
+[conditions.novelty.entities.bin]
+on_top_of = "crate"
+offset = [0.01, -0.01]
+"""
+    source = read_text(text, where="raised.toml")
+    original, novelty = source.scene("original", 0), source.scene("novelty", 0)
+    crate, bin_ = novelty.entity("crate"), novelty.entity("bin")
+    assert original.entity("bin").position[:2] == pytest.approx((0.52, 0.04))
+    assert bin_.position[:2] == pytest.approx((0.53, -0.21))
+    assert bin_.position[2] - bin_.size[2] / 2 == pytest.approx(crate.position[2] + crate.size[2] / 2)
+    with World.from_scene(novelty) as world:
+        world.settle(max_steps=SETTLE_STEPS)
+        assert fluent("on", "bin", "crate") in perceive(world)
 
 
 def test_a_condition_weakens_the_grip_of_the_robot_it_builds() -> None:

@@ -217,7 +217,12 @@ def _built_entity(m: EntityModel, d: Draws, built: Mapping[str, Any], floor_z: f
         extra["mass"] = mass
     if m.wall is not None:
         extra["wall"] = d.number(m.wall, f"{key}.wall")
-    at = (d.number(m.x, f"{key}.x"), d.number(m.y, f"{key}.y"))  # type: ignore[arg-type]
+    if m.on_top_of is not None:  # a container standing on another entity: on its top face
+        below = built[m.on_top_of]
+        at = (below.position[0] + d.number(m.offset[0], f"{key}.offset[0]"), below.position[1] + d.number(m.offset[1], f"{key}.offset[1]"))
+        on = below.position[2] + below.size[2] / 2.0
+    else:
+        at = (d.number(m.x, f"{key}.x"), d.number(m.y, f"{key}.y"))  # type: ignore[arg-type]
     if m.shape == "box":
         return open_box(m.name, color, at=at, size=size, on=on, yaw=yaw, **extra)
     return bucket(m.name, color, at=at, diameter=size[0], height=size[1], on=on, **extra)
