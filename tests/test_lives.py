@@ -103,7 +103,7 @@ def test_the_shipped_lives_load_and_default_uses_every_shipped_family() -> None:
     assert paper.family_names == ("scenario1", "scenario2", "scenario3")
 
 
-def test_the_held_out_judge_holds_the_five_held_out_families_back_as_probes(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_held_out_judge_holds_every_held_out_family_back_as_probes(monkeypatch: pytest.MonkeyPatch) -> None:
     from llcps.scenarios import shipped_names
 
     root = Path(__file__).parent.parent
