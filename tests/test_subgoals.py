@@ -158,6 +158,31 @@ def test_a_further_failed_attempt_never_lowers_the_belief_that_the_contact_block
     assert blocked_belief([*ps, p]) >= blocked_belief(ps) - 1e-12
 
 
+def test_each_action_on_its_arguments_is_one_attempt_however_often_it_failed() -> None:
+    """a_f is a push of the can; the attempts repeat it (another operator with the same
+    controller call) and name the placement twice, at other settings: two attempts, and
+    only the candidates of those two actions on their arguments are a failed attempt's."""
+    from llcps.cps.exploration import FailurePoint
+    from llcps.domain import ControllerParams
+    from llcps.trial_records import TrialSpec
+
+    kb = KnowledgeBase.default()
+    _, pushed = _failure(kb, "push")
+
+    def spec(action, arguments, rate=0.4):
+        return TrialSpec(action, arguments, ControllerParams(rate=rate, movement_magnitude=0.15, orientation="top"))
+
+    candidates = (spec("push", ("can",), 0.1), spec("place_in_container", ("can", "bin"), 0.1), spec("push_together", ("can", "bin")))
+    point = FailurePoint(
+        scenario="mine", failure=pushed, state=STATE, bodies=(), candidates=candidates, inputs=(), desired=np.zeros(6),
+        failed=spec("push", ("can",)),
+        attempts=(spec("push", ("can",), 1.0), spec("place_in_container", ("can", "bin")), spec("place_in_container", ("can", "bin"), 1.0)),
+    )  # fmt: skip
+    masks = attempted(point, [0, 1, 2])
+    assert [m.tolist() for m in masks] == [[True, False, False], [False, True, False]]
+    assert own_action(point, [2, 1, 0]).tolist() == [False, True, True]
+
+
 def test_the_repairs_steps_that_missed_a_fs_atoms_are_its_attempts() -> None:
     """K's push of the can into the bin failed (a_f); its repair, the placement, missed
     the same atom: the placement is an attempt, once, and a_f's own step is not; a step

@@ -193,9 +193,11 @@ def blocked_belief(own_probability: float | Sequence[float]) -> float:
 
 
 def attempted(point: FailurePoint, indices: Sequence[int]) -> list[np.ndarray]:
-    """Per failed attempt at the missing atoms (a_f, then :attr:`FailurePoint.attempts`):
-    which candidates of ``indices`` are its action on its arguments, bool (n,) each."""
-    keys = [(spec.action, spec.arguments) for spec in ((point.failed,) if point.failed is not None else ()) + point.attempts]
+    """Per failed attempt at the missing atoms (a_f, then :attr:`FailurePoint.attempts`),
+    each action on its arguments once (two of K's operators may share a controller
+    call): which candidates of ``indices`` are it, bool (n,) each."""
+    specs = ((point.failed,) if point.failed is not None else ()) + point.attempts
+    keys = list(dict.fromkeys((spec.action, spec.arguments) for spec in specs))
     of = [(point.candidates[i].action, point.candidates[i].arguments) for i in indices]
     return [np.array([k == key for k in of], dtype=bool).reshape(len(indices)) for key in keys]
 
