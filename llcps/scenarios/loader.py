@@ -203,29 +203,24 @@ def _built_entity(m: EntityModel, d: Draws, built: Mapping[str, Any], floor_z: f
     yaw = d.number(m.yaw, f"{key}.yaw")
     mass = None if m.mass is None else d.number(m.mass, f"{key}.mass")
     on = 0.0 if m.on == "table" else floor_z
+    placed = m.inside is not None or m.on_top_of is not None
+    offset = (d.number(m.offset[0], f"{key}.offset[0]"), d.number(m.offset[1], f"{key}.offset[1]")) if placed else (0.0, 0.0)
+    at = (0.0, 0.0) if placed else (d.number(m.x, f"{key}.x"), d.number(m.y, f"{key}.y"))  # type: ignore[arg-type]
     if m.kind == "object":
-        if m.inside is not None or m.on_top_of is not None:
-            offset = (d.number(m.offset[0], f"{key}.offset[0]"), d.number(m.offset[1], f"{key}.offset[1]"))
-            loose = solid(m.name, m.shape, color, size, at=(0, 0), yaw=yaw, mass=mass)
-            if m.inside is not None:
-                return inside(loose, built[m.inside], offset=offset)
-            return stacked(loose, built[m.on_top_of], offset=offset)  # type: ignore[index]
-        at = (d.number(m.x, f"{key}.x"), d.number(m.y, f"{key}.y"))  # type: ignore[arg-type]
-        return solid(m.name, m.shape, color, size, at=at, on=on, yaw=yaw, mass=mass)
-    extra: dict[str, float] = {}
-    if mass is not None:
-        extra["mass"] = mass
-    if m.wall is not None:
-        extra["wall"] = d.number(m.wall, f"{key}.wall")
-    if m.on_top_of is not None:  # a container standing on another entity: on its top face
-        below = built[m.on_top_of]
-        at = (below.position[0] + d.number(m.offset[0], f"{key}.offset[0]"), below.position[1] + d.number(m.offset[1], f"{key}.offset[1]"))
-        on = below.position[2] + below.size[2] / 2.0
+        made = solid(m.name, m.shape, color, size, at=at, on=on, yaw=yaw, mass=mass)
+        if m.inside is not None:
+            return inside(made, built[m.inside], offset=offset)
     else:
-        at = (d.number(m.x, f"{key}.x"), d.number(m.y, f"{key}.y"))  # type: ignore[arg-type]
-    if m.shape == "box":
-        return open_box(m.name, color, at=at, size=size, on=on, yaw=yaw, **extra)
-    return bucket(m.name, color, at=at, diameter=size[0], height=size[1], on=on, **extra)
+        extra: dict[str, float] = {}
+        if mass is not None:
+            extra["mass"] = mass
+        if m.wall is not None:
+            extra["wall"] = d.number(m.wall, f"{key}.wall")
+        if m.shape == "box":
+            made = open_box(m.name, color, at=at, size=size, on=on, yaw=yaw, **extra)
+        else:
+            made = bucket(m.name, color, at=at, diameter=size[0], height=size[1], on=on, **extra)
+    return made if m.on_top_of is None else stacked(made, built[m.on_top_of], offset=offset)
 
 
 def _fixture_specs(f: Any, d: Draws, table: Any) -> tuple[Any, ...]:
