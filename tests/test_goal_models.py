@@ -437,3 +437,37 @@ def test_a_failed_motion_drops_on_the_action_s_other_bodies(toy, query, name):
         assert ratio[i] < 1.0
         siblings = [j for j in pushes if coarse[j] == coarse[i] and motion[j] != motion[i]]
         assert siblings and np.all(ratio[i] < ratio[siblings])
+
+
+@pytest.mark.parametrize("name", ["nb", "logreg"])
+def test_a_change_of_an_atom_not_asked_is_no_episode_evidence(toy, query, name):
+    """A placement that put another object into the container says the family can
+    work, but not that it can put in the object the novelty stopped: asked for
+    ``TARGET`` alone, that success moves nothing of the family's other settings, where
+    without ``asked`` it raises them. The trial's failures still count: what it left as
+    it was is kept."""
+    records, changes = toy
+    p = make_world_model(name, 0).fit(records, changes).predict_goal(query)[:, 0]
+    coarse, *_, motion = family_keys(encode_queries(query))
+    placements = [i for i, c in enumerate(query.candidates) if c.action == "place_in_container" and c.arguments == TARGET[1:]]
+    other = replace(query.candidates[placements[0]], arguments=("entity1", TARGET[2]))
+    assert other.arguments != TARGET[1:] and ("in", *other.arguments) != TARGET
+    moved, moved_changes = failing_trials(query, [placements[0]], 10_000, 1)
+    moved = [replace(moved[0], spec=other)]
+    before = moved_changes[10_000].before
+    moved_changes = {10_000: TrialChange(before, frozenset({fluent("in", *other.arguments)}), frozenset(), query.bodies, trial_id=10_000)}
+    trials, all_changes = list(records) + moved, {**changes, **moved_changes}
+    elsewhere = [i for i in placements if coarse[i] == coarse[placements[0]] and motion[i] != motion[placements[0]]]
+    assert elsewhere
+
+    def after(asked):
+        model = make_world_model(name, 0).fit(records, changes)
+        return model.update(trials, all_changes, asked=asked).predict_goal(query)[:, 0]
+
+    assert np.all(after(None)[elsewhere] > p[elsewhere])  # any atom: the success is the family's
+    assert np.allclose(after({(TARGET, True)})[elsewhere], p[elsewhere])  # asked: it is not evidence
+    # the asked atom itself, made by the trial, is evidence as before
+    made = {10_000: replace(moved_changes[10_000], added=frozenset({fluent(*TARGET)}))}
+    model = make_world_model(name, 0).fit(records, changes)
+    model.update(list(records) + [replace(moved[0], spec=query.candidates[placements[0]])], {**changes, **made}, asked={(TARGET, True)})
+    assert np.all(model.predict_goal(query)[:, 0][elsewhere] > p[elsewhere])

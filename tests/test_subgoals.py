@@ -183,6 +183,22 @@ def test_each_action_on_its_arguments_is_one_attempt_however_often_it_failed() -
     assert own_action(point, [2, 1, 0]).tolist() == [False, True, True]
 
 
+def test_a_failure_point_asks_for_a_fs_missing_atoms_and_every_subgoal_s() -> None:
+    """What episode evidence may count (``FailurePoint.asked``): a_f's missing atoms and
+    each subgoal's atoms, with their signs; nothing else."""
+    from llcps.cps.exploration import FailurePoint
+
+    kb = KnowledgeBase.default()
+    _, pushed = _failure(kb, "push")
+    clear = Subgoal("(push can bin)", ((fluent("touching", "can", "board"), False),), clearance=True)
+    point = FailurePoint(scenario="mine", failure=pushed, state=STATE, bodies=(), candidates=(), inputs=(), desired=np.zeros(6))
+    assert point.asked == {(fluent("in", "can", "bin"), True)} | {(atom, False) for atom in pushed.missing_del}
+    with_clearance = FailurePoint(
+        scenario="mine", failure=pushed, state=STATE, bodies=(), candidates=(), inputs=(), desired=np.zeros(6), subgoals=(clear,)
+    )  # fmt: skip
+    assert with_clearance.asked == point.asked | {(fluent("touching", "can", "board"), False)}
+
+
 def test_the_repairs_steps_that_missed_a_fs_atoms_are_its_attempts() -> None:
     """K's push of the can into the bin failed (a_f); its repair, the placement, missed
     the same atom: the placement is an attempt, once, and a_f's own step is not; a step

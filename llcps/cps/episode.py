@@ -370,7 +370,7 @@ def _explore(
             measure=config.measure,
             seed=config.seed,
             refit_every=config.refit_every,
-            update=lambda only: model.update(_taken(executor.records, trial_ids, only), executor.changes, start=snapshot),
+            update=lambda only: model.update(_taken(executor.records, trial_ids, only), executor.changes, start=snapshot, asked=point.asked),
             store=executor.store,
             branch=executor.branch,
             episode_id=executor.episode_id,

@@ -253,6 +253,12 @@ class FailurePoint:
     def missing_effects(self) -> str:
         return self.failure.describe()
 
+    @property
+    def asked(self) -> frozenset[tuple[Fluent, bool]]:
+        """Every atom (with its sign) a goal-aware question here asks for: a_f's missing
+        atoms and each subgoal's."""
+        return frozenset(_signed_missing(self.failure)).union(*(subgoal.atoms for subgoal in self.subgoals))
+
     def query(self, indices: Sequence[int] | None = None) -> GoalQuery:
         """The goal-aware question for some candidates (all by default): will they make
         the missing atoms hold (and the atoms that should go, go)?"""

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import hashlib
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import Any, ClassVar, Collection, Mapping, Sequence
 
 import numpy as np
 
-from llcps.domain import OUTCOME_NAMES
+from llcps.domain import OUTCOME_NAMES, Fluent
 from llcps.trial_records import TrialChange, TrialRecord, WorldModelInput
 from llcps.errors import LlcpsError
 
@@ -119,6 +119,7 @@ class WorldModel(ABC):
         changes: Mapping[int, TrialChange] | None = None,
         *,
         start: int | None = None,
+        asked: Collection[tuple[Fluent, bool]] | None = None,
     ) -> WorldModel:
         """Bring the model up to ``records``, a training set that grew since the last fit.
 
@@ -131,10 +132,12 @@ class WorldModel(ABC):
             start: the snapshot id the candidates being ranked start from. Only new
                 trials that started there are episode evidence (None: every new trial);
                 the others are learned at the next fit.
+            asked: the atoms (with their sign) the ranked candidates are asked to
+                change: a new trial's change of any other atom is no episode evidence.
         """
         self._update_outcome(records)
         if self.has_goal:
-            self.goal.update(records, changes or {}, start=start)
+            self.goal.update(records, changes or {}, start=start, asked=asked)
         return self
 
     @abstractmethod

@@ -38,8 +38,10 @@ of one half: 0.67, 0.06 and 2e-12), and each setting
 (orientation, magnitude) a member shares with a failure lowers it again:
 exploration moves away from what failed in every setting, then in kind; and a motion
 that failed drops on the action's other bodies too, so one stroke is not tried on every
-pair of bodies in turn before any other. The evidence lives for one fit: the next fit
-learns from those trials anyway.
+pair of bodies in turn before any other. A success counts only on an atom the candidates
+are asked to change (``asked``): that a family made two other bodies touch does not say
+it can make the pair the novelty stopped touch. The evidence lives for one fit: the next
+fit learns from those trials anyway.
 
 **Nothing is ruled out, and K is heard.** A learner trained on random interactions
 gives a change it never saw (a push that lands an object in a container) a vanishing
@@ -63,10 +65,11 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from typing import Any, Callable, ClassVar, Mapping, Sequence
+from typing import Any, Callable, ClassVar, Collection, Mapping, Sequence
 
 import numpy as np
 
+from llcps.domain import Fluent, fluent
 from llcps.trial_records import TrialChange, TrialRecord
 from llcps.training import TrainingSet
 from llcps.models.artifact import array
@@ -89,6 +92,7 @@ from llcps.models.relational import (
     Examples,
     GoalQuery,
     encode_queries,
+    trial_examples,
 )
 
 #: Expected share of a family's members that change the atom when the family works in a scene.
@@ -433,7 +437,12 @@ class GoalHead:
         self.rates = (self.rate_sums[:, 0] + 1.0) / (self.rate_sums[:, 1] + 2.0)
 
     def update(
-        self, records: Sequence[TrialRecord], changes: Mapping[int, TrialChange], *, start: int | None = None
+        self,
+        records: Sequence[TrialRecord],
+        changes: Mapping[int, TrialChange],
+        *,
+        start: int | None = None,
+        asked: Collection[tuple[Fluent, bool]] | None = None,
     ) -> GoalHead:
         """Take in the trials after the fit as episode evidence (the learner is not refitted).
 
@@ -442,6 +451,11 @@ class GoalHead:
                 started there are evidence (None: every trial after the fit). A family's
                 outcomes are one mixture only from one start state; a plan step run from
                 the state a trial left behind says nothing certain about that family there.
+            asked: the atoms (with their sign) the ranked candidates are asked to change
+                (None: any). A trial's change of another atom is no evidence: that a
+                family made two other bodies touch does not say it can make the bodies
+                the novelty stopped touch. Its failures still are (a motion that failed
+                drops on the action's other bodies).
         """
         # the trials after the fit: a training set's base (up to its watermark) is older
         after_fit = records.tail if isinstance(records, TrainingSet) and records.watermark <= self.watermark else records
@@ -456,7 +470,11 @@ class GoalHead:
         ]
         if not fresh:
             return self
-        examples = self.table.encode(fresh, changes)
+        if asked is None:
+            examples = self.table.encode(fresh, changes)
+        else:
+            spelled = {(fluent(*atom), add) for atom, add in asked}
+            examples = Examples.concatenate([trial_examples(r, changes[r.id], asked=spelled) for r in fresh])  # type: ignore[index]
         self._evidence_ids.update(r.id for r in fresh)  # type: ignore[misc]
         if not len(examples):
             return self

@@ -34,7 +34,7 @@ import math
 import struct
 import zlib
 from dataclasses import dataclass
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import Callable, Collection, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -410,10 +410,21 @@ def _sample_key(trial: TrialRecord, atom: Fluent) -> int:
     return zlib.crc32(("|".join(atom) + f"#{trial.seed}#{trial.spec.label}").encode())
 
 
-def trial_examples(trial: TrialRecord, change: TrialChange, *, other_negatives: int = OTHER_NEGATIVES) -> Examples:
+def trial_examples(
+    trial: TrialRecord,
+    change: TrialChange,
+    *,
+    other_negatives: int = OTHER_NEGATIVES,
+    asked: Collection[tuple[Fluent, bool]] | None = None,
+) -> Examples:
     """The examples one stored trial gives (see the module docstring).
 
     A trial whose arguments are not in its change's scene gives none (a damaged row).
+
+    Args:
+        asked: if given, the atoms (with their sign) a question asks for: an atom the
+            trial changed that is not among them gives no example (episode evidence,
+            :meth:`~llcps.models.goal.GoalHead.update`).
     """
     scene = Scene(change.bodies)
     if any(name not in scene.bodies for name in trial.spec.arguments):
@@ -424,6 +435,8 @@ def trial_examples(trial: TrialRecord, change: TrialChange, *, other_negatives: 
     for atom in ground_atoms(scene):
         add = atom not in change.before
         changed = atom in (change.added if add else change.deleted)
+        if changed and asked is not None and (atom, add) not in asked:
+            continue
         if changed or args.intersection(atom[1:]):
             kept.append((atom, add, int(changed), 1.0))
         else:
