@@ -9,8 +9,10 @@ import pytest
 from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, fluent
 from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.sim.controllers import CONTROLLERS, PUSH_DIRECTION, SIDE, execute
+from llcps.sim.controllers import CONTROLLERS, PUSH_DIRECTION, SIDE, execute, path_meets
 from llcps.sim.builders import inside, open_box, solid
+from llcps.sim.specs import FixtureSpec
+from llcps.sim.trial import bodies_met
 from llcps.sim.perception import perceive
 from llcps.sim.world import SceneSpec, World
 
@@ -168,3 +170,52 @@ def test_what_the_arm_reaches_is_not_refused_and_pushes_never_are(far_world) -> 
     execute(world, place)
     assert fluent("in", "near", "tray") in perceive(world)
     assert math.dist(before, world.center("near")) > 0.1
+
+
+#: A low wall 12 cm beyond the cube along +x (a push from the front), and a box beside the
+#: bin that a carry at the usual height passes through and a higher lift passes over.
+WALLED = SceneSpec(
+    entities=(
+        solid("cube", "box", "red", (0.045, 0.045, 0.045), at=(0.4, 0.1)),
+        open_box("tray", "green", at=(0.4, -0.25), size=(0.16, 0.16, 0.06)),
+    ),
+    fixtures=(
+        FixtureSpec("wall", (0.02, 0.2, 0.06), (0.52, 0.1, 0.03)),
+        FixtureSpec("screen", (0.2, 0.02, 0.16), (0.4, -0.1, 0.08)),
+    ),
+)
+
+
+@pytest.fixture(scope="module")
+def walled():
+    yield from settled(WALLED)
+
+
+def test_a_stroke_meets_the_bodies_in_its_way_and_only_them(walled) -> None:
+    """A push from the front drives the cube into the wall: met. A push to the left,
+    away from it, meets nothing; the cube's argument, the table and what touched it
+    before the stroke are never named."""
+    walled.restore(walled.start)
+    assert bodies_met(walled, TrialSpec("push", ("cube",), ControllerParams(0.2, 0.3, "front"))) == {"wall"}
+    walled.restore(walled.start)
+    assert bodies_met(walled, TrialSpec("push", ("cube",), ControllerParams(0.2, 0.1, "left"))) == frozenset()
+
+
+def test_a_planned_path_meets_what_lies_across_it_by_geometry_alone(walled) -> None:
+    walled.restore(walled.start)
+
+    def spec(action: str, args: tuple[str, ...], magnitude: float, orientation: str) -> TrialSpec:
+        return TrialSpec(action, args, ControllerParams(0.2, magnitude, orientation))
+
+    # pushes slide along the table: toward the wall far enough, or not
+    assert path_meets(walled, spec("push", ("cube",), 0.3, "front"), "wall")
+    assert not path_meets(walled, spec("push", ("cube",), 0.05, "front"), "wall")
+    assert not path_meets(walled, spec("push", ("cube",), 0.3, "left"), "wall")
+    # a carry at the usual height goes through the 16 cm screen; lifted 30 cm, over it
+    assert path_meets(walled, spec("place_in_container", ("cube", "tray"), 0.05, "top"), "screen")
+    assert not path_meets(walled, spec("place_in_container", ("cube", "tray"), 0.3, "top"), "screen")
+    assert not path_meets(walled, spec("place_in_container", ("cube", "tray"), 0.05, "top"), "wall")
+    # the real stroke agrees with the geometry
+    assert bodies_met(walled, spec("place_in_container", ("cube", "tray"), 0.05, "top")) >= {"screen"}
+    walled.restore(walled.start)
+    assert "screen" not in bodies_met(walled, spec("place_in_container", ("cube", "tray"), 0.3, "top"))

@@ -134,6 +134,17 @@ def test_a_contact_that_blocked_a_f_keeps_a_fs_own_action_from_the_atoms_by_hand
     assert p[2] == pytest.approx(resolve_probability(goal, sub, trust)[2])
 
 
+def test_a_body_met_on_a_fs_path_keeps_the_candidates_whose_path_meets_it_from_the_atoms_by_hand() -> None:
+    """Candidates 0 and 1 are a_f's own action; 0's path meets the body a_f's stroke met
+    (believed with 0.8 to have blocked a_f), 1's does not, 2 is another action."""
+    goal = np.array([[0.9], [0.9], [0.3]])
+    sub, trust = np.array([[0.5], [0.5], [0.5]]), np.array([0.5])
+    p = resolve_probability(goal, sub, trust, stroke=np.array([0.8, 0.0, 0.0]))
+    # 0: the atoms only if the body does not block its path too: 0.9 (1 - 0.8); subgoals as before.
+    assert p == pytest.approx([1 - (1 - 0.9 * 0.2) * (1 - 0.25), 1 - 0.1 * 0.75, 1 - 0.7 * 0.75])
+    assert p[1:] == pytest.approx(resolve_probability(goal, sub, trust)[1:])
+
+
 @given(st.floats(0, 1), st.floats(0, 1))
 def test_the_belief_that_a_contact_blocked_a_f_grows_with_how_sure_the_model_was_of_a_f(p: float, q: float) -> None:
     """t / (t + (1 - t)(1 - p)): the prior when the model expected nothing of a_f, certainty
@@ -313,3 +324,34 @@ def test_a_real_repair_that_missed_a_fs_atom_is_blocked_by_the_contact_beside_a_
     unblocked = resolve_probability(ranking.goal, ranking.subgoals, trust)
     assert np.all(ranking.resolve[placements] < unblocked[placements])
     assert ranking.resolve[~own] == pytest.approx(unblocked[~own])
+
+
+@pytest.mark.slow
+def test_a_real_stroke_that_met_a_fence_lowers_a_fs_own_action_on_every_path_through_it(readme_pretrained: Path, tmp_path: Path) -> None:
+    """docs/heldout/fence.toml: K pushes the block toward the puck (a_f) and a low fence
+    between them stops it; at the failure the fence touches neither, so no clearance
+    explains it. The replayed stroke met the fence, every planned path of a_f's own
+    action goes through it, and those candidates are lowered by the belief that it
+    blocked a_f (and K's repairs that missed the same atom); no other candidate moves."""
+    from llcps.cps.inspection import reach_failure
+    from llcps.models.persistence import fit_or_load
+    from llcps.store import Store
+
+    fence = str(Path(__file__).resolve().parents[1] / "docs" / "heldout" / "fence.toml")
+    with Store.open(str(shutil.copyfile(readme_pretrained, tmp_path / "llcps.db"))) as store:
+        point = reach_failure(store, branch="main", scenario=fence, seed=0, reach_check=False)
+        model = fit_or_load(store, "main", "nb", 1, records=store.visible_trials("main"), changes=store.visible_changes("main"))
+    assert point.failed is not None and point.failed.action == "push_together"
+    assert point.met == ("fence",) and not any(s.clearance for s in point.subgoals)
+    own = {i for i, c in enumerate(point.candidates) if (c.action, c.arguments) == (point.failed.action, point.failed.arguments)}
+    assert point.in_the_way == own
+    ranking = rank_candidates(model, point, measure="goal-directed", seed=0)
+    assert ranking.goal is not None and ranking.subgoals is not None and ranking.resolve is not None
+    mask = np.isin(ranking.indices, sorted(own))
+    direct = np.prod(ranking.goal, axis=1)
+    assert ranking.blocked == pytest.approx(blocked_belief([float(direct[m].mean()) for m in attempted(point, ranking.indices) if m.any()]))
+    trust = np.full(len(point.subgoals), SUBGOAL_TRUST)
+    free = resolve_probability(ranking.goal, ranking.subgoals, trust)
+    assert ranking.resolve[~mask] == pytest.approx(free[~mask])
+    assert ranking.resolve[mask] == pytest.approx(resolve_probability(ranking.goal, ranking.subgoals, trust, stroke=ranking.blocked * mask)[mask])
+    assert np.any(ranking.resolve[mask] < free[mask])

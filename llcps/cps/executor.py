@@ -36,7 +36,7 @@ from llcps.scenarios.goal import goal_text
 from llcps.sim.cache import CachedTrial, PhysicsCache, trial_key
 from llcps.sim.controllers import DEFAULT_MAX_STEPS
 from llcps.sim.perception import perceive
-from llcps.sim.trial import TrialResult, run_trial
+from llcps.sim.trial import TrialResult, bodies_met, run_trial
 from llcps.sim.world import SavedState, World
 from llcps.store import Store
 from llcps.symbolic.lifted import GroundAction
@@ -332,6 +332,13 @@ class TrialExecutor:
         """The scene as a snapshot stores it: what the world is built from, and the task's goal,
         so that a trial replays (and is judged) from the store alone, whatever file it came from."""
         return {**self.world.scene.to_dict(), "goal": goal_text(self.scenario.goal_pos, self.scenario.goal_neg)}
+
+    def met(self, spec: TrialSpec) -> frozenset[str]:
+        """The bodies ``spec``'s stroke meets from the world's state now
+        (:func:`~llcps.sim.trial.bodies_met`), simulated and not stored; restore a
+        snapshot after it."""
+        self.sync()
+        return bodies_met(self.world, spec, max_steps=self.max_steps)
 
     def restore(self, snapshot_id: int) -> None:
         """Return the world to a snapshot taken by :meth:`snapshot`."""

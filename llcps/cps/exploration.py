@@ -47,6 +47,18 @@ its probability of doing so is multiplied by ``1 - b (1 - q)``, ``q`` being its
 probability of ending the contact. Other candidates are not judged by it: the evidence
 is about a_f.
 
+**A body met on a_f's path.** What stopped a_f may touch neither argument once it
+failed: a low fence the pushed block hit and bounced back from, a screen the carried can
+hit before it fell. So exploration starts by replaying a_f's stroke from its stored
+start, recording every body the arm or an argument met on the way
+(:meth:`ExplorationSite.met`; not a trial, nothing stored). A body met that no clearance
+names, and that a_f's planned path goes through (by geometry alone,
+:func:`~llcps.sim.controllers.path_meets`), explains the failure as a clearance does, with
+the same belief ``b``. It cannot be ended, so a candidate of a_f's own action and
+arguments whose planned path goes through it too makes the missing atoms directly with
+its probability times ``1 - b``; one whose path passes it (the can lifted over the
+screen) is not judged by it. The evidence is about a_f: no other candidate is.
+
 K's repairs may have tried for the same missing atoms another way before exploration
 started (a placement of the can, after a push of it into the bin failed), and failed
 too (:attr:`~llcps.cps.plan_execution.Failure.attempts`). Each such failed attempt is
@@ -58,7 +70,7 @@ action on its arguments are blocked as a_f's own are.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Mapping, Protocol, Sequence
+from typing import TYPE_CHECKING, Collection, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -158,7 +170,9 @@ def subgoals(kb: KnowledgeBase, task: Task, failure: StepFailure, state: State) 
     return found
 
 
-def resolve_probability(goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarray, blocking: np.ndarray | None = None) -> np.ndarray:
+def resolve_probability(
+    goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarray, blocking: np.ndarray | None = None, stroke: np.ndarray | None = None
+) -> np.ndarray:
     """P(a candidate resolves the novelty) per candidate: it makes the missing atoms, or
     it meets a subgoal and K's step works from there (see the module docstring).
 
@@ -170,11 +184,16 @@ def resolve_probability(goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarra
             contact keeps the candidate from making the missing atoms while it lasts
             (a clearance's belief on the candidates of a_f's own action and arguments,
             else 0; see the module docstring). None: nothing blocks.
+        stroke: (n,) per candidate, the belief that a body a_f's stroke met keeps it
+            from making the missing atoms (on a_f's own action and arguments where its
+            planned path meets it, else 0). None: nothing met.
     """
     met = np.clip(subgoals, 0.0, 1.0)
     direct = joint_probability(goal)
     if blocking is not None and subgoals.size:
         direct = direct * np.prod(1.0 - blocking * (1.0 - met), axis=1)
+    if stroke is not None:
+        direct = direct * (1.0 - stroke)
     miss = 1.0 - direct
     if subgoals.size:
         miss = miss * np.prod(1.0 - met * trust, axis=1)
@@ -234,6 +253,11 @@ class FailurePoint:
         failed: a_f's controller call.
         attempts: the controller calls of the other steps of K's plans that missed the
             same atoms (:attr:`~llcps.cps.plan_execution.Failure.attempts`).
+        met: the bodies a_f's stroke met that touch none of its arguments at the
+            failure (no clearance ends them), other than the support and the ground,
+            and that lie on a_f's planned path (:func:`~llcps.sim.controllers.path_meets`).
+        in_the_way: the candidates of a_f's own action on its arguments whose planned
+            path meets a body of ``met``.
     """
 
     scenario: str
@@ -248,6 +272,15 @@ class FailurePoint:
     refused: frozenset[int] = frozenset()
     failed: TrialSpec | None = None
     attempts: tuple[TrialSpec, ...] = ()
+    met: tuple[str, ...] = ()
+    in_the_way: frozenset[int] = frozenset()
+
+    @property
+    def ranks_by_resolve(self) -> bool:
+        """Whether a candidate's probability of resolving the failure is more than its
+        missing atoms' joint probability (:func:`resolve_probability`): the point has
+        subgoals, or candidates whose path meets a body a_f's stroke met."""
+        return bool(self.subgoals or self.in_the_way)
 
     @property
     def missing_effects(self) -> str:
@@ -314,6 +347,7 @@ def failure_point(
     known: KnowledgeBase | None = None,
     reach_check: bool = False,
     attempts: Sequence[GroundAction] = (),
+    met: Collection[str] = (),
 ) -> FailurePoint:
     """The failure point of ``site``'s world as it is now (just after a_f failed).
 
@@ -328,8 +362,11 @@ def failure_point(
             caller that restores the world before its next trial asks for it.
         attempts: the other plan steps that missed the same atoms
             (:attr:`FailurePoint.attempts`).
+        met: the bodies a_f's stroke met (:meth:`ExplorationSite.met`); those in
+            contact with its arguments at the failure, the support and the ground are
+            left out of :attr:`FailurePoint.met`.
     """
-    from llcps.sim.controllers import refuses
+    from llcps.sim.controllers import path_meets, refuses
     from llcps.sim.perception import entity_features, scene_bodies
 
     world = site.world
@@ -351,6 +388,14 @@ def failure_point(
         Subgoal(step, atoms, claimed_by(atoms), clearance=True) for step, atoms in clearances(failure, state, kinds)
     )
     refused = frozenset(i for i, spec in enumerate(specs) if refuses(world, spec)) if reach_check else frozenset()
+    in_contact = {body for _, atoms in clearances(failure, state, kinds) for (atom, _) in atoms for body in atom[1:]}
+    # a body met on a_f's planned path: the evidence is about a_f, so only its own action on
+    # its arguments is judged by it, each candidate by whether its planned path meets it too
+    stroke = tuple(
+        b for b in sorted(met) if b not in in_contact and kinds.get(b) not in (None, SUPPORT_KIND, GROUND_KIND) and path_meets(world, failed_spec, b)
+    )
+    own = [i for i, spec in enumerate(specs) if (spec.action, spec.arguments) == (failed_spec.action, failed_spec.arguments)]
+    in_the_way = frozenset(i for i in own if any(path_meets(world, specs[i], b) for b in stroke))
     return FailurePoint(
         scenario=site.scenario.name,
         failure=failure,
@@ -364,13 +409,17 @@ def failure_point(
         refused=refused,
         failed=failed_spec,
         attempts=tuple(site.controller_call(step) for step in attempts),
+        met=stroke,
+        in_the_way=in_the_way,
     )
 
 
 class ExplorationSite(FailureSite, Protocol):
-    """A :class:`FailureSite` that can return its world to a stored snapshot."""
+    """A :class:`FailureSite` that can return its world to a stored snapshot, and replay a
+    controller call from one to see what its stroke meets."""
 
     def restore(self, snapshot_id: int) -> None: ...
+    def met(self, spec: TrialSpec) -> frozenset[str]: ...
 
 
 def start_exploration(
@@ -389,7 +438,12 @@ def start_exploration(
     if failure.snapshot is None:
         raise ValueError("exploration starts from a stored snapshot: run the plan with store=True")
     site.restore(failure.snapshot)
-    return failure_point(site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb), reach_check=reach_check, attempts=failure.attempts)
+    met = site.met(site.controller_call(failure.monitor.step))
+    site.restore(failure.snapshot)
+    return failure_point(
+        site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb), reach_check=reach_check, attempts=failure.attempts,
+        met=met,
+    )
 
 
 @dataclass(frozen=True)
@@ -455,17 +509,20 @@ def rank_candidates(
         decay = 0.5**failures
         trust, blocking = SUBGOAL_TRUST * decay, None
         clearance = np.array([s.clearance for s in point.subgoals], dtype=bool)
-        if clearance.any():
-            own = own_action(point, chosen)
+        stroke = None
+        if clearance.any() or point.in_the_way:
             if blocked is None:
                 direct = joint_probability(goal)
                 blocked = blocked_belief([float(np.mean(direct[mask])) for mask in attempted(point, chosen) if mask.any()])
+        if clearance.any():
             trust = np.where(clearance, blocked * decay, trust)
-            blocking = np.outer(own, np.where(clearance, trust, 0.0))
-        resolve = resolve_probability(goal, subgoal, trust, blocking)
-    # Without subgoals, the missing atoms' probabilities themselves (the same order, and
-    # the score keeps one term per atom).
-    ranked_by = resolve[:, None] if resolve is not None and point.subgoals else goal
+            blocking = np.outer(own_action(point, chosen), np.where(clearance, trust, 0.0))
+        if point.in_the_way:
+            stroke = blocked * np.isin(chosen, sorted(point.in_the_way))
+        resolve = resolve_probability(goal, subgoal, trust, blocking, stroke)
+    # Otherwise the missing atoms' probabilities themselves (the same order, and the score
+    # keeps one term per atom).
+    ranked_by = resolve[:, None] if resolve is not None and point.ranks_by_resolve else goal
     order = rank(outcome, measure, seed=seed, desired=point.desired, goal=ranked_by)
     score = get_measure(measure).score(outcome, point.desired, ranked_by)
     return Ranking(
@@ -476,11 +533,12 @@ def rank_candidates(
 
 def candidate_probability(point: FailurePoint, ranking: Ranking) -> np.ndarray:
     """Per candidate of ``point`` (n,): the world model's probability that it resolves the
-    failure, as ``ranking`` holds it (:func:`resolve_probability` when the point has
-    subgoals, else the missing atoms' joint probability); 0.5 for a measure without
-    the goal-aware head, and for the candidates ``ranking`` left out."""
+    failure, as ``ranking`` holds it (:func:`resolve_probability` where
+    :attr:`FailurePoint.ranks_by_resolve`, else the missing atoms' joint probability);
+    0.5 for a measure without the goal-aware head, and for the candidates ``ranking``
+    left out."""
     probability = np.full(len(point.candidates), 0.5)
-    resolve = ranking.resolve if ranking.resolve is not None and point.subgoals else None
+    resolve = ranking.resolve if ranking.resolve is not None and point.ranks_by_resolve else None
     if resolve is None and ranking.goal is not None:
         resolve = joint_probability(ranking.goal)
     if resolve is not None and ranking.indices:

@@ -188,10 +188,12 @@ def reach_failure(
                 if learned
                 else "the novelty does not make the nominal plan fail (see docs/scenarios.md)",
             )
+        world.restore_serialized(failure.physics)  # what a_f's stroke met, as the agent sees it
+        met = executor.met(executor.controller_call(failure.monitor.step))
         world.restore_serialized(failure.physics)  # candidates start where a_f did
         return failure_point(
             executor, failure.monitor, failure.state, kb, grid=config.candidate_grid(spec), known=experience.costed(kb),
-            reach_check=reach_check, attempts=failure.attempts,
+            reach_check=reach_check, attempts=failure.attempts, met=met,
         )  # fmt: skip
     finally:
         world.close()

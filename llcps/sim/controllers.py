@@ -371,6 +371,68 @@ def refuses(world: "World", spec: TrialSpec) -> bool:
     return where is not None and not _reachable(world, *where(world, spec.arguments, spec.params).waypoints(spec.params))
 
 
+#: Spacing of the points at which :func:`path_meets` places the moved boxes along a path (m).
+PATH_STEP = 0.01
+#: Height of the hand above the tool point that :func:`path_meets` sweeps with a carry (m).
+HAND_HEIGHT = 0.1
+
+_Box = tuple[tuple[float, float, float], tuple[float, float, float]]
+
+
+def _sweeps(path: list[tuple[float, float, float]], box: _Box, body: _Box) -> bool:
+    """Whether ``box`` (offsets from a path point) meets ``body`` at a point of ``path``,
+    a polyline sampled every :data:`PATH_STEP`."""
+    (bx0, by0, bz0), (bx1, by1, bz1) = body
+    (ox0, oy0, oz0), (ox1, oy1, oz1) = box
+    for a, b in zip(path, path[1:]):
+        n = max(1, math.ceil(math.dist(a, b) / PATH_STEP))
+        for i in range(n + 1):
+            x, y, z = (a[k] + (b[k] - a[k]) * i / n for k in range(3))
+            if x + ox0 < bx1 and x + ox1 > bx0 and y + oy0 < by1 and y + oy1 > by0 and z + oz0 < bz1 and z + oz1 > bz0:
+                return True
+    return False
+
+
+def path_meets(world: "World", spec: TrialSpec, body: str) -> bool:
+    """Whether ``spec``'s planned motion, by geometry alone, takes what it moves through
+    ``body``'s bounding box (grown by :data:`~llcps.sim.contact.TOUCH_DISTANCE`).
+
+    A push slides its object along the table: from where it stands, along the push
+    (``push_together``: toward the other argument, up to it), by the stroke's travel. A
+    pick-and-place call lifts its object from the grasp to the carry height its
+    magnitude sets, carries it to the target, and, placing from the top, lowers it into
+    the container; the hand above it sweeps a column of the object's footprint. No time passes and nothing moves: what the
+    arm would sweep on the way to the object, and where a body bounces, is not known.
+    """
+    lo, hi = world.aabb(body)
+    grown = (tuple(v - TOUCH_DISTANCE for v in lo), tuple(v + TOUCH_DISTANCE for v in hi))
+    obj = spec.arguments[0]
+    olo, ohi = world.aabb(obj)
+    cx, cy, cz = world.center(obj)
+    rx, ry = (ohi[0] - olo[0]) / 2.0, (ohi[1] - olo[1]) / 2.0
+    where = _CARRIES.get(spec.action)
+    if where is None:
+        if spec.action == "push_together":
+            other = world.center(spec.arguments[1])
+            d = g.unit2(other[0] - cx, other[1] - cy)
+            travel = max(0.0, math.dist((cx, cy), other[:2]) - g.extent_along(world, obj, d) - g.extent_along(world, spec.arguments[1], d))
+        else:
+            d = PUSH_DIRECTION[spec.params.orientation]
+            travel = PRE_CONTACT + spec.params.movement_magnitude
+        path = [(cx, cy, cz), (cx + d[0] * travel, cy + d[1] * travel, cz)]
+        return _sweeps(path, ((-rx, -ry, olo[2] - cz), (rx, ry, ohi[2] - cz)), grown)
+    carry = where(world, spec.arguments, spec.params)
+    grasp, above = carry.waypoints(spec.params)
+    path = [grasp, (grasp[0], grasp[1], above[2]), above]
+    if spec.action == "place_in_container" and spec.params.orientation == "top":
+        path.append((above[0], above[1], g.inner_floor_z(world, spec.arguments[1]) + 0.015 + carry.held))
+    # the object hangs ``held`` below the tool point, the hand stands above it: a column
+    # of the object's footprint
+    h = max(rx, ry)
+    moved = ((-h, -h, -carry.held), (h, h, max(ohi[2] - olo[2] - carry.held, HAND_HEIGHT)))
+    return _sweeps(path, moved, grown)
+
+
 Controller = Callable[["World", Motion, tuple[str, ...], "ControllerParams"], None]
 
 #: The action controllers, one per action (keys == llcps.domain.ACTIONS).

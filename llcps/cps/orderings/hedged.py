@@ -80,7 +80,7 @@ MAX_EVIDENCE_PROBABILITY = 0.5
 def resolve_probabilities(ranking: Ranking, point: FailurePoint) -> np.ndarray | None:
     """The model's probability that each ranked candidate resolves the novelty (what
     ``goal-directed`` ranks by), or None when the measure gives none."""
-    if ranking.resolve is not None and point.subgoals:
+    if ranking.resolve is not None and point.ranks_by_resolve:
         return ranking.resolve
     if ranking.goal is not None:
         return np.prod(np.clip(ranking.goal, 0.0, 1.0), axis=1)
