@@ -150,11 +150,17 @@ def show(report: "ModelInspection") -> None:
     notice(f"{failure.scenario}{where}: {failure.missing_effects}; {len(failure.candidates)} candidates{refused}")
     for k, subgoal in enumerate(failure.subgoals, start=1):
         notice(f"subgoal S{k}: {subgoal.label} (a trial that meets it lets K's step finish the job)")
+    if failure.met:
+        notice(
+            f"met on a_f's path: {', '.join(failure.met)} ({len(failure.in_the_way)} candidates of a_f's action "
+            "whose path meets it too are lowered under goal-directed)"
+        )
     for model, by_measure in report.rankings.items():
         for measure, ranked in by_measure.items():
             atoms = list(ranked[0].goal) if ranked else []
             subgoals = list(ranked[0].subgoals) if ranked else []
-            via = ([f"P(S{k})" for k in range(1, len(subgoals) + 1)] + ["P(resolve)"]) if subgoals else []
+            resolve = bool(ranked) and ranked[0].resolve is not None and failure.ranks_by_resolve
+            via = [f"P(S{k})" for k in range(1, len(subgoals) + 1)] + (["P(resolve)"] if resolve else [])
             print_table(
                 f"{model} / {measure}",
                 ("#", "trial", "K claims", "score", *(f"P{a}" for a in atoms), "P(all)", *via, *(_SHORT[name] for name in OUTCOME_NAMES)),
@@ -166,7 +172,8 @@ def show(report: "ModelInspection") -> None:
                         f"{c.score:.3f}",
                         *(f"{c.goal[a]:.3f}" for a in atoms),
                         f"{c.joint:.3f}",
-                        *((*(f"{c.subgoals[s]:.3f}" for s in subgoals), f"{c.resolve:.3f}") if subgoals else ()),
+                        *(f"{c.subgoals[s]:.3f}" for s in subgoals),
+                        *((f"{c.resolve:.3f}",) if resolve else ()),
                         *(f"{c.outcome[n]:.2f}" for n in OUTCOME_NAMES),
                     )
                     for c in ranked

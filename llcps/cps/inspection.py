@@ -109,6 +109,8 @@ class ModelInspection:
                 "missing_effects": self.failure.missing_effects,
                 "missing_atoms": [atom.label for atom in self.failure.query([]).atoms],
                 "subgoals": [subgoal.label for subgoal in self.failure.subgoals],
+                "met": list(self.failure.met),
+                "in_the_way": len(self.failure.in_the_way),
                 "desired": dict(zip(OUTCOME_NAMES, self.failure.desired.round(4).tolist())),
                 "candidates": len(self.failure.candidates),
                 "refused": len(self.failure.refused),
