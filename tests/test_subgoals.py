@@ -331,8 +331,9 @@ def test_a_real_stroke_that_met_a_fence_lowers_a_fs_own_action_on_every_path_thr
     """docs/heldout/fence.toml: K pushes the block toward the puck (a_f) and a low fence
     between them stops it; at the failure the fence touches neither, so no clearance
     explains it. The replayed stroke met the fence, every planned path of a_f's own
-    action goes through it, and those candidates are lowered by the belief that it
-    blocked a_f (and K's repairs that missed the same atom); no other candidate moves."""
+    action on the two bodies, pushed either way, goes through it, and those candidates
+    are lowered by the belief that it blocked a_f (and K's repairs that missed the same
+    atom); no other candidate moves."""
     from llcps.cps.inspection import reach_failure
     from llcps.models.persistence import fit_or_load
     from llcps.store import Store
@@ -343,8 +344,9 @@ def test_a_real_stroke_that_met_a_fence_lowers_a_fs_own_action_on_every_path_thr
         model = fit_or_load(store, "main", "nb", 1, records=store.visible_trials("main"), changes=store.visible_changes("main"))
     assert point.failed is not None and point.failed.action == "push_together"
     assert point.met == ("fence",) and not any(s.clearance for s in point.subgoals)
-    own = {i for i, c in enumerate(point.candidates) if (c.action, c.arguments) == (point.failed.action, point.failed.arguments)}
+    own = {i for i, c in enumerate(point.candidates) if (c.action, sorted(c.arguments)) == (point.failed.action, sorted(point.failed.arguments))}
     assert point.in_the_way == own
+    assert {point.candidates[i].arguments for i in own} == {point.failed.arguments, point.failed.arguments[::-1]}
     ranking = rank_candidates(model, point, measure="goal-directed", seed=0)
     assert ranking.goal is not None and ranking.subgoals is not None and ranking.resolve is not None
     mask = np.isin(ranking.indices, sorted(own))

@@ -54,8 +54,9 @@ start, recording every body the arm or an argument met on the way
 (:meth:`ExplorationSite.met`; not a trial, nothing stored). A body met that no clearance
 names, and that a_f's planned path goes through (by geometry alone,
 :func:`~llcps.sim.controllers.path_meets`), explains the failure as a clearance does, with
-the same belief ``b``. It cannot be ended, so a candidate of a_f's own action and
-arguments whose planned path goes through it too makes the missing atoms directly with
+the same belief ``b``. It cannot be ended, so a candidate of a_f's own action on its
+arguments (in either order: the block pushed against the puck or the puck against the
+block) whose planned path goes through it too makes the missing atoms directly with
 its probability times ``1 - b``; one whose path passes it (the can lifted over the
 screen) is not judged by it. The evidence is about a_f: no other candidate is.
 
@@ -256,8 +257,8 @@ class FailurePoint:
         met: the bodies a_f's stroke met that touch none of its arguments at the
             failure (no clearance ends them), other than the support and the ground,
             and that lie on a_f's planned path (:func:`~llcps.sim.controllers.path_meets`).
-        in_the_way: the candidates of a_f's own action on its arguments whose planned
-            path meets a body of ``met``.
+        in_the_way: the candidates of a_f's own action on its arguments, in any order,
+            whose planned path meets a body of ``met``.
     """
 
     scenario: str
@@ -390,11 +391,12 @@ def failure_point(
     refused = frozenset(i for i, spec in enumerate(specs) if refuses(world, spec)) if reach_check else frozenset()
     in_contact = {body for _, atoms in clearances(failure, state, kinds) for (atom, _) in atoms for body in atom[1:]}
     # a body met on a_f's planned path: the evidence is about a_f, so only its own action on
-    # its arguments is judged by it, each candidate by whether its planned path meets it too
+    # its arguments (in any order) is judged by it, each candidate by whether its planned
+    # path meets it too
     stroke = tuple(
         b for b in sorted(met) if b not in in_contact and kinds.get(b) not in (None, SUPPORT_KIND, GROUND_KIND) and path_meets(world, failed_spec, b)
     )
-    own = [i for i, spec in enumerate(specs) if (spec.action, spec.arguments) == (failed_spec.action, failed_spec.arguments)]
+    own = [i for i, spec in enumerate(specs) if (spec.action, sorted(spec.arguments)) == (failed_spec.action, sorted(failed_spec.arguments))]
     in_the_way = frozenset(i for i in own if any(path_meets(world, specs[i], b) for b in stroke))
     return FailurePoint(
         scenario=site.scenario.name,
