@@ -296,6 +296,47 @@ def test_a_first_plan_experience_turned_aside_that_fails_is_rewound_and_k_alone_
     assert log.failed_action == place.label and log.repairs[0]["rewound"] is True
 
 
+def test_a_detour_of_learned_steps_blamed_midway_goes_back_to_its_start(sqlite_store: Store) -> None:
+    """K' plans two learned steps before the placement: the first works by its facts
+    (the can pushed against the bin), the second fails at its own step and is blamed.
+    The world goes back to where the detour started, not to where the blamed step did:
+    the step before it left the can where K's placement fails, while from the start K
+    alone's placement reaches the goal (an original scene after a life)."""
+    from llcps.cps.branch_knowledge import BranchExperience
+    from llcps.cps.plan_execution import PlanLog, plan_and_repair
+
+    start = OUT_OF_REACH | {fluent("reachable", "bin")}
+    pushed = start | {fluent("touching", "can", "bin"), fluent("touching", "bin", "can")}
+    ready = pushed - {fluent("on", "can", "table")}
+    first = learn_operator(
+        spec=TrialSpec("push", ("can",), ControllerParams(0.1, 0.3, "left")), before=start, after=pushed, objects=ROOM, replaces="place_in_container"
+    )
+    second = learn_operator(
+        spec=TrialSpec("push_together", ("can", "bin"), ControllerParams(1.0, 0.05, "left")), before=pushed, after=ready, objects=ROOM,
+        replaces="place_in_container",
+    )
+    kb = KnowledgeBase.default().with_operator(first).with_operator(second)
+    (place,) = plan(KnowledgeBase.default(), Task(objects=ROOM, init=start, goal_pos=IN_BIN))
+    placing = [(place.name, kb.context(place, state), False) for state in (start, pushed) for _ in range(4)]
+    placing += [(place.name, kb.context(place, ready), True)] * 3  # it worked where the second push left the can
+    push = plan(kb.with_experience(Experience.of(placing)), Task(objects=ROOM, init=start, goal_pos=IN_BIN))[0]
+    assert push.name == "push_together"  # K's own push makes the first push's facts too; it failed here
+    dear = Experience.of(placing + [(push.name, kb.context(push, start), False)] * 4)
+    detour = plan(kb.with_experience(dear), Task(objects=ROOM, init=start, goal_pos=IN_BIN))
+    assert detour is not None and [s.name for s in detour] == [first.name, second.name, place.name]
+
+    def original(step, state):  # noqa: ANN001, ANN202
+        if step.name == place.name:
+            return state | IN_BIN if state == start else state
+        return pushed if step.name == first.name else state  # the second push moves nothing
+
+    world = _Facts(start, original)
+    log = PlanLog()
+    plan_and_repair(world, BranchExperience(sqlite_store, "main", experience=dear), kb.with_experience(dear), start, log)  # type: ignore[arg-type]
+    assert log.plan == [s.label for s in detour] and world.resumed == [start]
+    assert log.solved and log.repairs == [{"plan": [place.label], "rewound": True, "failed_action": None, "missing_effects": None}]
+
+
 def test_after_a_trial_k_alone_plans_where_the_re_plan_experience_turned_aside_fails(sqlite_store: Store) -> None:
     """A trial moved the bin; experience from look-alike scenes made the placement dear in
     the context it left, so K' re-plans a push first, which fails. K alone's placement

@@ -22,9 +22,12 @@ the blamed step). Experience misleads the same way without a learned step:
 K's own placement, failed in look-alike scenes, is left out where it would work, and K'
 plans a *detour* (a push first). So when K's first plan is not the one K alone makes from
 the start and it fails, the world returns to the start and K alone plans (this plan is not
-counted among the repairs). A failure blamed on a learned step or a detour is taken as a_f
-only when no other is found: exploration does not start from a state a misleading step
-left, and it starts where the reset agent would, with what was learned in its world model.
+counted among the repairs); so does a detour whose failure is blamed on a learned step
+after other learned steps that worked: they made the context it was planned for, and
+the world they left may be one where K alone fails though it works from the start. A
+failure blamed on a learned step or a detour is taken as a_f only when no other is found:
+exploration does not start from a state a misleading step left, and it starts where the
+reset agent would, with what was learned in its world model.
 The re-plan after an exploration trial (:func:`resolves`) falls back on K alone likewise.
 """
 
@@ -271,7 +274,9 @@ def plan_and_repair(
             if executor.scenario.goal_reached(state):
                 log.solved = True
             return with_attempts(first or misled, failures)
-        back_to = failure.blamed or (run.started if detour else None)
+        # a detour goes back to its start, even past learned steps that worked: they made
+        # the context the blamed one was planned for, and K alone plans from the start
+        back_to = run.started if detour else failure.blamed
         detour = rewound = False
         if failure.blamed is not None or back_to is None:
             excluded.add(failure.left_out)
