@@ -385,11 +385,12 @@ def failure_point(
     steps_of = kb if known is None else known
     bodies = scene_bodies(world)
     kinds = {body.name: body.kind for body in bodies}
+    cleared = clearances(failure, state, kinds)
     routes = tuple(Subgoal(step, atoms, claimed_by(atoms)) for step, atoms in subgoals(steps_of, task, failure, state)) + tuple(
-        Subgoal(step, atoms, claimed_by(atoms), clearance=True) for step, atoms in clearances(failure, state, kinds)
+        Subgoal(step, atoms, claimed_by(atoms), clearance=True) for step, atoms in cleared
     )
     refused = frozenset(i for i, spec in enumerate(specs) if refuses(world, spec)) if reach_check else frozenset()
-    in_contact = {body for _, atoms in clearances(failure, state, kinds) for (atom, _) in atoms for body in atom[1:]}
+    in_contact = {body for _, atoms in cleared for (atom, _) in atoms for body in atom[1:]}
     # a body met on a_f's planned path: the evidence is about a_f, so only its own action on
     # its arguments (in any order) is judged by it, each candidate by whether its planned
     # path meets it too
@@ -533,16 +534,23 @@ def rank_candidates(
     )
 
 
-def candidate_probability(point: FailurePoint, ranking: Ranking) -> np.ndarray:
-    """Per candidate of ``point`` (n,): the world model's probability that it resolves the
-    failure, as ``ranking`` holds it (:func:`resolve_probability` where
+def resolve_probabilities(ranking: Ranking, point: FailurePoint) -> np.ndarray | None:
+    """Per ranked candidate (``ranking.indices``): the world model's probability that it
+    resolves the failure, as ``ranking`` holds it (:func:`resolve_probability` where
     :attr:`FailurePoint.ranks_by_resolve`, else the missing atoms' joint probability);
-    0.5 for a measure without the goal-aware head, and for the candidates ``ranking``
-    left out."""
+    None for a measure without the goal-aware head."""
+    if ranking.resolve is not None and point.ranks_by_resolve:
+        return ranking.resolve
+    if ranking.goal is not None:
+        return joint_probability(ranking.goal)
+    return None
+
+
+def candidate_probability(point: FailurePoint, ranking: Ranking) -> np.ndarray:
+    """Per candidate of ``point`` (n,): :func:`resolve_probabilities`; 0.5 for a measure
+    without the goal-aware head, and for the candidates ``ranking`` left out."""
     probability = np.full(len(point.candidates), 0.5)
-    resolve = ranking.resolve if ranking.resolve is not None and point.ranks_by_resolve else None
-    if resolve is None and ranking.goal is not None:
-        resolve = joint_probability(ranking.goal)
+    resolve = resolve_probabilities(ranking, point)
     if resolve is not None and ranking.indices:
         probability[np.asarray(ranking.indices)] = resolve
     return probability

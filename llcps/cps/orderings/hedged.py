@@ -56,9 +56,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any, ClassVar
 
-import numpy as np
-
-from llcps.cps.exploration import FailurePoint, Ranking
+from llcps.cps.exploration import resolve_probabilities
 from llcps.cps.orderings.base import MODEL_SIDE, RANDOM_SIDE, Exploration
 from llcps.cps.orderings.coverage import FixedOrder, coverage_order
 from llcps.cps.orderings.ranked import Ranked
@@ -75,16 +73,6 @@ MODEL_PRIOR = 0.5
 #: calibrated: one sure of a candidate K claims (p near 1) would otherwise lose every
 #: trial to random order after one failure, whatever it knows of the rest.
 MAX_EVIDENCE_PROBABILITY = 0.5
-
-
-def resolve_probabilities(ranking: Ranking, point: FailurePoint) -> np.ndarray | None:
-    """The model's probability that each ranked candidate resolves the novelty (what
-    ``goal-directed`` ranks by), or None when the measure gives none."""
-    if ranking.resolve is not None and point.ranks_by_resolve:
-        return ranking.resolve
-    if ranking.goal is not None:
-        return np.prod(np.clip(ranking.goal, 0.0, 1.0), axis=1)
-    return None
 
 
 class Hedged(Ranked):
