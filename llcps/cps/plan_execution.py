@@ -227,7 +227,7 @@ def plan_and_repair(
 
     A failure blamed on a learned step (:attr:`Failure.blamed`) is repaired from where
     that step started, with K alone; a first plan that K alone would not have made (a
-    detour) is, when it fails, followed by K alone's plan from the start. a_f is the
+    detour) is, when it fails (blamed or not), followed by K alone's plan from the start. a_f is the
     first failure not blamed on a learned step or a detour, else the first such one.
 
     Returns:
