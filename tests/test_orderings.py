@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from llcps.cps.exploration import Ranking
+from llcps.cps.ranking import Ranking
 from llcps.cps.orderings import ORDERINGS, get_ordering
 from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.orderings.base import Exploration, resolving_pick

@@ -1,4 +1,4 @@
-"""Subgoals: the other way to a failure's missing atoms through K (llcps.cps.exploration).
+"""Subgoals: the other way to a failure's missing atoms through K (llcps.cps.failure_point, llcps.cps.ranking).
 
 A trial resolves a novelty when the goal holds after it, or when K's plan from the state
 it leaves works. So a step of K that would make a missing atom, but lacks preconditions
@@ -16,19 +16,16 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from llcps.cps.exploration import (
+from llcps.cps.failure_point import (
     MAX_CLEARANCES,
     MAX_SUBGOAL_ATOMS,
-    SUBGOAL_TRUST,
     Subgoal,
     attempted,
-    blocked_belief,
     clearances,
     own_action,
-    rank_candidates,
-    resolve_probability,
     subgoals,
 )
+from llcps.cps.ranking import SUBGOAL_TRUST, blocked_belief, rank_candidates, resolve_probability
 from llcps.cps.plan_execution import Failure, with_attempts
 from llcps.domain import fluent
 from llcps.models.measures import GOAL_FLOOR, rank
@@ -173,7 +170,7 @@ def test_each_action_on_its_arguments_is_one_attempt_however_often_it_failed() -
     """a_f is a push of the can; the attempts repeat it (another operator with the same
     controller call) and name the placement twice, at other settings: two attempts, and
     only the candidates of those two actions on their arguments are a failed attempt's."""
-    from llcps.cps.exploration import FailurePoint
+    from llcps.cps.failure_point import FailurePoint
     from llcps.domain import ControllerParams
     from llcps.trial_records import TrialSpec
 
@@ -197,7 +194,7 @@ def test_each_action_on_its_arguments_is_one_attempt_however_often_it_failed() -
 def test_a_failure_point_asks_for_a_fs_missing_atoms_and_every_subgoal_s() -> None:
     """What episode evidence may count (``FailurePoint.asked``): a_f's missing atoms and
     each subgoal's atoms, with their signs; nothing else."""
-    from llcps.cps.exploration import FailurePoint
+    from llcps.cps.failure_point import FailurePoint
 
     kb = KnowledgeBase.default()
     _, pushed = _failure(kb, "push")

@@ -11,7 +11,7 @@ The loop: perceive; execute K's plan, repairing it with what K knows when a step
 (:mod:`llcps.cps.plan_execution`); only when no repaired plan reaches the goal does
 creative problem solving start, for the first step that failed, a_f: the novelty is that
 a_f fails where K expected it to work, so exploration tries candidates ranked by the
-world model (:mod:`llcps.cps.exploration`) from the state a_f was executed in, until one
+world model (:mod:`llcps.cps.ranking`) from the state a_f was executed in, until one
 resolves the novelty, and a learned operator records that state as its context
 (:mod:`llcps.cps.learning`).
 
@@ -351,7 +351,7 @@ def _explore(
     found: _Progress,
 ) -> None:
     """Try candidates from the failure snapshot, in the config's ordering, until one resolves the novelty."""
-    from llcps.cps.exploration import start_exploration
+    from llcps.cps.failure_point import start_exploration
     from llcps.cps.learning import learn
     from llcps.cps.orderings import get_ordering
     from llcps.cps.orderings.base import Exploration

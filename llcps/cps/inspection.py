@@ -4,7 +4,7 @@ scenario's failure point under each measure, with each candidate's predicted
 probability of the failure's missing atoms.
 
 The failure point is reached the way the agent reaches it (:func:`~llcps.cps.plan_execution.plan_and_repair`,
-then :func:`~llcps.cps.exploration.failure_point` from the state a_f was executed in),
+then :func:`~llcps.cps.failure_point.failure_point` from the state a_f was executed in),
 without storing anything (except the fitted models, stored by
 :func:`~llcps.models.persistence.fit_or_load`).
 """
@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from llcps.cps.exploration import FailurePoint, failure_point, rank_candidates
+from llcps.cps.failure_point import FailurePoint, failure_point
+from llcps.cps.ranking import rank_candidates
 from llcps.domain import OUTCOME_NAMES, check_seed
 from llcps.errors import LlcpsError
 from llcps.models.base import WorldModel
@@ -46,7 +47,7 @@ class RankedCandidate:
         claimed: the missing atoms the knowledge base claims the candidate's action has
             as an effect (the goal head's prior, docs/world_models.md).
         subgoals: predicted probability that the candidate meets each subgoal (another
-            step of K and the preconditions it lacks, :mod:`llcps.cps.exploration`).
+            step of K and the preconditions it lacks, :mod:`llcps.cps.failure_point`).
         resolve: the probability ``goal-directed`` ranks by: the missing atoms, or a
             subgoal and K's step after it.
         refused: the arm would refuse the call here (the reach check): the agent tries

@@ -36,10 +36,11 @@ from llcps.domain import ACTIONS
 from llcps.errors import LlcpsError
 from llcps.models.features import CONTINUOUS_COLUMNS, ENCODED_FEATURE_NAMES, FeatureEncoder, encode_inputs
 
-from llcps.cps.exploration import candidate_probability
+from llcps.cps.ranking import candidate_probability
 
 if TYPE_CHECKING:
-    from llcps.cps.exploration import FailurePoint, Ranking
+    from llcps.cps.failure_point import FailurePoint
+    from llcps.cps.ranking import Ranking
 
 #: Rows of the candidate table: the largest candidate space an observation holds
 #: (the shipped scenes offer 467).

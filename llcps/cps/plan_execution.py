@@ -6,7 +6,7 @@ fails, the agent first tries what it already knows: it re-plans from the perceiv
 without that ground action (the operator that failed is demoted by its failure, see
 :func:`llcps.symbolic.knowledge_base.experience_cost`), executes the repaired plan, and
 repeats up to :data:`MAX_PLAN_REPAIRS` times. The first step that failed, a_f, is where
-exploration starts (:mod:`llcps.cps.exploration`), from the snapshot stored before it.
+exploration starts (:mod:`llcps.cps.failure_point`), from the snapshot stored before it.
 
 A learned step is K' applied where it was learned to apply, and it can mislead: no fact
 may tell the scene from the one it was learned in (an icy table, an arm of shorter reach),
@@ -73,7 +73,7 @@ class Failure(StepStart):
     #: The other steps of this episode's plans that missed one of the atoms this step
     #: missed (set on a_f's failure by :func:`plan_and_repair`: K's repairs that tried
     #: for the same atoms another way and failed too; exploration takes them as failed
-    #: attempts beside a_f, :mod:`llcps.cps.exploration`).
+    #: attempts beside a_f, :mod:`llcps.cps.failure_point`).
     attempts: tuple[GroundAction, ...] = ()
 
     @property

@@ -129,7 +129,7 @@ def warm_up() -> None:
     """Import what every task needs while the worker would otherwise wait for its first task."""
     import llcps.cps.executor  # noqa: F401  (the trial executor, the simulator, the models' registry)
     import llcps.cps.plan_execution  # noqa: F401  (the planner)
-    import llcps.cps.exploration  # noqa: F401
+    import llcps.cps.ranking  # noqa: F401  (the failure point too)
     import llcps.cps.pretraining  # noqa: F401
 
 

@@ -5,7 +5,7 @@ At :meth:`ExploreEnv.reset` the environment picks one of its (scenario, variant)
 executes K's plan with its repairs as an episode does
 (:func:`llcps.cps.plan_execution.find_failure`; the steps are stored as ``plan``
 trials) and stops at the failure point, where exploration would start
-(:func:`llcps.cps.exploration.start_exploration`). The plan runs once per pair: later
+(:func:`llcps.cps.failure_point.start_exploration`). The plan runs once per pair: later
 resets of the same pair start from the stored failure snapshot at once.
 
 - **Observation**: a ``Dict`` of ``failure`` (``(FAILURE_FEATURES,)``) and
@@ -51,7 +51,8 @@ import numpy as np
 from llcps.cps.branch_knowledge import BranchExperience, load_experience, load_knowledge
 from llcps.cps.episode import DEFAULT_BUDGET, SolveConfig
 from llcps.cps.executor import TrialExecutor
-from llcps.cps.exploration import FailurePoint, rank_candidates, start_exploration
+from llcps.cps.failure_point import FailurePoint, start_exploration
+from llcps.cps.ranking import rank_candidates
 from llcps.cps.observation import MAX_CANDIDATES, FailureObservation, action_space, observation_space
 from llcps.cps.plan_execution import Failure, PlanLog, find_failure, resolves
 from llcps.errors import LlcpsError

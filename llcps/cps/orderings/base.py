@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, ClassVar, Collection, Mapping
 
 if TYPE_CHECKING:
-    from llcps.cps.exploration import FailurePoint
+    from llcps.cps.failure_point import FailurePoint
     from llcps.domain import State
     from llcps.models.base import WorldModel
     from llcps.store import Store

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, ClassVar, Collection, Sequence
 
 import numpy as np
 
-from llcps.cps.exploration import rank_candidates
+from llcps.cps.ranking import rank_candidates
 from llcps.cps.orderings.base import Exploration, Ordering
 
 if TYPE_CHECKING:

@@ -56,7 +56,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from llcps.cps.exploration import resolve_probabilities
+from llcps.cps.ranking import resolve_probabilities
 from llcps.cps.orderings.base import MODEL_SIDE, RANDOM_SIDE, Exploration
 from llcps.cps.orderings.coverage import FixedOrder, coverage_order
 from llcps.cps.orderings.ranked import Ranked

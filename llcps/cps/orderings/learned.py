@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, ClassVar, Collection
 
 import numpy as np
 
-from llcps.cps.exploration import rank_candidates
+from llcps.cps.ranking import rank_candidates
 from llcps.cps.observation import FailureObservation
 from llcps.cps.orderings.base import Exploration, Ordering
 from llcps.errors import LlcpsError

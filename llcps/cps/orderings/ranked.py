@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, ClassVar, Collection
 
-from llcps.cps.exploration import Ranking, rank_candidates
+from llcps.cps.ranking import Ranking, rank_candidates
 from llcps.cps.orderings.base import Exploration, Ordering
 
 if TYPE_CHECKING:
@@ -15,10 +15,10 @@ class Ranked(Ordering):
     """Try the best-ranked untried candidate; after every ``refit_every`` failed trials,
     take them into the world model (episode evidence) and rank the rest again.
 
-    A failed trial that met one of K's subgoals (:class:`~llcps.cps.exploration.Subgoal`)
+    A failed trial that met one of K's subgoals (:class:`~llcps.cps.failure_point.Subgoal`)
     halves the trust in that subgoal's step for the next ranking. The belief that a
     contact blocked a_f is the first ranking's, before any trial
-    (:func:`~llcps.cps.exploration.blocked_belief`): later rankings see a_f's own action
+    (:func:`~llcps.cps.ranking.blocked_belief`): later rankings see a_f's own action
     lowered by the episode's failures, which are no evidence against the contact.
     """
 

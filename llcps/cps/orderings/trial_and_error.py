@@ -9,7 +9,7 @@ arguments, all its controller settings):
 
 - prior: ``Beta(k m, k (1 - m))`` with ``m`` the world model's largest probability
   that a candidate of the family resolves the failure
-  (:func:`~llcps.cps.exploration.candidate_probability`, clipped to
+  (:func:`~llcps.cps.ranking.candidate_probability`, clipped to
   [:data:`PRIOR_FLOOR`, 1 - :data:`PRIOR_FLOOR`]) and ``k`` :data:`PRIOR_STRENGTH`
   pseudo-trials;
 - choice: one draw ``theta_f ~ Beta`` per family with untried candidates (Thompson
@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, ClassVar, Collection
 
 import numpy as np
 
-from llcps.cps.exploration import candidate_probability, rank_candidates
+from llcps.cps.ranking import candidate_probability, rank_candidates
 from llcps.cps.orderings.base import Exploration, Ordering
 
 if TYPE_CHECKING:

@@ -7,7 +7,7 @@ via Bootstrapped DQN", NeurIPS 2016): a candidate the model is unsure about is w
 trial because it teaches the model most. :data:`MEMBERS` copies of the episode's world
 model (same kind, their own seeds) are fitted on bootstrap resamples of the trials the
 branch sees, once per episode; each predicts every candidate's probability of
-resolving the failure (:func:`~llcps.cps.exploration.candidate_probability`). A
+resolving the failure (:func:`~llcps.cps.ranking.candidate_probability`). A
 candidate scores
 
     p(candidate) + BONUS * std over the members of their probabilities,
@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from llcps.cps.exploration import candidate_probability, rank_candidates
+from llcps.cps.ranking import candidate_probability, rank_candidates
 from llcps.cps.orderings.base import Exploration, Ordering
 from llcps.models.measures import get_measure, tie_break_key
 

@@ -1,11 +1,11 @@
-"""Where exploration starts: the failure point, its candidates, and their ranking.
+"""Where exploration starts: the failure point and its candidates.
 
-One place for the path from a failed plan step to an ordered list of candidate
-trials, used by the episode (:mod:`llcps.cps.episode`) and by ``llcps inspect model``
-(:mod:`llcps.cps.inspection`): enumerate the candidates in the default order, describe
-each for the world model (Table-1 inputs for Omega, and the goal-aware query of the
-failure's missing atoms over the scene as it is at the failure), and rank them with a
-world model and a measure.
+One place for what exploration knows once a plan step failed, used by the episode
+(:mod:`llcps.cps.episode`), the Gymnasium environment (:mod:`llcps.gym`) and ``llcps
+inspect model`` (:mod:`llcps.cps.inspection`): the candidates in the default order, each
+described for the world model (Table-1 inputs for Omega, and the goal-aware query of the
+failure's missing atoms over the scene as it is at the failure), and the other ways to
+the missing atoms that the ranking (:mod:`llcps.cps.ranking`) values.
 
 **Subgoals: the other way to the missing atoms.** A trial resolves the novelty when the
 goal holds after it, or when K plans from the state it leaves and that plan works
@@ -13,14 +13,7 @@ goal holds after it, or when K plans from the state it leaves and that plan work
 may meet what another step of K lacks. Every ground step of K (other than a_f) that
 would make a missing atom but is not applicable at the failure gives a
 :class:`Subgoal`: its unmet preconditions (at most :data:`MAX_SUBGOAL_ATOMS`; K's
-``push(can, bin)`` lacks ``(near can bin)`` when the bin is out of reach). The world
-model's goal head predicts a subgoal's atoms as it predicts the missing ones, and
-``goal-directed`` ranks by the probability that a candidate resolves the novelty either
-way (:func:`resolve_probability`):
-``1 - (1 - P(missing atoms)) * prod_k (1 - t_k P(subgoal k))``, where ``t_k``, the
-belief that K's step works once its preconditions hold, starts at
-:data:`SUBGOAL_TRUST` and halves each time a trial met the subgoal and K's plan from
-there still failed.
+``push(can, bin)`` lacks ``(near can bin)`` when the bin is out of reach).
 
 **Clearances: what is in the way.** a_f may have failed because of a body in contact
 with its arguments: a board lying across the container's opening, a box standing on the
@@ -28,24 +21,7 @@ object. Each body other than a_f's arguments, the support and the ground that to
 carries or holds one of them at the failure gives one more subgoal of a_f itself
 (:func:`clearances`): ending that contact, every relation of it that holds (``in``,
 ``on``, ``touching``): a board pushed off the bin's top that still leans on its rim is
-not out of the way. It is valued and distrusted as K's subgoals are, so a contact whose
-end did not let K's plan work stops mattering after a few trials. A failure with no such
-contact ranks as without clearances.
-
-**A contact that blocked a_f.** A clearance is also an explanation of the failure: its
-contact blocks a_f's own action on its arguments, in every setting, while it lasts (a
-board across the bin's opening stops every placement of the can into the bin). a_f's
-failure is evidence for it: certain if the contact blocks, and of chance ``1 - p``
-otherwise, ``p`` being the model's probability that a_f's action on its arguments makes
-the missing atoms (the mean over those candidates at the first ranking). So the belief
-starts at ``b = t / (t + (1 - t)(1 - p))`` from ``t`` = :data:`SUBGOAL_TRUST`
-(:func:`blocked_belief`): a model that expected a_f to work learns that the contact is
-the likely reason it did not; one that expected nothing of a_f learns nothing. ``b`` is
-the clearance's trust (halved as above), and a candidate of a_f's own action and
-arguments makes the missing atoms directly only with the contact's end or its absence:
-its probability of doing so is multiplied by ``1 - b (1 - q)``, ``q`` being its
-probability of ending the contact. Other candidates are not judged by it: the evidence
-is about a_f.
+not out of the way. A failure with no such contact has no clearances.
 
 **A body met on a_f's path.** What stopped a_f may touch neither argument once it
 failed: a low fence the pushed block hit and bounced back from, a screen the carried can
@@ -53,19 +29,15 @@ hit before it fell. So exploration starts by replaying a_f's stroke from its sto
 start, recording every body the arm or an argument met on the way
 (:meth:`ExplorationSite.met`; not a trial, nothing stored). A body met that no clearance
 names, and that a_f's planned path goes through (by geometry alone,
-:func:`~llcps.sim.controllers.path_meets`), explains the failure as a clearance does, with
-the same belief ``b``. It cannot be ended, so a candidate of a_f's own action on its
-arguments (in either order: the block pushed against the puck or the puck against the
-block) whose planned path goes through it too makes the missing atoms directly with
-its probability times ``1 - b``; one whose path passes it (the can lifted over the
-screen) is not judged by it. The evidence is about a_f: no other candidate is.
+:func:`~llcps.sim.controllers.path_meets`), is kept (:attr:`FailurePoint.met`), with the
+candidates of a_f's own action on its arguments (in either order: the block pushed
+against the puck or the puck against the block) whose planned path goes through it too
+(:attr:`FailurePoint.in_the_way`).
 
 K's repairs may have tried for the same missing atoms another way before exploration
 started (a placement of the can, after a push of it into the bin failed), and failed
-too (:attr:`~llcps.cps.plan_execution.Failure.attempts`). Each such failed attempt is
-evidence for the contact in the same way, independently: ``b = t / (t + (1 - t)
-prod_i (1 - p_i))`` over a_f and the attempts, and the candidates of each attempt's
-action on its arguments are blocked as a_f's own are.
+too (:attr:`~llcps.cps.plan_execution.Failure.attempts`): the failure point keeps their
+controller calls (:attr:`FailurePoint.attempts`, :func:`attempted`).
 """
 
 from __future__ import annotations
@@ -79,9 +51,6 @@ from llcps.cps.candidates import Grid, enumerate_candidates
 from llcps.cps.outcomes import desired_outcome
 from llcps.domain import GROUND_KIND, SUPPORT_KIND, Fluent, State, format_fluent
 from llcps.trial_records import Body, TrialSpec, WorldModelInput
-from llcps.models.base import WorldModel
-from llcps.models.goal import joint_probability
-from llcps.models.measures import get_measure, rank
 from llcps.models.relational import GoalQuery
 from llcps.symbolic.knowledge_base import KnowledgeBase
 from llcps.symbolic.task import Task
@@ -96,8 +65,6 @@ if TYPE_CHECKING:
 
 #: Most unmet preconditions a step of K may lack to be a subgoal (see the module docstring).
 MAX_SUBGOAL_ATOMS = 2
-#: Belief, before any evidence, that a step of K works once a trial met its preconditions.
-SUBGOAL_TRUST = 0.5
 #: Predicates of contact: a body that touches, carries or holds an argument of a_f (see :func:`clearances`).
 CONTACT_PREDICATES = ("in", "on", "touching")
 #: Most clearances a failure point gets (each is one more goal-head question per ranking).
@@ -169,47 +136,6 @@ def subgoals(kb: KnowledgeBase, task: Task, failure: StepFailure, state: State) 
         if 0 < len(unmet) <= MAX_SUBGOAL_ATOMS and unmet not in (atoms for _, atoms in found):
             found.append((step.label, unmet))
     return found
-
-
-def resolve_probability(
-    goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarray, blocking: np.ndarray | None = None, stroke: np.ndarray | None = None
-) -> np.ndarray:
-    """P(a candidate resolves the novelty) per candidate: it makes the missing atoms, or
-    it meets a subgoal and K's step works from there (see the module docstring).
-
-    Args:
-        goal: (n, k) probabilities of the missing atoms (their product is used).
-        subgoals: (n, s) probability that the candidate meets each subgoal.
-        trust: (s,) belief that each subgoal's step works once met.
-        blocking: (n, s) per candidate and subgoal, the belief that the subgoal's
-            contact keeps the candidate from making the missing atoms while it lasts
-            (a clearance's belief on the candidates of a_f's own action and arguments,
-            else 0; see the module docstring). None: nothing blocks.
-        stroke: (n,) per candidate, the belief that a body a_f's stroke met keeps it
-            from making the missing atoms (on a_f's own action and arguments where its
-            planned path meets it, else 0). None: nothing met.
-    """
-    met = np.clip(subgoals, 0.0, 1.0)
-    direct = joint_probability(goal)
-    if blocking is not None and subgoals.size:
-        direct = direct * np.prod(1.0 - blocking * (1.0 - met), axis=1)
-    if stroke is not None:
-        direct = direct * (1.0 - stroke)
-    miss = 1.0 - direct
-    if subgoals.size:
-        miss = miss * np.prod(1.0 - met * trust, axis=1)
-    return 1.0 - miss
-
-
-def blocked_belief(own_probability: float | Sequence[float]) -> float:
-    """The belief that a contact at the failure (a clearance) blocked a_f, now that a_f
-    failed (see the module docstring): ``t / (t + (1 - t) prod_i (1 - p_i))`` from the
-    prior ``t`` = :data:`SUBGOAL_TRUST`, ``p_i`` being the model's probability that the
-    i-th failed attempt's action on its arguments makes the missing atoms
-    (``own_probability``: a_f's alone, or one per attempt)."""
-    t = SUBGOAL_TRUST
-    missed = float(np.prod(1.0 - np.clip(np.atleast_1d(np.asarray(own_probability, dtype=np.float64)), 0.0, 1.0)))
-    return t / (t + (1.0 - t) * missed)
 
 
 def attempted(point: FailurePoint, indices: Sequence[int]) -> list[np.ndarray]:
@@ -447,111 +373,3 @@ def start_exploration(
         site, failure.monitor, failure.state, kb, grid=grid, known=experience.costed(kb), reach_check=reach_check, attempts=failure.attempts,
         met=met,
     )
-
-
-@dataclass(frozen=True)
-class Ranking:
-    """Candidates in a measure's order, with what they were ranked by.
-
-    Attributes:
-        order: candidate indices (into the failure point's candidates), best first.
-        indices: the candidates ranked, in the order the arrays below follow.
-        score: the measure's score of each (higher ranks first).
-        outcome: predicted Omega of each (n, 6).
-        goal: predicted probability of each missing atom (n, k), or None when the
-            measure does not use it.
-        subgoals: predicted probability that each candidate meets each of the failure
-            point's subgoals (n, s), or None when the measure does not use the goal.
-        resolve: what ``goal-directed`` ranked by, :func:`resolve_probability` (n,),
-            or None when the measure does not use the goal.
-    """
-
-    order: list[int]
-    indices: list[int]
-    score: np.ndarray
-    outcome: np.ndarray
-    goal: np.ndarray | None
-    subgoals: np.ndarray | None = None
-    resolve: np.ndarray | None = None
-    #: The belief that a clearance's contact blocked a_f (None: no clearance, or a
-    #: measure without the goal).
-    blocked: float | None = None
-
-
-def rank_candidates(
-    model: WorldModel,
-    point: FailurePoint,
-    *,
-    measure: str,
-    seed: int,
-    indices: Sequence[int] | None = None,
-    subgoal_failures: Sequence[int] | None = None,
-    blocked: float | None = None,
-) -> Ranking:
-    """Rank some of a failure point's candidates (all by default) under ``measure``.
-
-    Args:
-        subgoal_failures: per subgoal of ``point``, how many trials met it without K's
-            plan from there working (each halves its trust; none by default).
-        blocked: the belief that a clearance's contact blocked a_f (None: worked out
-            from this ranking's candidates, :func:`blocked_belief`; an ordering that ranks
-            again passes its first ranking's, :attr:`Ranking.blocked`).
-
-    Returns:
-        The ranking; ``order`` holds candidate indices into ``point.candidates``.
-    """
-    chosen = list(range(len(point.candidates))) if indices is None else list(indices)
-    outcome = model.predict_proba([point.inputs[i] for i in chosen])
-    goal = subgoal = resolve = None
-    if get_measure(measure).uses_goal:
-        goal = model.predict_goal(point.query(chosen))
-        subgoal = np.zeros((len(chosen), len(point.subgoals)))
-        for k in range(len(point.subgoals)):
-            subgoal[:, k] = joint_probability(model.predict_goal(point.subgoal_query(k, chosen)))
-        failures = np.zeros(len(point.subgoals)) if subgoal_failures is None else np.asarray(subgoal_failures, dtype=np.float64)
-        decay = 0.5**failures
-        trust, blocking = SUBGOAL_TRUST * decay, None
-        clearance = np.array([s.clearance for s in point.subgoals], dtype=bool)
-        stroke = None
-        if clearance.any() or point.in_the_way:
-            if blocked is None:
-                direct = joint_probability(goal)
-                blocked = blocked_belief([float(np.mean(direct[mask])) for mask in attempted(point, chosen) if mask.any()])
-        if clearance.any():
-            trust = np.where(clearance, blocked * decay, trust)
-            blocking = np.outer(own_action(point, chosen), np.where(clearance, trust, 0.0))
-        if point.in_the_way:
-            stroke = blocked * np.isin(chosen, sorted(point.in_the_way))
-        resolve = resolve_probability(goal, subgoal, trust, blocking, stroke)
-    # Otherwise the missing atoms' probabilities themselves (the same order, and the score
-    # keeps one term per atom).
-    ranked_by = resolve[:, None] if resolve is not None and point.ranks_by_resolve else goal
-    order = rank(outcome, measure, seed=seed, desired=point.desired, goal=ranked_by)
-    score = get_measure(measure).score(outcome, point.desired, ranked_by)
-    return Ranking(
-        order=[chosen[i] for i in order], indices=chosen, score=score, outcome=outcome, goal=goal, subgoals=subgoal, resolve=resolve,
-        blocked=blocked,
-    )
-
-
-def resolve_probabilities(ranking: Ranking, point: FailurePoint) -> np.ndarray | None:
-    """Per ranked candidate (``ranking.indices``): the world model's probability that it
-    resolves the failure, as ``ranking`` holds it (:func:`resolve_probability` where
-    :attr:`FailurePoint.ranks_by_resolve`, else the missing atoms' joint probability);
-    None for a measure without the goal-aware head."""
-    if ranking.resolve is not None and point.ranks_by_resolve:
-        return ranking.resolve
-    if ranking.goal is not None:
-        return joint_probability(ranking.goal)
-    return None
-
-
-def candidate_probability(point: FailurePoint, ranking: Ranking) -> np.ndarray:
-    """Per candidate of ``point`` (n,): :func:`resolve_probabilities`; 0.5 for a measure
-    without the goal-aware head, and for the candidates ``ranking`` left out."""
-    probability = np.full(len(point.candidates), 0.5)
-    resolve = resolve_probabilities(ranking, point)
-    if resolve is not None and ranking.indices:
-        probability[np.asarray(ranking.indices)] = resolve
-    return probability
-
