@@ -9,7 +9,7 @@ import pytest
 from llcps.domain import ACTIONS, ORIENTATIONS, ControllerParams, fluent
 from llcps.trial_records import TrialSpec
 from llcps.errors import LlcpsError, UnknownNameError
-from llcps.sim.controllers import CONTROLLERS, PUSH_DIRECTION, SIDE, execute, path_meets
+from llcps.sim.controllers import CONTROLLERS, PUSH_DIRECTION, SIDE, execute, path_meets, planned_end
 from llcps.sim.builders import inside, open_box, solid
 from llcps.sim.specs import FixtureSpec
 from llcps.sim.trial import bodies_met
@@ -219,3 +219,27 @@ def test_a_planned_path_meets_what_lies_across_it_by_geometry_alone(walled) -> N
     assert bodies_met(walled, spec("place_in_container", ("cube", "tray"), 0.05, "top")) >= {"screen"}
     walled.restore(walled.start)
     assert "screen" not in bodies_met(walled, spec("place_in_container", ("cube", "tray"), 0.3, "top"))
+
+
+def test_where_a_planned_motion_leaves_its_object_and_the_path_from_there(walled) -> None:
+    """A push moves the cube by its magnitude; a push from the front meets the wall from
+    where the cube stands and misses it from where a push to the right would leave it; a
+    remove sets it down beside the container; a placement leaves it in one (None)."""
+    walled.restore(walled.start)
+    x, y, _ = walled.center("cube")
+
+    def spec(action: str, args: tuple[str, ...], magnitude: float, orientation: str) -> TrialSpec:
+        return TrialSpec(action, args, ControllerParams(0.2, magnitude, orientation))
+
+    name, end = planned_end(walled, spec("push", ("cube",), 0.2, "right"))
+    assert name == "cube" and end == pytest.approx((x, y + 0.2))
+    front = spec("push", ("cube",), 0.3, "front")
+    assert path_meets(walled, front, "wall") and path_meets(walled, front, "wall", at={"cube": (x, y)})
+    assert not path_meets(walled, front, "wall", at={"cube": end})
+    assert path_meets(walled, front, "wall", at={"tray": end})  # not an argument: from where the cube stands
+    name, end = planned_end(walled, spec("push_together", ("cube", "tray"), 0.1, "front"))
+    tray = walled.center("tray")
+    assert name == "cube" and end[0] == pytest.approx(x, abs=0.01) and tray[1] < end[1] < y
+    name, end = planned_end(walled, spec("remove_from_container", ("cube", "tray"), 0.1, "left"))
+    assert name == "cube" and end[0] == pytest.approx(tray[0]) and end[1] > tray[1] + 0.08  # beside it, on the left side (+y)
+    assert planned_end(walled, spec("place_in_container", ("cube", "tray"), 0.1, "top")) is None

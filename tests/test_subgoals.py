@@ -142,6 +142,16 @@ def test_a_body_met_on_a_fs_path_keeps_the_candidates_whose_path_meets_it_from_t
     assert p[1:] == pytest.approx(resolve_probability(goal, sub, trust)[1:])
 
 
+def test_a_way_around_a_body_met_is_one_more_route_by_hand() -> None:
+    """Candidate 1 would take a_f's argument off the body's path: K's step then works with
+    the belief 0.3 it is given; 0 and 2 are not such candidates."""
+    goal = np.array([[0.2], [0.1], [0.1]])
+    sub, trust = np.zeros((3, 0)), np.zeros(0)
+    p = resolve_probability(goal, sub, trust, around=np.array([0.0, 0.3, 0.0]))
+    assert p == pytest.approx([0.2, 1 - 0.9 * 0.7, 0.1])
+    assert resolve_probability(goal, sub, trust, around=np.zeros(3)) == pytest.approx(resolve_probability(goal, sub, trust))
+
+
 @given(st.floats(0, 1), st.floats(0, 1))
 def test_the_belief_that_a_contact_blocked_a_f_grows_with_how_sure_the_model_was_of_a_f(p: float, q: float) -> None:
     """t / (t + (1 - t)(1 - p)): the prior when the model expected nothing of a_f, certainty
@@ -330,7 +340,8 @@ def test_a_real_stroke_that_met_a_fence_lowers_a_fs_own_action_on_every_path_thr
     explains it. The replayed stroke met the fence, every planned path of a_f's own
     action on the two bodies, pushed either way, goes through it, and those candidates
     are lowered by the belief that it blocked a_f (and K's repairs that missed the same
-    atom); no other candidate moves."""
+    atom). The candidates that would take the block or the puck off the fence's line
+    (by geometry) are raised by the same belief; no other candidate moves."""
     from llcps.cps.inspection import reach_failure
     from llcps.models.persistence import fit_or_load
     from llcps.store import Store
@@ -351,6 +362,12 @@ def test_a_real_stroke_that_met_a_fence_lowers_a_fs_own_action_on_every_path_thr
     assert ranking.blocked == pytest.approx(blocked_belief([float(direct[m].mean()) for m in attempted(point, ranking.indices) if m.any()]))
     trust = np.full(len(point.subgoals), SUBGOAL_TRUST)
     free = resolve_probability(ranking.goal, ranking.subgoals, trust)
-    assert ranking.resolve[~mask] == pytest.approx(free[~mask])
+    around = np.isin(ranking.indices, sorted(point.relocations))
+    assert point.relocations and not point.relocations & own
+    assert all(point.candidates[i].arguments[0] in point.failed.arguments for i in point.relocations)
+    assert ranking.resolve[~mask & ~around] == pytest.approx(free[~mask & ~around])
     assert ranking.resolve[mask] == pytest.approx(resolve_probability(ranking.goal, ranking.subgoals, trust, stroke=ranking.blocked * mask)[mask])
     assert np.any(ranking.resolve[mask] < free[mask])
+    way = ranking.blocked * SUBGOAL_TRUST * around
+    assert ranking.resolve[around] == pytest.approx(resolve_probability(ranking.goal, ranking.subgoals, trust, around=way)[around])
+    assert np.all(ranking.resolve[around] > free[around])

@@ -153,7 +153,8 @@ def show(report: "ModelInspection") -> None:
     if failure.met:
         notice(
             f"met on a_f's path: {', '.join(failure.met)} ({len(failure.in_the_way)} candidates of a_f's action "
-            "whose path meets it too are lowered under goal-directed)"
+            "whose path meets it too are lowered under goal-directed; "
+            f"{len(failure.relocations)} that would take an argument of a_f off its path are raised)"
         )
     for model, by_measure in report.rankings.items():
         for measure, ranked in by_measure.items():

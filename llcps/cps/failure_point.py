@@ -34,6 +34,13 @@ candidates of a_f's own action on its arguments (in either order: the block push
 against the puck or the puck against the block) whose planned path goes through it too
 (:attr:`FailurePoint.in_the_way`).
 
+**A way around it.** If that body stopped an a_f aimed at its other argument (a push of
+one body against another), a_f may work from elsewhere: the block pushed aside is
+pushed against the puck along a line that misses the fence, and still ends against it.
+The candidates whose planned motion takes an argument of a_f, by a path that misses the
+bodies met, to a place on the support from where a_f's planned path misses them too
+(:func:`relocations`, geometry alone) are kept (:attr:`FailurePoint.relocations`).
+
 K's repairs may have tried for the same missing atoms another way before exploration
 started (a placement of the can, after a push of it into the bin failed), and failed
 too (:attr:`~llcps.cps.plan_execution.Failure.attempts`): the failure point keeps their
@@ -69,6 +76,9 @@ MAX_SUBGOAL_ATOMS = 2
 CONTACT_PREDICATES = ("in", "on", "touching")
 #: Most clearances a failure point gets (each is one more goal-head question per ranking).
 MAX_CLEARANCES = 4
+#: The actions whose stroke is aimed at another of their arguments, wherever the two stand
+#: (:func:`relocations`): moved elsewhere, the object is still pushed to the other one.
+AIMED_ACTIONS = ("push_together",)
 
 
 @dataclass(frozen=True)
@@ -185,6 +195,9 @@ class FailurePoint:
             and that lie on a_f's planned path (:func:`~llcps.sim.controllers.path_meets`).
         in_the_way: the candidates of a_f's own action on its arguments, in any order,
             whose planned path meets a body of ``met``.
+        relocations: the candidates whose planned motion takes an argument of a_f, by a
+            path that meets no body of ``met``, to a place on the support from where
+            a_f's planned path meets none of them (:func:`relocations`).
     """
 
     scenario: str
@@ -201,13 +214,15 @@ class FailurePoint:
     attempts: tuple[TrialSpec, ...] = ()
     met: tuple[str, ...] = ()
     in_the_way: frozenset[int] = frozenset()
+    relocations: frozenset[int] = frozenset()
 
     @property
     def ranks_by_resolve(self) -> bool:
         """Whether a candidate's probability of resolving the failure is more than its
-        missing atoms' joint probability (:func:`resolve_probability`): the point has
-        subgoals, or candidates whose path meets a body a_f's stroke met."""
-        return bool(self.subgoals or self.in_the_way)
+        missing atoms' joint probability (:func:`~llcps.cps.ranking.resolve_probability`):
+        the point has subgoals, or candidates whose path meets a body a_f's stroke met or
+        that take an argument of a_f off that path."""
+        return bool(self.subgoals or self.in_the_way or self.relocations)
 
     @property
     def missing_effects(self) -> str:
@@ -325,6 +340,7 @@ def failure_point(
     )
     own = [i for i, spec in enumerate(specs) if (spec.action, sorted(spec.arguments)) == (failed_spec.action, sorted(failed_spec.arguments))]
     in_the_way = frozenset(i for i in own if any(path_meets(world, specs[i], b) for b in stroke))
+    supports = [world.aabb(body.name) for body in bodies if body.kind == SUPPORT_KIND]
     return FailurePoint(
         scenario=site.scenario.name,
         failure=failure,
@@ -340,7 +356,43 @@ def failure_point(
         attempts=tuple(site.controller_call(step) for step in attempts),
         met=stroke,
         in_the_way=in_the_way,
+        relocations=relocations(world, failed_spec, specs, stroke, supports, skip=own) if stroke else frozenset(),
     )
+
+
+def relocations(
+    world: World,
+    failed: TrialSpec,
+    specs: Sequence[TrialSpec],
+    met: Sequence[str],
+    supports: Sequence[tuple[tuple[float, float, float], tuple[float, float, float]]],
+    *,
+    skip: Collection[int] = (),
+) -> frozenset[int]:
+    """The candidates of ``specs`` (but ``skip``) that would take a_f's stroke off the
+    bodies it met (see the module docstring), by geometry alone
+    (:func:`~llcps.sim.controllers.planned_end`, :func:`~llcps.sim.controllers.path_meets`):
+    each moves an argument of a_f (``failed``), by a path that meets no body of ``met``,
+    to a place within a support's footprint from where a_f's planned path meets none of
+    them. Only an a_f aimed at its other argument has them (:data:`AIMED_ACTIONS`): a
+    push one way, or a carry, from elsewhere ends elsewhere, so its effect is not what
+    K expected of it."""
+    from llcps.sim.controllers import planned_end, path_meets
+
+    if failed.action not in AIMED_ACTIONS:
+        return frozenset()
+    found, skipped = set(), set(skip)
+    for i, spec in enumerate(specs):
+        end = None if i in skipped else planned_end(world, spec)
+        if end is None or end[0] not in failed.arguments:
+            continue
+        x, y = end[1]
+        if not any(lo[0] <= x <= hi[0] and lo[1] <= y <= hi[1] for lo, hi in supports):
+            continue
+        if any(path_meets(world, spec, b) or path_meets(world, failed, b, at={end[0]: end[1]}) for b in met):
+            continue
+        found.add(i)
+    return frozenset(found)
 
 
 class ExplorationSite(FailureSite, Protocol):

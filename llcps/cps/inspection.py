@@ -112,6 +112,7 @@ class ModelInspection:
                 "subgoals": [subgoal.label for subgoal in self.failure.subgoals],
                 "met": list(self.failure.met),
                 "in_the_way": len(self.failure.in_the_way),
+                "relocations": len(self.failure.relocations),
                 "desired": dict(zip(OUTCOME_NAMES, self.failure.desired.round(4).tolist())),
                 "candidates": len(self.failure.candidates),
                 "refused": len(self.failure.refused),

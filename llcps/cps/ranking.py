@@ -32,7 +32,12 @@ explains the failure as a clearance does, with the same belief ``b``. It cannot 
 ended, so a candidate of a_f's own action on its arguments whose planned path goes
 through it too (:attr:`~llcps.cps.failure_point.FailurePoint.in_the_way`) makes the
 missing atoms directly with its probability times ``1 - b``; one whose path passes it
-(the can lifted over the screen) is not judged by it.
+(the can lifted over the screen) is not judged by it. A candidate that takes an
+argument of an a_f aimed at its other argument off that path (:attr:`~llcps.cps.failure_point.FailurePoint.relocations`)
+is one more way: K's step from there works with the belief ``b t``, ``t`` starting at
+:data:`SUBGOAL_TRUST` and halving with each such candidate that failed, as a subgoal's
+trust does (the geometry says where the argument would go, not that it gets there, nor
+that nothing else stops a_f).
 
 Each failed attempt of K's repairs at the same missing atoms
 (:attr:`~llcps.cps.failure_point.FailurePoint.attempts`) is evidence for the contact in
@@ -58,7 +63,12 @@ SUBGOAL_TRUST = 0.5
 
 
 def resolve_probability(
-    goal: np.ndarray, subgoals: np.ndarray, trust: np.ndarray, blocking: np.ndarray | None = None, stroke: np.ndarray | None = None
+    goal: np.ndarray,
+    subgoals: np.ndarray,
+    trust: np.ndarray,
+    blocking: np.ndarray | None = None,
+    stroke: np.ndarray | None = None,
+    around: np.ndarray | None = None,
 ) -> np.ndarray:
     """P(a candidate resolves the novelty) per candidate: it makes the missing atoms, or
     it meets a subgoal and K's step works from there (see the module docstring).
@@ -74,6 +84,9 @@ def resolve_probability(
         stroke: (n,) per candidate, the belief that a body a_f's stroke met keeps it
             from making the missing atoms (on a_f's own action and arguments where its
             planned path meets it, else 0). None: nothing met.
+        around: (n,) per candidate, the belief that K's step works once the candidate
+            took an argument of a_f off the path of a body a_f's stroke met (0 for the
+            others). None: no such candidate.
     """
     met = np.clip(subgoals, 0.0, 1.0)
     direct = joint_probability(goal)
@@ -84,6 +97,8 @@ def resolve_probability(
     miss = 1.0 - direct
     if subgoals.size:
         miss = miss * np.prod(1.0 - met * trust, axis=1)
+    if around is not None:
+        miss = miss * (1.0 - around)
     return 1.0 - miss
 
 
@@ -136,6 +151,7 @@ def rank_candidates(
     indices: Sequence[int] | None = None,
     subgoal_failures: Sequence[int] | None = None,
     blocked: float | None = None,
+    relocation_failures: int = 0,
 ) -> Ranking:
     """Rank some of a failure point's candidates (all by default) under ``measure``.
 
@@ -145,6 +161,9 @@ def rank_candidates(
         blocked: the belief that a clearance's contact blocked a_f (None: worked out
             from this ranking's candidates, :func:`blocked_belief`; an ordering that ranks
             again passes its first ranking's, :attr:`Ranking.blocked`).
+        relocation_failures: how many failed trials were candidates of
+            :attr:`~llcps.cps.failure_point.FailurePoint.relocations` (each halves the
+            trust in that way around).
 
     Returns:
         The ranking; ``order`` holds candidate indices into ``point.candidates``.
@@ -161,7 +180,7 @@ def rank_candidates(
         decay = 0.5**failures
         trust, blocking = SUBGOAL_TRUST * decay, None
         clearance = np.array([s.clearance for s in point.subgoals], dtype=bool)
-        stroke = None
+        stroke = around = None
         if clearance.any() or point.in_the_way:
             if blocked is None:
                 direct = joint_probability(goal)
@@ -171,7 +190,9 @@ def rank_candidates(
             blocking = np.outer(own_action(point, chosen), np.where(clearance, trust, 0.0))
         if point.in_the_way:
             stroke = blocked * np.isin(chosen, sorted(point.in_the_way))
-        resolve = resolve_probability(goal, subgoal, trust, blocking, stroke)
+            if point.relocations:
+                around = blocked * SUBGOAL_TRUST * 0.5**relocation_failures * np.isin(chosen, sorted(point.relocations))
+        resolve = resolve_probability(goal, subgoal, trust, blocking, stroke, around)
     # Otherwise the missing atoms' probabilities themselves (the same order, and the score
     # keeps one term per atom).
     ranked_by = resolve[:, None] if resolve is not None and point.ranks_by_resolve else goal

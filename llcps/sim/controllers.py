@@ -393,7 +393,7 @@ def _sweeps(path: list[tuple[float, float, float]], box: _Box, body: _Box) -> bo
     return False
 
 
-def path_meets(world: "World", spec: TrialSpec, body: str) -> bool:
+def path_meets(world: "World", spec: TrialSpec, body: str, *, at: Mapping[str, tuple[float, float]] | None = None) -> bool:
     """Whether ``spec``'s planned motion, by geometry alone, takes what it moves through
     ``body``'s bounding box (grown by :data:`~llcps.sim.contact.TOUCH_DISTANCE`).
 
@@ -403,6 +403,11 @@ def path_meets(world: "World", spec: TrialSpec, body: str) -> bool:
     magnitude sets, carries it to the target, and, placing from the top, lowers it into
     the container; the hand above it sweeps a column of the object's footprint. No time passes and nothing moves: what the
     arm would sweep on the way to the object, and where a body bounces, is not known.
+
+    Args:
+        at: for a push, a horizontal position of the centre of some of its arguments
+            other than where they stand (where another motion would leave them,
+            :func:`planned_end`); ignored by a pick-and-place call.
     """
     lo, hi = world.aabb(body)
     grown = (tuple(v - TOUCH_DISTANCE for v in lo), tuple(v + TOUCH_DISTANCE for v in hi))
@@ -412,10 +417,12 @@ def path_meets(world: "World", spec: TrialSpec, body: str) -> bool:
     rx, ry = (ohi[0] - olo[0]) / 2.0, (ohi[1] - olo[1]) / 2.0
     where = _CARRIES.get(spec.action)
     if where is None:
+        moved = at or {}
+        cx, cy = moved.get(obj, (cx, cy))
         if spec.action == "push_together":
-            other = world.center(spec.arguments[1])
+            other = moved.get(spec.arguments[1], world.center(spec.arguments[1])[:2])
             d = g.unit2(other[0] - cx, other[1] - cy)
-            travel = max(0.0, math.dist((cx, cy), other[:2]) - g.extent_along(world, obj, d) - g.extent_along(world, spec.arguments[1], d))
+            travel = max(0.0, math.dist((cx, cy), other) - g.extent_along(world, obj, d) - g.extent_along(world, spec.arguments[1], d))
         else:
             d = PUSH_DIRECTION[spec.params.orientation]
             travel = PRE_CONTACT + spec.params.movement_magnitude
@@ -429,8 +436,34 @@ def path_meets(world: "World", spec: TrialSpec, body: str) -> bool:
     # the object hangs ``held`` below the tool point, the hand stands above it: a column
     # of the object's footprint
     h = max(rx, ry)
-    moved = ((-h, -h, -carry.held), (h, h, max(ohi[2] - olo[2] - carry.held, HAND_HEIGHT)))
-    return _sweeps(path, moved, grown)
+    moved_box = ((-h, -h, -carry.held), (h, h, max(ohi[2] - olo[2] - carry.held, HAND_HEIGHT)))
+    return _sweeps(path, moved_box, grown)
+
+
+def planned_end(world: "World", spec: TrialSpec) -> tuple[str, tuple[float, float]] | None:
+    """Where ``spec``'s planned motion leaves what it moves, by geometry alone: its name
+    and the horizontal position of its centre; None for a placement, which leaves it in
+    a container.
+
+    A push moves its object by the magnitude along the push; ``push_together`` moves it
+    along the line to the other argument until their bounding boxes meet;
+    ``remove_from_container`` sets it down beside the container, toward the
+    orientation's side. As :func:`path_meets`, no time passes: where a body slides on,
+    tips or is stopped is not known.
+    """
+    obj = spec.arguments[0]
+    cx, cy, _ = world.center(obj)
+    if spec.action == "push":
+        d = PUSH_DIRECTION[spec.params.orientation]
+        return obj, (cx + d[0] * spec.params.movement_magnitude, cy + d[1] * spec.params.movement_magnitude)
+    if spec.action == "push_together":
+        other = world.center(spec.arguments[1])
+        d = g.unit2(other[0] - cx, other[1] - cy)
+        travel = max(0.0, math.dist((cx, cy), other[:2]) - g.extent_along(world, obj, d) - g.extent_along(world, spec.arguments[1], d))
+        return obj, (cx + d[0] * travel, cy + d[1] * travel)
+    if spec.action == "remove_from_container":
+        return obj, _remove_carry(world, spec.arguments, spec.params).target
+    return None
 
 
 Controller = Callable[["World", Motion, tuple[str, ...], "ControllerParams"], None]

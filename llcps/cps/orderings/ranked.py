@@ -29,6 +29,8 @@ class Ranked(Ordering):
         self.tried = 0
         #: Per subgoal of the failure point: failed trials that met it.
         self.subgoal_failures = [0] * len(exploration.point.subgoals)
+        #: Failed trials that would have taken a_f's arguments off a body it met.
+        self.relocation_failures = 0
         #: The failed trials (candidate indices) the ranking took in, in order.
         self.taken: list[int] = []
         #: The belief that a clearance's contact blocked a_f, fixed by the first ranking.
@@ -46,7 +48,7 @@ class Ranked(Ordering):
         x = self.exploration
         return rank_candidates(
             x.model, x.point, measure=x.measure, seed=x.seed, indices=self.remaining, subgoal_failures=self.subgoal_failures,
-            blocked=self.blocked,
+            blocked=self.blocked, relocation_failures=self.relocation_failures,
         )
 
     def choose(self) -> int:
@@ -68,6 +70,7 @@ class Ranked(Ordering):
         self.taken.append(index)
         for k, subgoal in enumerate(self.exploration.point.subgoals):
             self.subgoal_failures[k] += subgoal.met(after)
+        self.relocation_failures += index in self.exploration.point.relocations
         if self.tried % self.exploration.refit_every == 0 and self.remaining:
             self.exploration.update(self.taken)
             self.ranking = self.rank()
