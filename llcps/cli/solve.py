@@ -48,7 +48,7 @@ def solve_cli(
         typer.Option(
             "--ordering",
             help="Order of the exploration trials: the ranking alone (ranked, the paper's), or the ranking "
-            "hedged with a random order spread over the candidates (hedged, the default: at most 2P+1 trials where that order needs P); "
+            "hedged with a random order spread over the candidates (hedged, the default: at most 2P trials where that order needs P); "
             "baselines: that spread random order alone (coverage), past solutions first (case-based), "
             "Thompson sampling with the model as prior (trial-and-error), an ensemble's disagreement (uncertainty), "
             "the policy of `llcps rl train` (rl); see docs/world_models.md.",

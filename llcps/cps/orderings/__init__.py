@@ -58,7 +58,7 @@ def _entries(*entries: OrderingEntry) -> dict[str, OrderingEntry]:
 
 #: name -> ordering, the one list of exploration orderings. Its default is ``hedged``: a
 #: novel scene may be one where the model points the wrong way, and the hedge bounds what
-#: that costs (at most ``2P + 1`` trials where its random side needs ``P``). Measured leave one
+#: that costs (at most ``2P`` trials where its random side needs ``P``). Measured leave one
 #: family out on the families written after it was designed, it also explored less than
 #: the ranking alone (docs/world_models.md, "Which default").
 ORDERINGS: Registry[OrderingEntry] = Registry(
