@@ -17,12 +17,12 @@ two:
   candidates (one action on the body in the way, in most of its settings) is met sooner
   than in the bare permutation (docs/world_models.md, "Why random order spread").
 
-**The share.** Random order takes the first trial; after each trial the model is
-credited its share ``min(w, MAX_MODEL_SHARE)`` and takes the next trial whenever its
-credit reaches one (random order takes the others). Random order goes first because a
-novelty that many candidates resolve as a side effect costs it one or two trials, and a
-model that points the wrong way would double that; where the model points the right
-way, its first pick comes second. ``w`` is the posterior probability that the model
+**The share.** Random order takes the first trial and the model the second; after each
+trial the model is credited its share ``min(w, MAX_MODEL_SHARE)`` and takes the next
+trial whenever its credit (one before the first trial) reaches one (random order takes
+the others). Random order goes first because a novelty that many candidates resolve as
+a side effect costs it one or two trials, and a model that points the wrong way would
+double that; where the model points the right way, its first pick comes second. ``w`` is the posterior probability that the model
 points the right way in this scene, starting from :data:`MODEL_PRIOR`. Each failed
 trial of a candidate the model gave probability ``p`` of resolving the novelty, whichever
 side chose it, multiplies the odds of that by ``(1 - p) / (1 - p_mean)``, ``p_mean``
@@ -40,18 +40,18 @@ candidate after one unlucky member). So the model's side is ``ranked`` over the
 candidates not yet tried, moved by its own failures only, and random order's side
 its spread permutation, fixed when the episode starts.
 
-**The guarantee.** Whatever the model predicts, it takes at most
-``MAX_MODEL_SHARE * T`` of the first ``T`` trials, so random order takes at least
-``(1 - MAX_MODEL_SHARE) T`` of them, in its order, skipping candidates the model
-already tried (which only brings a resolving one nearer). If that order's first
-resolving candidate stands at position ``P``, the episode ends by trial
-``P / (1 - MAX_MODEL_SHARE)``: with the default share of one half, at most ``2 P``
-trials, where the spread random order alone needs ``P``. Against the bare
+**The guarantee.** Whatever the model predicts, it takes none of the first trial and at
+most ``1 + MAX_MODEL_SHARE * (T - 1)`` of the first ``T``, so random order takes the
+rest, in its order, skipping candidates the model already tried (which only brings a
+resolving one nearer). If that order's first resolving candidate stands at position
+``P``, the episode ends by the first trial ``T`` with ``T - floor(1 + MAX_MODEL_SHARE
+(T - 1)) >= P``: with the default share of one half, at most ``2 P`` trials, where the
+spread random order alone needs ``P``. Against the bare
 permutation of random order the bound is measured, not proved: spreading the trials
 meets a resolving set placed without regard to the candidates' structure at about the
 same position, and a structured one sooner (:mod:`~llcps.cps.orderings.coverage`). While the
 model keeps its full share (``w`` at least one half) the model's side loses at most the
-same factor: the ``k``-th candidate of its side is tried by trial ``2 k``.
+same factor: the ``k``-th candidate of its side is tried by trial ``max(2, 2 k - 1)``.
 """
 
 from __future__ import annotations
@@ -94,7 +94,7 @@ class Hedged(Ranked):
         self.random = FixedOrder(self.random_side())
         super().__init__(exploration)
         self.log_odds = math.log(MODEL_PRIOR / (1.0 - MODEL_PRIOR))
-        self.credit = 1.0 - MAX_MODEL_SHARE  # random order takes the first trial
+        self.credit = 1.0
         self.picks: list[str] = []
         self.beliefs: list[float] = []
 
@@ -110,7 +110,7 @@ class Hedged(Ranked):
 
     def choose(self) -> int:
         self.beliefs.append(self.belief)
-        if self.credit >= 1.0:
+        if self.credit >= 1.0 and self.picks:  # random order takes the first trial
             self.picks.append(MODEL_SIDE)
             return self.order[0]
         self.picks.append(RANDOM_SIDE)
