@@ -340,7 +340,10 @@ def failure_point(
     )
     own = [i for i, spec in enumerate(specs) if (spec.action, sorted(spec.arguments)) == (failed_spec.action, sorted(failed_spec.arguments))]
     in_the_way = frozenset(i for i in own if any(path_meets(world, specs[i], b) for b in stroke))
-    supports = [world.aabb(body.name) for body in bodies if body.kind == SUPPORT_KIND]
+    way_around: frozenset[int] = frozenset()
+    if stroke:
+        supports = [world.aabb(body.name) for body in bodies if body.kind == SUPPORT_KIND]
+        way_around = relocations(world, failed_spec, specs, stroke, supports, skip=own)
     return FailurePoint(
         scenario=site.scenario.name,
         failure=failure,
@@ -356,7 +359,7 @@ def failure_point(
         attempts=tuple(site.controller_call(step) for step in attempts),
         met=stroke,
         in_the_way=in_the_way,
-        relocations=relocations(world, failed_spec, specs, stroke, supports, skip=own) if stroke else frozenset(),
+        relocations=way_around,
     )
 
 

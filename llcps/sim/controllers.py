@@ -393,6 +393,15 @@ def _sweeps(path: list[tuple[float, float, float]], box: _Box, body: _Box) -> bo
     return False
 
 
+def _to_contact(
+    world: "World", obj: str, at: tuple[float, float], other: str, other_at: tuple[float, float]
+) -> tuple[tuple[float, float], float]:
+    """``push_together``'s planned slide of ``obj`` from ``at`` toward ``other`` standing at
+    ``other_at``: the direction, and how far it goes until their bounding boxes meet."""
+    d = g.unit2(other_at[0] - at[0], other_at[1] - at[1])
+    return d, max(0.0, math.dist(at, other_at) - g.extent_along(world, obj, d) - g.extent_along(world, other, d))
+
+
 def path_meets(world: "World", spec: TrialSpec, body: str, *, at: Mapping[str, tuple[float, float]] | None = None) -> bool:
     """Whether ``spec``'s planned motion, by geometry alone, takes what it moves through
     ``body``'s bounding box (grown by :data:`~llcps.sim.contact.TOUCH_DISTANCE`).
@@ -420,9 +429,7 @@ def path_meets(world: "World", spec: TrialSpec, body: str, *, at: Mapping[str, t
         moved = at or {}
         cx, cy = moved.get(obj, (cx, cy))
         if spec.action == "push_together":
-            other = moved.get(spec.arguments[1], world.center(spec.arguments[1])[:2])
-            d = g.unit2(other[0] - cx, other[1] - cy)
-            travel = max(0.0, math.dist((cx, cy), other) - g.extent_along(world, obj, d) - g.extent_along(world, spec.arguments[1], d))
+            d, travel = _to_contact(world, obj, (cx, cy), spec.arguments[1], moved.get(spec.arguments[1], world.center(spec.arguments[1])[:2]))
         else:
             d = PUSH_DIRECTION[spec.params.orientation]
             travel = PRE_CONTACT + spec.params.movement_magnitude
@@ -457,9 +464,7 @@ def planned_end(world: "World", spec: TrialSpec) -> tuple[str, tuple[float, floa
         d = PUSH_DIRECTION[spec.params.orientation]
         return obj, (cx + d[0] * spec.params.movement_magnitude, cy + d[1] * spec.params.movement_magnitude)
     if spec.action == "push_together":
-        other = world.center(spec.arguments[1])
-        d = g.unit2(other[0] - cx, other[1] - cy)
-        travel = max(0.0, math.dist((cx, cy), other[:2]) - g.extent_along(world, obj, d) - g.extent_along(world, spec.arguments[1], d))
+        d, travel = _to_contact(world, obj, (cx, cy), spec.arguments[1], world.center(spec.arguments[1])[:2])
         return obj, (cx + d[0] * travel, cy + d[1] * travel)
     if spec.action == "remove_from_container":
         return obj, _remove_carry(world, spec.arguments, spec.params).target

@@ -22,8 +22,9 @@ trial the model is credited its share ``min(w, MAX_MODEL_SHARE)`` and takes the 
 trial whenever its credit (one before the first trial) reaches one (random order takes
 the others). Random order goes first because a novelty that many candidates resolve as
 a side effect costs it one or two trials, and a model that points the wrong way would
-double that; where the model points the right way, its first pick comes second. ``w`` is the posterior probability that the model
-points the right way in this scene, starting from :data:`MODEL_PRIOR`. Each failed
+double that; where the model points the right way, its first pick comes second. ``w``
+is the posterior probability that the model points the right way in this scene,
+starting from :data:`MODEL_PRIOR`. Each failed
 trial of a candidate the model gave probability ``p`` of resolving the novelty, whichever
 side chose it, multiplies the odds of that by ``(1 - p) / (1 - p_mean)``, ``p_mean``
 being the model's mean over the untried candidates (both at most
@@ -46,8 +47,8 @@ rest, in its order, skipping candidates the model already tried (which only brin
 resolving one nearer). If that order's first resolving candidate stands at position
 ``P``, the episode ends by the first trial ``T`` with ``T - floor(1 + MAX_MODEL_SHARE
 (T - 1)) >= P``: with the default share of one half, at most ``2 P`` trials, where the
-spread random order alone needs ``P``. Against the bare
-permutation of random order the bound is measured, not proved: spreading the trials
+spread random order alone needs ``P``. Against the bare permutation of random order the
+bound is measured, not proved: spreading the trials
 meets a resolving set placed without regard to the candidates' structure at about the
 same position, and a structured one sooner (:mod:`~llcps.cps.orderings.coverage`). While the
 model keeps its full share (``w`` at least one half) the model's side loses at most the
