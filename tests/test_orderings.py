@@ -63,7 +63,7 @@ def _permutation(n: int, seed: int) -> np.ndarray:
 
 
 def _exploration(n: int, seed: int) -> Exploration:
-    point = SimpleNamespace(candidates=CANDIDATES[:n], subgoals=(), relocations=frozenset(), into_reach=frozenset())
+    point = SimpleNamespace(candidates=CANDIDATES[:n], subgoals=(), relocations=frozenset())
     return Exploration(model=None, point=point, measure="goal-directed", seed=seed)  # type: ignore[arg-type]
 
 

@@ -172,24 +172,6 @@ def test_what_the_arm_reaches_is_not_refused_and_pushes_never_are(far_world) -> 
     assert math.dist(before, world.center("near")) > 0.1
 
 
-def test_a_refused_pick_is_asked_again_with_its_arguments_elsewhere(far_world) -> None:
-    """``refuses(at=)``: the grasp moves with the object, the target with the container;
-    a body named but not an argument changes nothing; asking moves nothing."""
-    from llcps.sim.controllers import refuses
-
-    world = far_world
-    world.restore(world.start)
-    before = _poses(world)
-    far = TrialSpec("place_in_container", ("far", "tray"), ControllerParams(0.4, 0.15, "top"))
-    near = TrialSpec("place_in_container", ("near", "tray"), ControllerParams(0.4, 0.15, "top"))
-    assert refuses(world, far) and not refuses(world, near)
-    assert not refuses(world, far, at={"far": (0.45, 0.05)})  # brought beside the near box
-    assert refuses(world, far, at={"near": (0.45, 0.05)})  # not an argument
-    assert refuses(world, near, at={"tray": (1.3, -0.3)})  # the container taken beyond reach
-    assert not refuses(world, near, at={"tray": (0.45, -0.3)})  # where it stands
-    assert _poses(world) == before
-
-
 #: A low wall 12 cm beyond the cube along +x (a push from the front), and a box beside the
 #: bin that a carry at the usual height passes through and a higher lift passes over.
 WALLED = SceneSpec(

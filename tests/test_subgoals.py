@@ -152,16 +152,6 @@ def test_a_way_around_a_body_met_is_one_more_route_by_hand() -> None:
     assert resolve_probability(goal, sub, trust, around=np.zeros(3)) == pytest.approx(resolve_probability(goal, sub, trust))
 
 
-def test_a_way_into_reach_and_a_way_around_combine_as_independent_routes_by_hand() -> None:
-    """Candidate 0 would bring a refused a_f into reach (0.5), candidate 1 also takes its
-    argument off a body met (0.2): each is one more way K's step may work."""
-    goal = np.array([[0.1], [0.1], [0.1]])
-    sub, trust = np.zeros((3, 0)), np.zeros(0)
-    both = 1 - (1 - 0.2) * (1 - 0.5)
-    p = resolve_probability(goal, sub, trust, around=np.array([0.5, both, 0.0]))
-    assert p == pytest.approx([1 - 0.9 * 0.5, 1 - 0.9 * 0.8 * 0.5, 0.1])
-
-
 @given(st.floats(0, 1), st.floats(0, 1))
 def test_the_belief_that_a_contact_blocked_a_f_grows_with_how_sure_the_model_was_of_a_f(p: float, q: float) -> None:
     """t / (t + (1 - t)(1 - p)): the prior when the model expected nothing of a_f, certainty
@@ -381,35 +371,3 @@ def test_a_real_stroke_that_met_a_fence_lowers_a_fs_own_action_on_every_path_thr
     way = ranking.blocked * SUBGOAL_TRUST * around
     assert ranking.resolve[around] == pytest.approx(resolve_probability(ranking.goal, ranking.subgoals, trust, around=way)[around])
     assert np.all(ranking.resolve[around] > free[around])
-
-
-@pytest.mark.slow
-def test_a_refused_a_f_raises_the_candidates_that_bring_its_arguments_into_reach(readme_pretrained: Path, tmp_path: Path) -> None:
-    """scenario12: the shortened reach refuses K's placement of the can (a_f). The
-    candidates whose planned motion leaves the can on the table where the arm would not
-    refuse a_f are raised by the trust ``t``, and nothing else moves; a sideways push of
-    the can toward the table's middle is one. scenario4: the box stands on the floor
-    beyond the table, and no push slides it up onto the table: there are none."""
-    from llcps.cps.inspection import reach_failure
-    from llcps.models.persistence import fit_or_load
-    from llcps.store import Store
-
-    with Store.open(str(shutil.copyfile(readme_pretrained, tmp_path / "llcps.db"))) as store:
-        point = reach_failure(store, branch="main", scenario="scenario12", seed=0, reach_check=True)
-        floor = reach_failure(store, branch="main", scenario="scenario4", seed=0, reach_check=True)
-        model = fit_or_load(store, "main", "nb", 1, records=store.visible_trials("main"), changes=store.visible_changes("main"))
-    assert point.failed is not None and point.failed.action == "place_in_container"
-    assert point.into_reach and point.ranks_by_resolve and not point.into_reach & point.refused
-    raised = [point.candidates[i] for i in sorted(point.into_reach)]
-    assert {c.arguments[0] for c in raised} == {point.failed.arguments[0]}  # the can moves; the bin is within reach
-    assert any(c.action == "push" and c.params.orientation == "right" for c in raised)
-    assert floor.failed is not None and floor.refused and not floor.into_reach
-    ranking = rank_candidates(model, point, measure="goal-directed", seed=0)
-    assert ranking.resolve is not None and ranking.goal is not None and ranking.subgoals is not None
-    mask = np.isin(ranking.indices, sorted(point.into_reach))
-    trust = np.full(len(point.subgoals), SUBGOAL_TRUST)
-    free = resolve_probability(ranking.goal, ranking.subgoals, trust)
-    assert ranking.resolve[~mask] == pytest.approx(free[~mask])
-    assert ranking.resolve[mask] == pytest.approx(resolve_probability(ranking.goal, ranking.subgoals, trust, around=SUBGOAL_TRUST * mask)[mask])
-    halved = rank_candidates(model, point, measure="goal-directed", seed=0, reach_failures=1)
-    assert halved.resolve is not None and np.all(halved.resolve[mask] < ranking.resolve[mask])

@@ -156,11 +156,6 @@ def show(report: "ModelInspection") -> None:
             "whose path meets it too are lowered under goal-directed; "
             f"{len(failure.relocations)} that would take an argument of a_f off its path are raised)"
         )
-    if failure.into_reach:
-        notice(
-            f"the arm refused a_f here (out of reach): {len(failure.into_reach)} candidates that would bring an argument of a_f "
-            "into its reach are raised under goal-directed"
-        )
     for model, by_measure in report.rankings.items():
         for measure, ranked in by_measure.items():
             atoms = list(ranked[0].goal) if ranked else []

@@ -41,12 +41,6 @@ The candidates whose planned motion takes an argument of a_f, by a path that mis
 bodies met, to a place on the support from where a_f's planned path misses them too
 (:func:`relocations`, geometry alone) are kept (:attr:`FailurePoint.relocations`).
 
-**Into reach.** A pick-and-place a_f that the arm refused (a waypoint out of its reach,
-:func:`~llcps.sim.controllers.refuses`) moved nothing; the cause is known, not believed.
-K's step may work once an argument stands elsewhere: the candidates whose planned motion
-takes an argument of a_f to a place on the support from where the arm would not refuse
-a_f are kept (:func:`into_reach`, geometry and IK alone; :attr:`FailurePoint.into_reach`).
-
 K's repairs may have tried for the same missing atoms another way before exploration
 started (a placement of the can, after a push of it into the bin failed), and failed
 too (:attr:`~llcps.cps.plan_execution.Failure.attempts`): the failure point keeps their
@@ -56,7 +50,7 @@ controller calls (:attr:`FailurePoint.attempts`, :func:`attempted`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Collection, Iterator, Mapping, Protocol, Sequence
+from typing import TYPE_CHECKING, Collection, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -82,8 +76,6 @@ MAX_SUBGOAL_ATOMS = 2
 CONTACT_PREDICATES = ("in", "on", "touching")
 #: Most clearances a failure point gets (each is one more goal-head question per ranking).
 MAX_CLEARANCES = 4
-#: Most a body's bottom may lie below a support's top for it to stand on that support (m).
-STANDS_ON = 0.02
 #: The actions whose stroke is aimed at another of their arguments, wherever the two stand
 #: (:func:`relocations`): moved elsewhere, the object is still pushed to the other one.
 AIMED_ACTIONS = ("push_together",)
@@ -206,9 +198,6 @@ class FailurePoint:
         relocations: the candidates whose planned motion takes an argument of a_f, by a
             path that meets no body of ``met``, to a place on the support from where
             a_f's planned path meets none of them (:func:`relocations`).
-        into_reach: where the arm refused a_f here, the candidates whose planned motion
-            takes an argument of a_f to a place on the support from where it would not
-            (:func:`into_reach`); empty unless asked for (``reach_check``).
     """
 
     scenario: str
@@ -226,15 +215,14 @@ class FailurePoint:
     met: tuple[str, ...] = ()
     in_the_way: frozenset[int] = frozenset()
     relocations: frozenset[int] = frozenset()
-    into_reach: frozenset[int] = frozenset()
 
     @property
     def ranks_by_resolve(self) -> bool:
         """Whether a candidate's probability of resolving the failure is more than its
         missing atoms' joint probability (:func:`~llcps.cps.ranking.resolve_probability`):
         the point has subgoals, or candidates whose path meets a body a_f's stroke met or
-        that take an argument of a_f off that path or into the arm's reach."""
-        return bool(self.subgoals or self.in_the_way or self.relocations or self.into_reach)
+        that take an argument of a_f off that path."""
+        return bool(self.subgoals or self.in_the_way or self.relocations)
 
     @property
     def missing_effects(self) -> str:
@@ -311,8 +299,7 @@ def failure_point(
         known: K costed by the experience the branch has now, whose steps give the
             subgoals (default: ``kb``).
         reach_check: also find the candidates the arm would refuse here
-            (:attr:`FailurePoint.refused`) and, if it refuses a_f, those that would
-            bring a_f into its reach (:attr:`FailurePoint.into_reach`); the check solves IK, which leaves the arm's
+            (:attr:`FailurePoint.refused`); the check solves IK, which leaves the arm's
             joints as they were but not every byte the world saves next, so only a
             caller that restores the world before its next trial asks for it.
         attempts: the other plan steps that missed the same atoms
@@ -353,9 +340,10 @@ def failure_point(
     )
     own = [i for i, spec in enumerate(specs) if (spec.action, sorted(spec.arguments)) == (failed_spec.action, sorted(failed_spec.arguments))]
     in_the_way = frozenset(i for i in own if any(path_meets(world, specs[i], b) for b in stroke))
-    supports = [world.aabb(body.name) for body in bodies if body.kind == SUPPORT_KIND]
-    way_around = relocations(world, failed_spec, specs, stroke, supports, skip=own) if stroke else frozenset()
-    reached = into_reach(world, failed_spec, specs, supports, skip={*own, *refused}) if reach_check and refuses(world, failed_spec) else frozenset()
+    way_around: frozenset[int] = frozenset()
+    if stroke:
+        supports = [world.aabb(body.name) for body in bodies if body.kind == SUPPORT_KIND]
+        way_around = relocations(world, failed_spec, specs, stroke, supports, skip=own)
     return FailurePoint(
         scenario=site.scenario.name,
         failure=failure,
@@ -372,61 +360,7 @@ def failure_point(
         met=stroke,
         in_the_way=in_the_way,
         relocations=way_around,
-        into_reach=reached,
     )
-
-
-def _moves(
-    world: World,
-    failed: TrialSpec,
-    specs: Sequence[TrialSpec],
-    supports: Sequence[tuple[tuple[float, float, float], tuple[float, float, float]]],
-    skip: Collection[int],
-) -> Iterator[tuple[int, str, tuple[float, float]]]:
-    """(index, argument, where) for each candidate of ``specs`` (but ``skip``) whose planned
-    motion (:func:`~llcps.sim.controllers.planned_end`) leaves an argument of ``failed``
-    within the footprint of the support it stands on now (a body on the floor is not
-    slid up onto the table), and the horizontal position it leaves it at."""
-    from llcps.sim.controllers import planned_end
-
-    def footprint(name: str) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
-        bottom = world.aabb(name)[0][2]
-        x, y, _ = world.center(name)
-        return next((s for s in supports if _over(s, x, y) and bottom >= s[1][2] - STANDS_ON), None)
-
-    under = {name: footprint(name) for name in failed.arguments}
-    skipped = set(skip)
-    for i, spec in enumerate(specs):
-        end = None if i in skipped else planned_end(world, spec)
-        if end is None or end[0] not in under:
-            continue
-        support = under[end[0]]
-        if support is not None and _over(support, *end[1]):
-            yield i, end[0], end[1]
-
-
-def _over(box: tuple[tuple[float, float, float], tuple[float, float, float]], x: float, y: float) -> bool:
-    """Whether the point (x, y) lies within ``box``'s horizontal footprint."""
-    (x0, y0, _), (x1, y1, _) = box
-    return x0 <= x <= x1 and y0 <= y <= y1
-
-
-def into_reach(
-    world: World,
-    failed: TrialSpec,
-    specs: Sequence[TrialSpec],
-    supports: Sequence[tuple[tuple[float, float, float], tuple[float, float, float]]],
-    *,
-    skip: Collection[int] = (),
-) -> frozenset[int]:
-    """The candidates of ``specs`` (but ``skip``: a_f's own action, and those the arm would
-    refuse too, which move nothing) that would bring a refused a_f (``failed``) into the
-    arm's reach (see the module docstring), by geometry and IK alone: each moves an
-    argument of a_f to a place within the footprint of the support it stands on from
-    where the arm would not refuse a_f (:func:`~llcps.sim.controllers.refuses`)."""
-    from llcps.sim.controllers import refuses
-
-    return frozenset(i for i, name, where in _moves(world, failed, specs, supports, skip) if not refuses(world, failed, at={name: where}))
 
 
 def relocations(
@@ -446,15 +380,22 @@ def relocations(
     them. Only an a_f aimed at its other argument has them (:data:`AIMED_ACTIONS`): a
     push one way, or a carry, from elsewhere ends elsewhere, so its effect is not what
     K expected of it."""
-    from llcps.sim.controllers import path_meets
+    from llcps.sim.controllers import planned_end, path_meets
 
     if failed.action not in AIMED_ACTIONS:
         return frozenset()
-    return frozenset(
-        i
-        for i, name, where in _moves(world, failed, specs, supports, skip)
-        if not any(path_meets(world, specs[i], b) or path_meets(world, failed, b, at={name: where}) for b in met)
-    )
+    found, skipped = set(), set(skip)
+    for i, spec in enumerate(specs):
+        end = None if i in skipped else planned_end(world, spec)
+        if end is None or end[0] not in failed.arguments:
+            continue
+        x, y = end[1]
+        if not any(lo[0] <= x <= hi[0] and lo[1] <= y <= hi[1] for lo, hi in supports):
+            continue
+        if any(path_meets(world, spec, b) or path_meets(world, failed, b, at={end[0]: end[1]}) for b in met):
+            continue
+        found.add(i)
+    return frozenset(found)
 
 
 class ExplorationSite(FailureSite, Protocol):

@@ -113,7 +113,6 @@ class ModelInspection:
                 "met": list(self.failure.met),
                 "in_the_way": len(self.failure.in_the_way),
                 "relocations": len(self.failure.relocations),
-                "into_reach": len(self.failure.into_reach),
                 "desired": dict(zip(OUTCOME_NAMES, self.failure.desired.round(4).tolist())),
                 "candidates": len(self.failure.candidates),
                 "refused": len(self.failure.refused),

@@ -39,11 +39,6 @@ is one more way: K's step from there works with the belief ``b t``, ``t`` starti
 trust does (the geometry says where the argument would go, not that it gets there, nor
 that nothing else stops a_f).
 
-**Into reach.** Where the arm refused a_f (a waypoint out of its reach), the candidates
-that would bring it into reach (:attr:`~llcps.cps.failure_point.FailurePoint.into_reach`)
-are a way the same way, valued ``t`` (the refusal is known, so no belief ``b``), ``t``
-starting at :data:`SUBGOAL_TRUST` and halving with each such candidate that failed.
-
 Each failed attempt of K's repairs at the same missing atoms
 (:attr:`~llcps.cps.failure_point.FailurePoint.attempts`) is evidence for the contact in
 the same way, independently: ``b = t / (t + (1 - t) prod_i (1 - p_i))`` over a_f and
@@ -90,8 +85,8 @@ def resolve_probability(
             from making the missing atoms (on a_f's own action and arguments where its
             planned path meets it, else 0). None: nothing met.
         around: (n,) per candidate, the belief that K's step works once the candidate
-            took an argument of a_f off the path of a body a_f's stroke met, or into the
-            arm's reach (0 for the others). None: no such candidate.
+            took an argument of a_f off the path of a body a_f's stroke met (0 for the
+            others). None: no such candidate.
     """
     met = np.clip(subgoals, 0.0, 1.0)
     direct = joint_probability(goal)
@@ -157,7 +152,6 @@ def rank_candidates(
     subgoal_failures: Sequence[int] | None = None,
     blocked: float | None = None,
     relocation_failures: int = 0,
-    reach_failures: int = 0,
 ) -> Ranking:
     """Rank some of a failure point's candidates (all by default) under ``measure``.
 
@@ -170,9 +164,6 @@ def rank_candidates(
         relocation_failures: how many failed trials were candidates of
             :attr:`~llcps.cps.failure_point.FailurePoint.relocations` (each halves the
             trust in that way around).
-        reach_failures: how many failed trials were candidates of
-            :attr:`~llcps.cps.failure_point.FailurePoint.into_reach` (each halves the
-            trust in that way).
 
     Returns:
         The ranking; ``order`` holds candidate indices into ``point.candidates``.
@@ -201,9 +192,6 @@ def rank_candidates(
             stroke = blocked * np.isin(chosen, sorted(point.in_the_way))
             if point.relocations:
                 around = blocked * SUBGOAL_TRUST * 0.5**relocation_failures * np.isin(chosen, sorted(point.relocations))
-        if point.into_reach:
-            reach = SUBGOAL_TRUST * 0.5**reach_failures * np.isin(chosen, sorted(point.into_reach))
-            around = reach if around is None else 1.0 - (1.0 - around) * (1.0 - reach)
         resolve = resolve_probability(goal, subgoal, trust, blocking, stroke, around)
     # Otherwise the missing atoms' probabilities themselves (the same order, and the score
     # keeps one term per atom).

@@ -17,7 +17,7 @@ top         +x, contact near the entity's top  straight over / the robot side (-
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Mapping
 
 from llcps.domain import ACTIONS, PUSH_DIRECTION, SIDE
@@ -362,28 +362,13 @@ _CARRIES: Mapping[str, Callable[["World", tuple[str, ...], "ControllerParams"], 
 }
 
 
-def refuses(world: "World", spec: TrialSpec, *, at: Mapping[str, tuple[float, float]] | None = None) -> bool:
+def refuses(world: "World", spec: TrialSpec) -> bool:
     """Whether the controller would refuse ``spec`` in the world as it stands: a
     pick-and-place call with a waypoint out of the arm's reach (:func:`_reachable`), which
     moves nothing. What its trial would check first, asked without running it: IK only,
-    no time passes and no body moves (:meth:`~llcps.sim.robot.Robot.reach_error`).
-
-    Args:
-        at: a horizontal position of the centre of some of its arguments other than
-            where they stand (where another motion would leave them, :func:`planned_end`):
-            the grasp moves with the object, the target with the container.
-    """
+    no time passes and no body moves (:meth:`~llcps.sim.robot.Robot.reach_error`)."""
     where = _CARRIES.get(spec.action)
-    if where is None:
-        return False
-    carry = where(world, spec.arguments, spec.params)
-    if at:
-        shift = {name: (at[name][0] - world.center(name)[0], at[name][1] - world.center(name)[1]) for name in spec.arguments if name in at}
-        (gx, gy), (tx, ty) = shift.get(spec.arguments[0], (0.0, 0.0)), shift.get(spec.arguments[1], (0.0, 0.0))
-        carry = replace(
-            carry, grasp=(carry.grasp[0] + gx, carry.grasp[1] + gy, carry.grasp[2]), target=(carry.target[0] + tx, carry.target[1] + ty)
-        )
-    return not _reachable(world, *carry.waypoints(spec.params))
+    return where is not None and not _reachable(world, *where(world, spec.arguments, spec.params).waypoints(spec.params))
 
 
 #: Spacing of the points at which :func:`path_meets` places the moved boxes along a path (m).

@@ -31,8 +31,6 @@ class Ranked(Ordering):
         self.subgoal_failures = [0] * len(exploration.point.subgoals)
         #: Failed trials that would have taken a_f's arguments off a body it met.
         self.relocation_failures = 0
-        #: Failed trials that would have brought a refused a_f into the arm's reach.
-        self.reach_failures = 0
         #: The failed trials (candidate indices) the ranking took in, in order.
         self.taken: list[int] = []
         #: The belief that a clearance's contact blocked a_f, fixed by the first ranking.
@@ -51,7 +49,6 @@ class Ranked(Ordering):
         return rank_candidates(
             x.model, x.point, measure=x.measure, seed=x.seed, indices=self.remaining, subgoal_failures=self.subgoal_failures,
             blocked=self.blocked, relocation_failures=self.relocation_failures,
-            reach_failures=self.reach_failures,
         )
 
     def choose(self) -> int:
@@ -74,7 +71,6 @@ class Ranked(Ordering):
         for k, subgoal in enumerate(self.exploration.point.subgoals):
             self.subgoal_failures[k] += subgoal.met(after)
         self.relocation_failures += index in self.exploration.point.relocations
-        self.reach_failures += index in self.exploration.point.into_reach
         if self.tried % self.exploration.refit_every == 0 and self.remaining:
             self.exploration.update(self.taken)
             self.ranking = self.rank()
