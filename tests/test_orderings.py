@@ -231,3 +231,51 @@ def test_coverage_meets_a_resolving_pair_sooner_than_random_order_and_a_scattere
 )
 def test_the_resolving_pick_is_read_from_an_untrusted_summary(summary: dict, pick: str | None) -> None:
     assert resolving_pick(summary) == pick
+
+
+def _solved(store, branch: str, picks: list[str] | None, resolving: int = 1) -> int:
+    """A solved episode on ``branch`` whose hedge's trace (if any) ends with ``picks``."""
+    episode = store.start_episode(run_id=None, branch=branch, scenario="s", condition="novelty", model="nb", measure="goal-directed", seed=0)
+    summary = {"resolving_trial_id": resolving, "exploration_trials": len(picks or [1])}
+    if picks is not None:
+        summary["ordering_trace"] = {"picks": picks}
+    store.finish_episode(episode, status="solved", summary=summary)
+    return episode
+
+
+def test_the_hedge_starts_from_the_branchs_record_of_which_side_resolved(tmp_path) -> None:
+    """A branch whose past resolutions the model's side found more often than random
+    order's gives the model the first trial and a belief above the prior; a fresh branch,
+    an even record, an episode solved without a hedge, or the episode under way do not.
+    A fork sees its parent's episodes only up to the fork point (by their resolving
+    trial), and the parent never sees the fork's."""
+    from llcps.cps.orderings.hedged import MODEL_PRIOR, past_record
+    from llcps.store import Store
+
+    def hedge(store, branch, episode_id=None):
+        point = SimpleNamespace(candidates=CANDIDATES[:20], subgoals=(), relocations=frozenset())
+        exploration = Exploration(model=None, point=point, measure="goal-directed", seed=0, store=store, branch=branch, episode_id=episode_id)  # type: ignore[arg-type]
+        return _synthetic(Hedged, np.linspace(0.9, 0.1, 20))(exploration)
+
+    with Store.open(str(tmp_path / "past.db"), create=True) as store:
+        store.create_branch("life")
+        fresh = hedge(store, "life")
+        assert fresh.record == {"model": 0, "random": 0} and not fresh.model_first and fresh.belief == pytest.approx(MODEL_PRIOR)
+        _solved(store, "life", ["random", "model"])
+        _solved(store, "life", None)  # K's plan, no hedge: no side
+        under_way = _solved(store, "life", ["random", "model"])
+        assert past_record(hedge(store, "life", under_way).exploration) == {"model": 1, "random": 0}
+        one = hedge(store, "life")
+        assert one.record == {"model": 2, "random": 0} and one.model_first
+        assert one.belief == pytest.approx((2 * MODEL_PRIOR + 2) / 4)
+        assert one.next() is not None and one.picks == ["model"]
+        _solved(store, "life", ["random"])
+        _solved(store, "life", ["random", "model", "random"])
+        even = hedge(store, "life")
+        assert even.record == {"model": 2, "random": 2} and not even.model_first
+        even.next()
+        assert even.picks == ["random"]
+        store.create_branch("fork", from_branch="life")  # forked before any trial: the parent's resolutions came after
+        assert hedge(store, "fork").record == {"model": 0, "random": 0}
+        _solved(store, "fork", ["random", "model"])
+        assert hedge(store, "fork").record == {"model": 1, "random": 0} and hedge(store, "life").record == {"model": 2, "random": 2}
