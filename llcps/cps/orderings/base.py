@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, ClassVar, Collection, Mapping
@@ -12,7 +11,6 @@ if TYPE_CHECKING:
     from llcps.domain import State
     from llcps.models.base import WorldModel
     from llcps.store import Store
-    from llcps.store.records import EpisodeRecord
 
 
 @dataclass(frozen=True)
@@ -86,36 +84,6 @@ class Ordering(ABC):
         they leave :attr:`remaining` without being learned from."""
         gone = set(indices)
         self.remaining = [i for i in self.remaining if i not in gone]
-
-
-#: Most past episodes an ordering reads (the newest).
-MAX_PAST_EPISODES = 500
-
-
-def solved_past(store: Store, branch: str, *, exclude: int | None = None, limit: int = MAX_PAST_EPISODES) -> list[tuple[EpisodeRecord, Mapping[str, Any]]]:
-    """The solved episodes ``branch`` sees (run on it, or on a branch it descends from,
-    up to the fork point), newest first, each with its summary (a mapping; an
-    unreadable one is empty): of each branch of the chain, its newest ``limit``
-    episodes are read. An episode counts as seen when its resolving trial is;
-    ``exclude`` is the episode under way."""
-    chain: list[tuple[str, float]] = []
-    name: str | None = branch
-    upto = math.inf
-    while name is not None:
-        info = store.resolve_branch(name)
-        chain.append((info.name, upto))
-        if info.parent is not None:
-            upto = min(upto, info.fork_point)
-        name = info.parent
-    found: list[tuple[EpisodeRecord, Mapping[str, Any]]] = []
-    for name, bound in chain:
-        for episode in store.list_episodes(branch=name, limit=limit):
-            summary = episode.summary if isinstance(episode.summary, Mapping) else {}
-            resolving = summary.get("resolving_trial_id")
-            if episode.id != exclude and episode.status == "solved" and type(resolving) is int and resolving <= bound:
-                found.append((episode, summary))
-    found.sort(key=lambda item: -item[0].id)
-    return found
 
 
 #: The sides of a two-sided ordering (``hedged``): the world model's ranking, and random order.

@@ -29,7 +29,7 @@ import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Iterable, Sequence
 
-from llcps.cps.orderings.base import Exploration, Ordering, solved_past
+from llcps.cps.orderings.base import Exploration, Ordering
 
 if TYPE_CHECKING:
     from llcps.domain import EntityFeatures, State
@@ -100,17 +100,32 @@ class Case:
 
 def past_cases(store: Store, branch: str, *, exclude: int | None = None) -> list[Case]:
     """The resolved episodes ``branch`` sees, newest first (at most :data:`MAX_CASES`)."""
+    chain: list[tuple[str, float]] = []
+    name: str | None = branch
+    limit = math.inf
+    while name is not None:
+        info = store.resolve_branch(name)
+        chain.append((info.name, limit))
+        if info.parent is not None:
+            limit = min(limit, info.fork_point)
+        name = info.parent
     cases: list[Case] = []
-    for episode, summary in solved_past(store, branch, exclude=exclude, limit=MAX_CASES):
-        parsed = parse_failure(summary.get("failed_action"), summary.get("missing_effects"))
-        if parsed is None:
-            continue
-        operator, args, atoms = parsed
-        try:
-            trial = store.get_trial(summary["resolving_trial_id"])
-        except Exception:  # noqa: BLE001 - a row that does not load is no case
-            continue
-        cases.append(Case(episode.id, operator, args, role_atoms(atoms, args), trial))
+    for branch_name, upto in chain:
+        for episode in store.list_episodes(branch=branch_name, limit=MAX_CASES):
+            summary = episode.summary if isinstance(episode.summary, dict) else {}
+            resolving = summary.get("resolving_trial_id")
+            if episode.id == exclude or episode.status != "solved" or not isinstance(resolving, int) or resolving > upto:
+                continue
+            parsed = parse_failure(summary.get("failed_action"), summary.get("missing_effects"))
+            if parsed is None:
+                continue
+            operator, args, atoms = parsed
+            try:
+                trial = store.get_trial(resolving)
+            except Exception:  # noqa: BLE001 - a row that does not load is no case
+                continue
+            cases.append(Case(episode.id, operator, args, role_atoms(atoms, args), trial))
+    cases.sort(key=lambda c: -c.episode_id)
     return cases[:MAX_CASES]
 
 

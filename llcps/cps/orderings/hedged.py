@@ -23,16 +23,8 @@ trial whenever its credit (one before the first trial) reaches one (random order
 the others). Random order goes first because a novelty that many candidates resolve as
 a side effect costs it one or two trials, and a model that points the wrong way would
 double that; where the model points the right way, its first pick comes second. ``w``
-is the posterior probability that the model points the right way in this scene.
-
-**The branch's record.** Before any trial, ``w`` is what the branch's past says of the
-model: its solved episodes (:func:`~llcps.cps.orderings.base.solved_past`) whose
-resolution one side of a hedge found (:func:`~llcps.cps.orderings.base.resolving_pick`),
-``m`` by the model's side and ``r`` by random order's, give the Beta posterior mean
-``(2 q + m) / (2 + m + r)`` from the prior ``q`` = :data:`MODEL_PRIOR` (``q`` itself
-with no such past: a fresh pretraining branch, and every episode of a ``reset``
-condition). Where the model has found more resolutions than random order in this life
-(``w`` above ``q``), it takes the first trial, and random order the second. Each failed
+is the posterior probability that the model points the right way in this scene,
+starting from :data:`MODEL_PRIOR`. Each failed
 trial of a candidate the model gave probability ``p`` of resolving the novelty, whichever
 side chose it, multiplies the odds of that by ``(1 - p) / (1 - p_mean)``, ``p_mean``
 being the model's mean over the untried candidates (both at most
@@ -55,8 +47,7 @@ rest, in its order, skipping candidates the model already tried (which only brin
 resolving one nearer). If that order's first resolving candidate stands at position
 ``P``, the episode ends by the first trial ``T`` with ``T - floor(1 + MAX_MODEL_SHARE
 (T - 1)) >= P``: with the default share of one half, at most ``2 P`` trials, where the
-spread random order alone needs ``P`` (``2 P + 1`` where the branch's record gave the
-model the first trial). Against the bare permutation of random order the
+spread random order alone needs ``P``. Against the bare permutation of random order the
 bound is measured, not proved: spreading the trials
 meets a resolving set placed without regard to the candidates' structure at about the
 same position, and a structured one sooner (:mod:`~llcps.cps.orderings.coverage`). While the
@@ -70,7 +61,7 @@ import math
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from llcps.cps.ranking import resolve_probabilities
-from llcps.cps.orderings.base import MODEL_SIDE, RANDOM_SIDE, Exploration, resolving_pick, solved_past
+from llcps.cps.orderings.base import MODEL_SIDE, RANDOM_SIDE, Exploration
 from llcps.cps.orderings.coverage import FixedOrder, coverage_order
 from llcps.cps.orderings.ranked import Ranked
 
@@ -103,12 +94,7 @@ class Hedged(Ranked):
         #: Random order's side: every candidate, in the order it tries them.
         self.random = FixedOrder(self.random_side())
         super().__init__(exploration)
-        #: Solved episodes of the branch's past whose resolution each side found.
-        self.record = past_record(exploration)
-        prior = (2.0 * MODEL_PRIOR + self.record[MODEL_SIDE]) / (2.0 + sum(self.record.values()))
-        self.log_odds = math.log(prior / (1.0 - prior))
-        #: Whether the model takes the first trial (its record beats random order's).
-        self.model_first = prior > MODEL_PRIOR
+        self.log_odds = math.log(MODEL_PRIOR / (1.0 - MODEL_PRIOR))
         self.credit = 1.0
         self.picks: list[str] = []
         self.beliefs: list[float] = []
@@ -125,8 +111,7 @@ class Hedged(Ranked):
 
     def choose(self) -> int:
         self.beliefs.append(self.belief)
-        # random order takes the first trial, unless the branch's record gave it to the model
-        if self.credit >= 1.0 and (self.picks or self.model_first):
+        if self.credit >= 1.0 and self.picks:  # random order takes the first trial
             self.picks.append(MODEL_SIDE)
             return self.order[0]
         self.picks.append(RANDOM_SIDE)
@@ -162,17 +147,3 @@ class Hedged(Ranked):
         p = min(given[index], MAX_EVIDENCE_PROBABILITY)
         mean = min(sum(given.values()) / len(given), MAX_EVIDENCE_PROBABILITY)
         return math.log1p(-p) - math.log1p(-mean)
-
-
-def past_record(exploration: Exploration) -> dict[str, int]:
-    """Of the solved episodes the exploration's branch sees (the episode under way left
-    out), how many each side of a hedge resolved: ``{"model": m, "random": r}``; none
-    without a store."""
-    record = {MODEL_SIDE: 0, RANDOM_SIDE: 0}
-    if exploration.store is None or exploration.branch is None:
-        return record
-    for _, summary in solved_past(exploration.store, exploration.branch, exclude=exploration.episode_id):
-        side = resolving_pick(summary)
-        if side in record:
-            record[side] += 1
-    return record
