@@ -19,7 +19,7 @@ from llcps.cps.ranking import Ranking
 from llcps.cps.orderings import ORDERINGS, get_ordering
 from llcps.cps.candidates import enumerate_candidates
 from llcps.cps.orderings.base import Exploration, resolving_pick
-from llcps.cps.orderings.coverage import spread
+from llcps.cps.orderings.coverage import SpreadWalk, spread
 from llcps.cps.orderings.hedged import MAX_MODEL_SHARE, Hedged
 from llcps.cps.orderings.ranked import Ranked
 from llcps.domain import State
@@ -30,9 +30,9 @@ def _synthetic(base, probability: np.ndarray, *, families: np.ndarray | None = N
     family's probabilities (a stand-in for the goal head's episode evidence)."""
 
     class Synthetic(base):  # type: ignore[misc, valid-type]
-        def random_side(self) -> list[int]:
+        def random_side(self) -> SpreadWalk:
             candidates = self.exploration.point.candidates
-            return spread(candidates, [int(i) for i in _permutation(len(candidates), self.exploration.seed)])
+            return SpreadWalk(candidates, [int(i) for i in _permutation(len(candidates), self.exploration.seed)])
 
         def rank(self) -> Ranking:
             p = probability.copy()
@@ -63,7 +63,7 @@ def _permutation(n: int, seed: int) -> np.ndarray:
 
 
 def _exploration(n: int, seed: int) -> Exploration:
-    point = SimpleNamespace(candidates=CANDIDATES[:n], subgoals=(), relocations=frozenset())
+    point = SimpleNamespace(candidates=CANDIDATES[:n], subgoals=(), relocations=frozenset(), state=State())
     return Exploration(model=None, point=point, measure="goal-directed", seed=seed)  # type: ignore[arg-type]
 
 
@@ -231,3 +231,24 @@ def test_coverage_meets_a_resolving_pair_sooner_than_random_order_and_a_scattere
 )
 def test_the_resolving_pick_is_read_from_an_untrusted_summary(summary: dict, pick: str | None) -> None:
     assert resolving_pick(summary) == pick
+
+
+def test_the_spread_walk_puts_off_a_pair_whose_trial_changed_nothing():
+    """After a trial of pair X that changed no atom, every other pair's next member comes
+    before X's next; without such a trial the walk is spread's order."""
+    permutation = [int(i) for i in _permutation(len(CANDIDATES), 5)]
+    walk = SpreadWalk(CANDIDATES, permutation)
+    assert walk.order == spread(CANDIDATES, permutation)
+    untried = set(range(len(CANDIDATES)))
+    first = walk.next_untried(untried)
+    untried.discard(first)
+    walk.unchanging(first)
+    pairs = [_pair(walk.next_untried(untried))]
+    while True:
+        index = walk.next_untried(untried)
+        untried.discard(index)
+        pairs.append(_pair(index))
+        if _pair(index) == _pair(first):
+            break
+    assert len(set(pairs[:-1])) == 21 and len(pairs) - 1 >= 2 * 21 - 1  # every other pair twice over, all but one
+    assert sorted(walk.order) == list(range(len(CANDIDATES)))

@@ -62,7 +62,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from llcps.cps.ranking import resolve_probabilities
 from llcps.cps.orderings.base import MODEL_SIDE, RANDOM_SIDE, Exploration
-from llcps.cps.orderings.coverage import FixedOrder, coverage_order
+from llcps.cps.orderings.coverage import SpreadWalk, coverage_walk
 from llcps.cps.orderings.ranked import Ranked
 
 if TYPE_CHECKING:
@@ -92,17 +92,17 @@ class Hedged(Ranked):
     def __init__(self, exploration: Exploration) -> None:
         self.exploration = exploration
         #: Random order's side: every candidate, in the order it tries them.
-        self.random = FixedOrder(self.random_side())
+        self.random = self.random_side()
         super().__init__(exploration)
         self.log_odds = math.log(MODEL_PRIOR / (1.0 - MODEL_PRIOR))
         self.credit = 1.0
         self.picks: list[str] = []
         self.beliefs: list[float] = []
 
-    def random_side(self) -> list[int]:
-        """Every candidate in the order random order's side tries them
-        (:func:`~llcps.cps.orderings.coverage.coverage_order`)."""
-        return coverage_order(self.exploration)
+    def random_side(self) -> SpreadWalk:
+        """Random order's side: the walk of every candidate it tries, in turn
+        (:func:`~llcps.cps.orderings.coverage.coverage_walk`)."""
+        return coverage_walk(self.exploration)
 
     @property
     def belief(self) -> float:
@@ -124,6 +124,8 @@ class Hedged(Ranked):
         return {"picks": list(self.picks), "beliefs": [round(b, 6) for b in self.beliefs]}
 
     def learn(self, index: int, after: State) -> None:
+        if after == self.exploration.point.state:  # whichever side chose it
+            self.random.unchanging(index)
         self.log_odds += self._evidence(index)
         chosen_by_model = self.picks[-1] == MODEL_SIDE
         if chosen_by_model:
