@@ -8,7 +8,8 @@ episode runs, learning from each failed trial as it goes:
   world model updated and the candidates ranked again after every ``refit_every``
   failed trials.
 - ``coverage``: random order spread evenly over the candidates: every action on every
-  argument tuple once before any twice, each one's settings in turn (no world model).
+  argument tuple once before any twice, each one's settings in turn, a pair whose trial
+  changed no atom put off (no world model).
 - ``hedged`` (the default): the same ranking, interleaved with ``coverage``'s order of
   the candidates; the share of trials the ranking gets is the posterior belief that the
   model knows where the resolving candidates are in this scene, never more than

@@ -13,9 +13,11 @@ two:
   baseline (the ``random`` world model, which scores each candidate by a hash of the
   seed and the candidate, under the same measure and seed), re-sorted so that every
   action on every argument tuple is tried once before any twice, and each one's
-  settings in turn. It knows nothing of the scene either, but a resolving group of
-  candidates (one action on the body in the way, in most of its settings) is met sooner
-  than in the bare permutation (docs/world_models.md, "Why random order spread").
+  settings in turn, a pair whose trial (by either side) changed no atom put off
+  (:class:`~llcps.cps.orderings.coverage.SpreadWalk`). It knows nothing of the scene
+  either, but a resolving group of candidates (one action on the body in the way, in
+  most of its settings) is met sooner than in the bare permutation
+  (docs/world_models.md, "Why random order spread").
 
 **The share.** Random order takes the first trial and the model the second; after each
 trial the model is credited its share ``min(w, MAX_MODEL_SHARE)`` and takes the next
@@ -39,7 +41,8 @@ of resolving (the paper's four) gives no evidence: its share stays at the prior.
 random trial does not move it (it would lower the whole family of a resolving
 candidate after one unlucky member). So the model's side is ``ranked`` over the
 candidates not yet tried, moved by its own failures only, and random order's side
-its spread permutation, fixed when the episode starts.
+its spread walk of the permutation, fixed when the episode starts but for the pairs
+whose trials changed nothing.
 
 **The guarantee.** Whatever the model predicts, it takes none of the first trial and at
 most ``1 + MAX_MODEL_SHARE * (T - 1)`` of the first ``T``, so random order takes the
