@@ -115,8 +115,10 @@ def spread(candidates: Sequence[TrialSpec], permutation: Sequence[int]) -> list[
 
 
 def coverage_walk(exploration: Exploration) -> SpreadWalk:
-    """Random order spread evenly, walked (:class:`SpreadWalk` of :func:`random_order`)."""
-    return SpreadWalk(exploration.point.candidates, random_order(exploration))
+    """Random order spread evenly, walked from the failure point's state
+    (:class:`SpreadWalk` of :func:`random_order`)."""
+    x = exploration
+    return SpreadWalk(x.point.candidates, random_order(x), x.point.state)
 
 
 class SpreadWalk:
@@ -124,14 +126,15 @@ class SpreadWalk:
     trial changed no atom: what :class:`Coverage` tries, and the hedge's random side
     (:class:`~llcps.cps.orderings.hedged.Hedged`).
 
-    A trial that changed nothing (the symbolic state after it is the one every trial
-    starts from) counts its action-argument pair met :data:`UNCHANGED_WEIGHT` more
+    A trial that changed nothing (the symbolic state after it is ``start``, the one every
+    trial starts from) counts its action-argument pair met :data:`UNCHANGED_WEIGHT` more
     times, so the walk comes back to that pair only after the pairs whose trials changed
     something have had another turn. Without such trials it walks :func:`spread`'s order.
     """
 
-    def __init__(self, candidates: Sequence[TrialSpec], permutation: Sequence[int]) -> None:
+    def __init__(self, candidates: Sequence[TrialSpec], permutation: Sequence[int], start: State) -> None:
         self.counts = Counts(candidates)
+        self.start = start
         self.left = np.asarray(permutation, dtype=np.int64)  # not walked yet, in the permutation's order
         #: The candidates walked so far, in turn (the ones tried before skipped, not tried).
         self.walked: list[int] = []
@@ -146,9 +149,11 @@ class SpreadWalk:
             if index in untried:
                 return index
 
-    def unchanging(self, index: int) -> None:
-        """Candidate ``index`` was tried and changed no atom: put its pair off."""
-        self.counts.pair_met[self.counts.pairs[index]] += UNCHANGED_WEIGHT
+    def learn(self, index: int, after: State) -> None:
+        """Candidate ``index`` was tried (by any side) and left ``after``: if it changed
+        no atom, put its pair off."""
+        if after == self.start:
+            self.counts.pair_met[self.counts.pairs[index]] += UNCHANGED_WEIGHT
 
     @property
     def order(self) -> list[int]:
@@ -171,5 +176,4 @@ class Coverage(Ordering):
         return self.walk.next_untried(set(self.remaining))
 
     def learn(self, index: int, after: State) -> None:
-        if after == self.exploration.point.state:
-            self.walk.unchanging(index)
+        self.walk.learn(index, after)

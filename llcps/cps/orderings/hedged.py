@@ -127,8 +127,7 @@ class Hedged(Ranked):
         return {"picks": list(self.picks), "beliefs": [round(b, 6) for b in self.beliefs]}
 
     def learn(self, index: int, after: State) -> None:
-        if after == self.exploration.point.state:  # whichever side chose it
-            self.random.unchanging(index)
+        self.random.learn(index, after)  # whichever side chose it
         self.log_odds += self._evidence(index)
         chosen_by_model = self.picks[-1] == MODEL_SIDE
         if chosen_by_model:
